@@ -1,0 +1,5 @@
+import sys
+
+from millflow.cli import main
+
+sys.exit(main())

@@ -1,0 +1,56 @@
+"""Breakage functions: specific rates S_i and distributions B_ij, b_ij (eqs. 5-8, 10).
+
+The public face of :mod:`millflow.breakage_rates` (eq. 5 power law, eq. 7 Austin's
+rate with a maximum and ball-size dependence, eq. 10 process-parameter prefactor,
+form-free vectors) and :mod:`millflow.breakage_distributions` (eq. 6 normalized and
+eq. 8 non-normalized cumulative distributions, form-free B or b, conversions and
+validation). Sizes are upper class edges [m], rates [1/s]; class N is the sink:
+S_N = 0 and column N of B and b is zero. A rate model is any callable ``x -> S``,
+a distribution model any callable ``x -> b``; the dataclasses here are such
+callables with validated parameters, and a user's own function plugs in the same way.
+"""
+from millflow.breakage_distributions import (
+    COLUMN_TOL,
+    B_from_b,
+    NonNormalizedBreakage,
+    NormalizedBreakage,
+    TabulatedBreakage,
+    b_from_B,
+    evaluate_b,
+    non_normalized_B,
+    normalized_B,
+    validate_B,
+    validate_b,
+)
+from millflow.breakage_rates import (
+    AustinRate,
+    PowerLawRate,
+    TabulatedRate,
+    austin_rates,
+    evaluate_rates,
+    power_law_rates,
+    process_power_law,
+    validate_rates,
+)
+
+__all__ = [
+    "power_law_rates",
+    "austin_rates",
+    "process_power_law",
+    "validate_rates",
+    "evaluate_rates",
+    "PowerLawRate",
+    "AustinRate",
+    "TabulatedRate",
+    "normalized_B",
+    "non_normalized_B",
+    "b_from_B",
+    "B_from_b",
+    "validate_B",
+    "validate_b",
+    "evaluate_b",
+    "NormalizedBreakage",
+    "NonNormalizedBreakage",
+    "TabulatedBreakage",
+    "COLUMN_TOL",
+]

@@ -1,0 +1,379 @@
+"""Breakage distributions B_ij and b_ij on a size grid (EQUATIONS.md eqs. 6 and 8).
+
+B_ij [-] is the mass fraction of the material broken out of class j that is finer
+than the upper size of class i (i > j); b_ij = B_ij - B_{i+1,j} is the fraction that
+lands in class i, and b_Nj = B_Nj for the sink. Both are (N, N) arrays, row i the
+receiving class, column j the breaking class, with entries only strictly below the
+diagonal; column N (the sink, which does not break) is all zero. The index convention
+of eqs. 6 and 8, B_ij = F(x_{i-1}/x_j), makes B_{j+1,j} = 1 (all broken material
+leaves its class), so every column j < N of b sums to 1. Sizes x are the upper class
+edges [m] (Austin). A distribution model is anything callable as ``model(x) -> b``;
+the dataclasses also offer ``.B(x)``; :func:`evaluate_b` checks any model's output.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from millflow.errors import BreakageError
+from millflow.grid import as_sizes, class_label
+
+__all__ = [
+    "normalized_B",
+    "non_normalized_B",
+    "b_from_B",
+    "B_from_b",
+    "validate_B",
+    "validate_b",
+    "evaluate_b",
+    "NormalizedBreakage",
+    "NonNormalizedBreakage",
+    "TabulatedBreakage",
+]
+
+# Default tolerance on column sums of b and on B_{j+1,j} = 1: beyond rounding, below
+# the precision with which a tabulated b is normally published it must be exact;
+# callers with 4-digit tables pass a looser tol explicitly.
+COLUMN_TOL = 1e-9
+
+
+def _param(value, name: str, lo: float | None = None, hi: float | None = None) -> float:
+    try:
+        v = float(value)
+    except (TypeError, ValueError) as exc:
+        raise BreakageError(f"{name} = {value!r}: expected a number") from exc
+    if not np.isfinite(v) or (lo is not None and v < lo) or (hi is not None and v > hi):
+        rng = f"in [{lo:g}, {hi:g}]" if hi is not None else (f">= {lo:g}" if lo is not None else "finite")
+        raise BreakageError(f"{name} = {value!r}: expected a finite number {rng}")
+    return v
+
+
+def _cumulative(xs: np.ndarray, phi_j: np.ndarray, gamma: float, beta: float) -> np.ndarray:
+    """B_ij = phi_j r^gamma + (1 - phi_j) r^beta with r = x_{i-1}/x_j, for i > j."""
+    n = xs.size
+    B = np.zeros((n, n))
+    i, j = np.tril_indices(n, -1)
+    r = xs[i - 1] / xs[j]
+    B[i, j] = phi_j[j] * r ** gamma + (1.0 - phi_j[j]) * r ** beta
+    # r = 1 on the first subdiagonal; phi + (1 - phi) can round to 1 - ulp, and the
+    # convention B_{j+1,j} = 1 must hold exactly for the columns of b to sum to 1
+    k = np.arange(n - 1)
+    B[k + 1, k] = 1.0
+    return B
+
+
+def normalized_B(x, phi: float, gamma: float, beta: float) -> np.ndarray:
+    """Normalized cumulative breakage distribution, eq. 6.
+
+    B_ij = phi (x_{i-1}/x_j)^gamma + (1 - phi) (x_{i-1}/x_j)^beta  for i > j,
+    zero on and above the diagonal; B_{j+1,j} = 1.
+
+    Parameters
+    ----------
+    x : SizeGrid or array_like
+        Upper class sizes [m], coarse -> fine.
+    phi : float
+        Weight of the fine-fragment term [-], in [0, 1].
+    gamma, beta : float
+        Exponents [-], >= 0 (typically gamma 0.5-1.5, beta 2.5-5).
+
+    Returns
+    -------
+    numpy.ndarray
+        B, shape (N, N); column N (the sink) is zero.
+
+    Examples
+    --------
+    >>> B = normalized_B([4e-3, 2e-3, 1e-3], phi=0.5, gamma=1.0, beta=2.0)
+    >>> float(B[2, 0])  # 0.5 * 0.5 + 0.5 * 0.25
+    0.375
+    """
+    xs = as_sizes(x)
+    phi = _param(phi, "phi", 0.0, 1.0)
+    gamma = _param(gamma, "gamma", 0.0)
+    beta = _param(beta, "beta", 0.0)
+    return _cumulative(xs, np.full(xs.size, phi), gamma, beta)
+
+
+def non_normalized_B(x, phi0: float, gamma: float, beta: float, theta: float,
+                     x_max: float | None = None) -> np.ndarray:
+    """Non-normalized cumulative breakage distribution, eq. 8.
+
+    B_ij = phi_j (x_{i-1}/x_j)^gamma + (1 - phi_j) (x_{i-1}/x_j)^beta,
+    phi_j = phi0 (x_max/x_j)^theta; theta = 0 gives eq. 6.
+
+    Parameters
+    ----------
+    x : SizeGrid or array_like
+        Upper class sizes [m].
+    phi0 : float
+        phi at x_j = x_max [-], in [0, 1].
+    gamma, beta : float
+        Exponents [-], >= 0.
+    theta : float
+        Size dependence of phi [-] (Austin's -delta).
+    x_max : float, optional
+        Reference size [m], default the top size x_1.
+
+    Raises
+    ------
+    BreakageError
+        If phi_j leaves [0, 1] for a breaking class j (naming the class and phi_j).
+    """
+    xs = as_sizes(x)
+    phi0 = _param(phi0, "phi0", 0.0, 1.0)
+    gamma = _param(gamma, "gamma", 0.0)
+    beta = _param(beta, "beta", 0.0)
+    theta = _param(theta, "theta")
+    x_max = xs[0] if x_max is None else _param(x_max, "x_max", 0.0)
+    if x_max <= 0:
+        raise BreakageError(f"x_max = {x_max!r}: expected a size > 0 [m]")
+    phi_j = phi0 * (x_max / xs) ** theta
+    phi_j[-1] = 0.0  # the sink does not break; its phi is never used
+    bad = np.flatnonzero(~np.isfinite(phi_j) | (phi_j < 0) | (phi_j > 1))
+    if bad.size:
+        k = bad[0]
+        raise BreakageError(
+            f"phi_j = phi0 (x_max/x_j)^theta = {float(phi_j[k])!r} at {class_label(k, xs)}; expected 0 <= phi_j <= 1 "
+            f"(phi0 = {phi0:g}, theta = {theta:g}, x_max = {x_max:.6g} m)"
+        )
+    return _cumulative(xs, phi_j, gamma, beta)
+
+
+def b_from_B(B, x=None) -> np.ndarray:
+    """Fractional distribution b_ij = B_ij - B_{i+1,j}, b_Nj = B_Nj (validated B in).
+
+    Returns a strictly lower triangular (N, N) array whose columns j < N sum to 1
+    and whose sink column is zero.
+    """
+    B = validate_B(B, x)
+    b = B.copy()
+    b[:-1] -= B[1:]
+    # above and on the diagonal B is 0 but B_{j+1,j} = 1 would leave b_jj = -1
+    return np.tril(b, -1)
+
+
+def B_from_b(b, x=None, *, tol: float = COLUMN_TOL) -> np.ndarray:
+    """Cumulative distribution B_ij = sum_{k >= i} b_kj for i > j (validated b in)."""
+    b = validate_b(b, x, tol=tol)
+    B = np.cumsum(b[::-1], axis=0)[::-1]
+    return np.tril(B, -1)
+
+
+# ------------------------------------------------------------------------ validation
+def _square(M, x, name: str) -> tuple[np.ndarray, np.ndarray | None]:
+    xs = None if x is None else as_sizes(x)
+    try:
+        A = np.array(M, dtype=float)
+    except (TypeError, ValueError) as exc:
+        raise BreakageError(f"{name}: cannot read the matrix as numbers ({exc})") from exc
+    if A.ndim != 2 or A.shape[0] != A.shape[1] or A.shape[0] < 1:
+        raise BreakageError(f"{name}: expected a square (N, N) array, got shape {A.shape}")
+    if xs is not None and A.shape[0] != xs.size:
+        raise BreakageError(f"{name}: shape {A.shape} does not match a grid of {xs.size} classes")
+    bad = np.argwhere(~np.isfinite(A))
+    if bad.size:
+        i, j = bad[0]
+        raise BreakageError(f"{name}: {_entry(i, j, xs)} is {float(A[i, j])!r}; expected finite")
+    bad = np.argwhere(np.triu(A) != 0)
+    if bad.size:
+        i, j = bad[0]
+        raise BreakageError(
+            f"{name}: {_entry(i, j, xs)} is {float(A[i, j])!r}; expected 0 on and above the diagonal "
+            "(only finer classes i > j receive broken material)"
+        )
+    return A, xs
+
+
+def _entry(i: int, j: int, xs) -> str:
+    return f"entry for receiving {class_label(i, xs)} from breaking {class_label(j, xs)}"
+
+
+def validate_B(B, x=None, *, tol: float = COLUMN_TOL) -> np.ndarray:
+    """Check a cumulative breakage distribution B and return it as float array.
+
+    Requires: square (N, N), finite, zero on and above the diagonal, 0 <= B <= 1,
+    B_{j+1,j} = 1 (to ``tol``) for every breaking class j < N, and B non-increasing
+    down each column (finer sizes receive no more than coarser ones).
+
+    Raises
+    ------
+    BreakageError
+        Naming the receiving and breaking classes (1-based, with sizes if ``x`` is
+        given) and the offending value.
+    """
+    B, xs = _square(B, x, "B")
+    bad = np.argwhere((B < 0) | (B > 1 + tol))
+    if bad.size:
+        i, j = bad[0]
+        raise BreakageError(f"B: {_entry(i, j, xs)} is {float(B[i, j])!r}; expected 0 <= B <= 1")
+    n = B.shape[0]
+    k = np.arange(n - 1)
+    bad = np.flatnonzero(np.abs(B[k + 1, k] - 1.0) > tol)
+    if bad.size:
+        j = bad[0]
+        raise BreakageError(
+            f"B: {_entry(j + 1, j, xs)} is {float(B[j + 1, j])!r}; expected B_(j+1,j) = 1 "
+            "(everything broken out of a class is finer than its lower edge)"
+        )
+    # rise[i, j] = B_{i+1,j} - B_ij, kept where row i is itself below the diagonal
+    rise = np.tril(B[1:] - B[:-1], -1)
+    bad = np.argwhere(rise > 0)
+    if bad.size:
+        i, j = bad[0]
+        raise BreakageError(
+            f"B: {_entry(i + 1, j, xs)} is {float(B[i + 1, j])!r}, above {float(B[i, j])!r} for the coarser "
+            f"{class_label(i, xs)}; B must not increase down a column"
+        )
+    return B
+
+
+def validate_b(b, x=None, *, tol: float = COLUMN_TOL) -> np.ndarray:
+    """Check a fractional breakage distribution b and return it as float array.
+
+    Requires: square (N, N), finite, strictly lower triangular (so the sink column N
+    is zero), b >= 0, and every column j < N summing to 1 within ``tol``.
+
+    Raises
+    ------
+    BreakageError
+        Naming the classes (1-based, with sizes if ``x`` is given) and the value.
+    """
+    b, xs = _square(b, x, "b")
+    bad = np.argwhere(b < 0)
+    if bad.size:
+        i, j = bad[0]
+        raise BreakageError(f"b: {_entry(i, j, xs)} is {float(b[i, j])!r}; expected >= 0")
+    sums = b.sum(axis=0)
+    bad = np.flatnonzero(np.abs(sums[:-1] - 1.0) > tol)
+    if bad.size:
+        j = bad[0]
+        raise BreakageError(
+            f"b: column of breaking {class_label(j, xs)} sums to {float(sums[j])!r}; expected 1 (tolerance {tol:g})"
+        )
+    return b
+
+
+def evaluate_b(model, grid, *, tol: float = COLUMN_TOL) -> np.ndarray:
+    """Evaluate any distribution model (callable ``x -> b`` or object with ``.b``) and check it."""
+    x = as_sizes(grid)
+    fun = getattr(model, "b", model)
+    if not callable(fun):
+        raise BreakageError(f"breakage model {model!r} is neither callable nor has a .b(x) method")
+    return validate_b(fun(x), x, tol=tol)
+
+
+# ------------------------------------------------------------------------ dataclasses
+@dataclass(frozen=True)
+class NormalizedBreakage:
+    """Eq. 6 distribution: phi (x_{i-1}/x_j)^gamma + (1 - phi)(x_{i-1}/x_j)^beta.
+
+    Parameters
+    ----------
+    phi : float
+        [-] in [0, 1].
+    gamma, beta : float
+        Exponents [-], >= 0.
+    """
+
+    phi: float
+    gamma: float
+    beta: float
+
+    def __post_init__(self):
+        _param(self.phi, "phi", 0.0, 1.0)
+        _param(self.gamma, "gamma", 0.0)
+        _param(self.beta, "beta", 0.0)
+
+    def B(self, x) -> np.ndarray:
+        """Cumulative B (N, N) on the sizes x [m]."""
+        return normalized_B(x, self.phi, self.gamma, self.beta)
+
+    def b(self, x) -> np.ndarray:
+        """Fractional b (N, N) on the sizes x [m]."""
+        return b_from_B(self.B(x), x)
+
+    __call__ = b
+
+
+@dataclass(frozen=True)
+class NonNormalizedBreakage:
+    """Eq. 8 distribution with phi_j = phi0 (x_max/x_j)^theta; see :func:`non_normalized_B`.
+
+    Whether phi_j stays in [0, 1] depends on the grid and is checked in ``B(x)``.
+    """
+
+    phi0: float
+    gamma: float
+    beta: float
+    theta: float
+    x_max: float | None = None
+
+    def __post_init__(self):
+        _param(self.phi0, "phi0", 0.0, 1.0)
+        _param(self.gamma, "gamma", 0.0)
+        _param(self.beta, "beta", 0.0)
+        _param(self.theta, "theta")
+        if self.x_max is not None and _param(self.x_max, "x_max", 0.0) <= 0:
+            raise BreakageError(f"x_max = {self.x_max!r}: expected a size > 0 [m]")
+
+    def B(self, x) -> np.ndarray:
+        """Cumulative B (N, N) on the sizes x [m]."""
+        return non_normalized_B(x, self.phi0, self.gamma, self.beta, self.theta, self.x_max)
+
+    def b(self, x) -> np.ndarray:
+        """Fractional b (N, N) on the sizes x [m]."""
+        return b_from_B(self.B(x), x)
+
+    __call__ = b
+
+
+@dataclass(frozen=True, eq=False, init=False)
+class TabulatedBreakage:
+    """Form-free distribution: give exactly one of ``b`` or ``B`` as an (N, N) array.
+
+    Validated on construction (``tol`` on column sums / B_{j+1,j}); the other matrix is
+    derived. ``.b(x)`` and ``.B(x)`` check that the grid has N classes.
+    """
+
+    b_matrix: np.ndarray | None = None
+    B_matrix: np.ndarray | None = None
+    tol: float = COLUMN_TOL
+
+    def __init__(self, b=None, B=None, tol: float = COLUMN_TOL):
+        if (b is None) == (B is None):
+            raise BreakageError("TabulatedBreakage: give exactly one of b= or B=")
+        if b is not None:
+            bm = validate_b(b, tol=tol)
+            Bm = B_from_b(bm, tol=tol)
+        else:
+            Bm = validate_B(B, tol=tol)
+            bm = b_from_B(Bm)
+        for m in (bm, Bm):
+            m.setflags(write=False)
+        object.__setattr__(self, "b_matrix", bm)
+        object.__setattr__(self, "B_matrix", Bm)
+        object.__setattr__(self, "tol", tol)
+
+    def _check(self, x) -> None:
+        xs = as_sizes(x)
+        if xs.size != self.b_matrix.shape[0]:
+            raise BreakageError(
+                f"TabulatedBreakage is {self.b_matrix.shape[0]} x {self.b_matrix.shape[0]}; the grid has {xs.size} classes"
+            )
+
+    def b(self, x) -> np.ndarray:
+        """Fractional b (N, N) [-] (a copy)."""
+        self._check(x)
+        return self.b_matrix.copy()
+
+    def B(self, x) -> np.ndarray:
+        """Cumulative B (N, N) [-] (a copy)."""
+        self._check(x)
+        return self.B_matrix.copy()
+
+    __call__ = b
+
+    def __repr__(self) -> str:
+        return f"TabulatedBreakage(n={self.b_matrix.shape[0]})"

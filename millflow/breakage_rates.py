@@ -1,0 +1,354 @@
+"""Specific breakage rates S_i [1/s] on a size grid (EQUATIONS.md eqs. 5, 7, 10).
+
+A rate model is anything callable as ``model(x) -> S``: x the representative (upper)
+class sizes [m] of a :class:`~millflow.grid.SizeGrid` (or the grid itself), S an
+array of N first-order rates [1/s]. The last class is the sink and never breaks: every
+function here returns S with S_N = 0, whatever the formula would give at x_N.
+Plain functions implement the forms: the power law (eq. 5), Austin's rate with a
+maximum and ball-size dependence (eq. 7), and the process-parameter power law for
+its prefactor (eq. 10); small frozen dataclasses on top hold validated parameters.
+A user's own function plugs in exactly like the built-in ones; pass any model through
+:func:`evaluate_rates` to check its output.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import Mapping
+
+import numpy as np
+
+from millflow.errors import BreakageError
+from millflow.grid import as_sizes, class_label
+
+__all__ = [
+    "power_law_rates",
+    "austin_rates",
+    "process_power_law",
+    "validate_rates",
+    "evaluate_rates",
+    "PowerLawRate",
+    "AustinRate",
+    "TabulatedRate",
+]
+
+
+def _finite(value, name: str, *, positive: bool = False, nonneg: bool = False) -> float:
+    try:
+        v = float(value)
+    except (TypeError, ValueError) as exc:
+        raise BreakageError(f"{name} = {value!r}: expected a number") from exc
+    if not np.isfinite(v):
+        raise BreakageError(f"{name} = {value!r}: expected a finite number")
+    if positive and v <= 0:
+        raise BreakageError(f"{name} = {value!r}: expected > 0")
+    if nonneg and v < 0:
+        raise BreakageError(f"{name} = {value!r}: expected >= 0")
+    return v
+
+
+# ----------------------------------------------------------------------- validation
+def validate_rates(S, x=None, *, name: str = "S") -> np.ndarray:
+    """Check a rate vector: 1-D, finite, >= 0, and S_N = 0 for the sink.
+
+    Parameters
+    ----------
+    S : array_like
+        Specific breakage rates [1/s], coarse -> fine, length N.
+    x : SizeGrid or array_like, optional
+        Class sizes [m]; when given the length must match and messages show sizes.
+
+    Returns
+    -------
+    numpy.ndarray
+        ``S`` as float64.
+
+    Raises
+    ------
+    BreakageError
+        Naming the 1-based class, its size and the bad value.
+    """
+    xs = None if x is None else as_sizes(x)
+    try:
+        s = np.array(S, dtype=float)
+    except (TypeError, ValueError) as exc:
+        raise BreakageError(f"{name}: cannot read rates as numbers ({exc})") from exc
+    if s.ndim != 1 or s.size < 1:
+        raise BreakageError(f"{name}: expected a 1-D array of rates [1/s], got shape {s.shape}")
+    if xs is not None and s.size != xs.size:
+        raise BreakageError(f"{name}: {s.size} rates for a grid of {xs.size} classes")
+    bad = np.flatnonzero(~np.isfinite(s))
+    if bad.size:
+        raise BreakageError(f"{name}: {class_label(bad[0], xs)} has rate {float(s[bad[0]])!r} 1/s; expected finite")
+    bad = np.flatnonzero(s < 0)
+    if bad.size:
+        raise BreakageError(f"{name}: {class_label(bad[0], xs)} has rate {float(s[bad[0]])!r} 1/s; expected >= 0")
+    if s[-1] != 0:
+        raise BreakageError(
+            f"{name}: {class_label(s.size - 1, xs)} is the sink and has rate {float(s[-1])!r} 1/s; expected S_N = 0"
+        )
+    return s
+
+
+def evaluate_rates(model, grid) -> np.ndarray:
+    """Evaluate any rate model (callable ``x -> S`` or object with ``.rates``) and check it.
+
+    Parameters
+    ----------
+    model : callable or object with a ``rates(x)`` method
+        Built-in dataclass or a user's function of the sizes x [m].
+    grid : SizeGrid or array_like
+        Class sizes [m].
+
+    Returns
+    -------
+    numpy.ndarray
+        Validated rates [1/s] with S_N = 0.
+    """
+    x = as_sizes(grid)
+    fun = getattr(model, "rates", model)
+    if not callable(fun):
+        raise BreakageError(f"rate model {model!r} is neither callable nor has a .rates(x) method")
+    return validate_rates(fun(x), x, name=f"rates of {getattr(model, '__name__', type(model).__name__)}")
+
+
+# ----------------------------------------------------------------------- functional forms
+def power_law_rates(x, A: float, alpha: float, x0: float) -> np.ndarray:
+    """Power-law specific breakage rates, eq. 5: S_i = A (x_i / x0)^alpha.
+
+    Parameters
+    ----------
+    x : SizeGrid or array_like
+        Representative (upper) class sizes [m], coarse -> fine.
+    A : float
+        Rate at the reference size [1/s], >= 0.
+    alpha : float
+        Exponent [-] (typically 0.5 to 1.5).
+    x0 : float
+        Reference size [m], > 0 (often 1e-3).
+
+    Returns
+    -------
+    numpy.ndarray
+        S [1/s], length N, with S_N = 0 for the sink.
+
+    Examples
+    --------
+    >>> power_law_rates([2e-3, 1e-3, 5e-4], A=0.5, alpha=1.0, x0=1e-3)
+    array([1. , 0.5, 0. ])
+    """
+    xs = as_sizes(x)
+    A = _finite(A, "A", nonneg=True)
+    alpha = _finite(alpha, "alpha")
+    x0 = _finite(x0, "x0", positive=True)
+    S = A * (xs / x0) ** alpha
+    S[-1] = 0.0  # the sink does not break
+    return validate_rates(S, xs)
+
+
+def austin_rates(x, A: float, alpha: float, mu0: float, Lambda: float, *, xi: float = 0.0,
+                 x_b: float | None = None, x_b0: float | None = None, eta: float = 0.0,
+                 x0: float = 1.0) -> np.ndarray:
+    """Austin's rate with a maximum and ball-size dependence, eq. 7.
+
+    S_i = A (x_i/x0)^alpha (x_b0/x_b)^xi / (1 + [x_i / (mu0 (x_b/x_b0)^eta)]^Lambda)
+
+    With the default ``x0 = 1`` m this is eq. 7 as written (A in 1/s per m^alpha);
+    ``x0 = 1e-3`` gives Austin's usual convention of sizes in mm.
+
+    Parameters
+    ----------
+    x : SizeGrid or array_like
+        Class sizes [m].
+    A : float
+        Rate prefactor [1/s] at x = x0 (without the maximum term), >= 0.
+    alpha : float
+        Small-size exponent [-].
+    mu0 : float
+        Size [m] at which the correction term equals 1/2 for the reference ball, > 0.
+    Lambda : float
+        Steepness of the fall-off above the maximum [-], >= 0.
+    xi, eta : float
+        Ball-size exponents of the prefactor and of mu [-].
+    x_b, x_b0 : float, optional
+        Ball size and reference ball size [m]; both or neither. Without them the
+        ball-size factors are 1.
+    x0 : float
+        Reference size for alpha [m].
+
+    Returns
+    -------
+    numpy.ndarray
+        S [1/s] with S_N = 0.
+    """
+    xs = as_sizes(x)
+    A = _finite(A, "A", nonneg=True)
+    alpha = _finite(alpha, "alpha")
+    mu0 = _finite(mu0, "mu0", positive=True)
+    Lambda = _finite(Lambda, "Lambda", nonneg=True)
+    xi = _finite(xi, "xi")
+    eta = _finite(eta, "eta")
+    x0 = _finite(x0, "x0", positive=True)
+    if (x_b is None) != (x_b0 is None):
+        raise BreakageError(f"x_b = {x_b!r}, x_b0 = {x_b0!r}: give both ball sizes [m] or neither")
+    ball = 1.0 if x_b is None else _finite(x_b, "x_b", positive=True) / _finite(x_b0, "x_b0", positive=True)
+    mu = mu0 * ball ** eta
+    S = A * (xs / x0) ** alpha * ball ** (-xi) / (1.0 + (xs / mu) ** Lambda)
+    S[-1] = 0.0  # the sink does not break
+    return validate_rates(S, xs)
+
+
+def process_power_law(A0: float, params, exponents) -> float:
+    """Rate prefactor from process or design parameters, eq. 10: A = A0 prod p_k^a_k.
+
+    Parameters
+    ----------
+    A0 : float
+        Prefactor [1/s] (in whatever units make the p_k dimensionless), >= 0.
+    params : sequence of float or mapping name -> float
+        Process parameters p_k (speed fraction, ball density, ball size, ...), > 0.
+    exponents : sequence of float or mapping name -> float
+        Exponents a_k, same length (or same keys) as ``params``.
+
+    Returns
+    -------
+    float
+        A [1/s], to be used in eq. 5 or 7.
+
+    Examples
+    --------
+    >>> process_power_law(2.0, {"speed": 0.75, "ball_mm": 40.0}, {"speed": 1.0, "ball_mm": 0.0})
+    1.5
+    """
+    A0 = _finite(A0, "A0", nonneg=True)
+    if isinstance(params, Mapping):
+        if not isinstance(exponents, Mapping) or set(params) != set(exponents):
+            raise BreakageError(
+                f"exponents: keys {sorted(exponents) if isinstance(exponents, Mapping) else exponents!r} "
+                f"must match params keys {sorted(params)}"
+            )
+        names = list(params)
+        p = [params[k] for k in names]
+        a = [exponents[k] for k in names]
+    else:
+        p, a = list(params), list(exponents)
+        if len(p) != len(a):
+            raise BreakageError(f"params has {len(p)} values but exponents has {len(a)}")
+        names = [f"params[{k}]" for k in range(len(p))]
+    log_A = np.log(A0) if A0 > 0 else -np.inf
+    for name, pk, ak in zip(names, p, a):
+        pk = _finite(pk, f"process parameter {name}", positive=True)
+        ak = _finite(ak, f"exponent of {name}")
+        log_A += ak * np.log(pk)
+    return float(np.exp(log_A))
+
+
+# ------------------------------------------------------------------------ dataclasses
+@dataclass(frozen=True)
+class PowerLawRate:
+    """Eq. 5 rate model: S_i = A (x_i/x0)^alpha [1/s], S_N = 0.
+
+    Parameters
+    ----------
+    A : float
+        Rate at the reference size [1/s].
+    alpha : float
+        Exponent [-].
+    x0 : float
+        Reference size [m], default 1 mm.
+    """
+
+    A: float
+    alpha: float
+    x0: float = 1e-3
+
+    def __post_init__(self):
+        _finite(self.A, "A", nonneg=True)
+        _finite(self.alpha, "alpha")
+        _finite(self.x0, "x0", positive=True)
+
+    @classmethod
+    def from_process(cls, A0, params, exponents, alpha: float, x0: float = 1e-3) -> "PowerLawRate":
+        """Power law whose prefactor follows eq. 10 from process parameters."""
+        return cls(process_power_law(A0, params, exponents), alpha, x0)
+
+    def rates(self, x) -> np.ndarray:
+        """S [1/s] on the sizes x [m] (or a SizeGrid)."""
+        return power_law_rates(x, self.A, self.alpha, self.x0)
+
+    __call__ = rates
+
+
+@dataclass(frozen=True)
+class AustinRate:
+    """Eq. 7 rate model with a maximum and ball-size dependence; see :func:`austin_rates`."""
+
+    A: float
+    alpha: float
+    mu0: float
+    Lambda: float
+    xi: float = 0.0
+    x_b: float | None = None
+    x_b0: float | None = None
+    eta: float = 0.0
+    x0: float = 1.0
+
+    def __post_init__(self):
+        _finite(self.A, "A", nonneg=True)
+        _finite(self.alpha, "alpha")
+        _finite(self.mu0, "mu0", positive=True)
+        _finite(self.Lambda, "Lambda", nonneg=True)
+        _finite(self.xi, "xi")
+        _finite(self.eta, "eta")
+        _finite(self.x0, "x0", positive=True)
+        if (self.x_b is None) != (self.x_b0 is None):
+            raise BreakageError(f"x_b = {self.x_b!r}, x_b0 = {self.x_b0!r}: give both ball sizes [m] or neither")
+        if self.x_b is not None:
+            _finite(self.x_b, "x_b", positive=True)
+            _finite(self.x_b0, "x_b0", positive=True)
+
+    def _kw(self) -> dict:
+        return dict(A=self.A, alpha=self.alpha, mu0=self.mu0, Lambda=self.Lambda, xi=self.xi,
+                    x_b=self.x_b, x_b0=self.x_b0, eta=self.eta, x0=self.x0)
+
+    def rates(self, x) -> np.ndarray:
+        """S [1/s] on the sizes x [m] (or a SizeGrid)."""
+        return austin_rates(x, **self._kw())
+
+    __call__ = rates
+
+
+@dataclass(frozen=True, eq=False)
+class TabulatedRate:
+    """Form-free rates: one value per class [1/s].
+
+    Parameters
+    ----------
+    S : array_like
+        Either N values with S_N = 0, or N - 1 values for the breaking classes (the
+        sink's 0 is appended on evaluation). Finite, >= 0.
+    """
+
+    S: np.ndarray
+
+    def __post_init__(self):
+        s = np.array(self.S, dtype=float)
+        # validate as if a sink 0 followed, so both accepted lengths are checked alike
+        validate_rates(np.append(s, 0.0) if s.ndim == 1 else s, name="S")
+        s.setflags(write=False)
+        object.__setattr__(self, "S", s)
+
+    def rates(self, x) -> np.ndarray:
+        """The tabulated S [1/s] for the N classes of x (length N or N - 1 stored)."""
+        xs = as_sizes(x)
+        s = self.S
+        if s.size == xs.size - 1:
+            s = np.append(s, 0.0)
+        elif s.size != xs.size:
+            raise BreakageError(f"TabulatedRate has {s.size} rates; the grid has {xs.size} classes "
+                                f"(expected {xs.size} or {xs.size - 1})")
+        return validate_rates(s, xs)
+
+    __call__ = rates
+
+    def __repr__(self) -> str:
+        return f"TabulatedRate(n={self.S.size}, S=[{self.S[0]:.4g} ... {self.S[-1]:.4g}] 1/s)"

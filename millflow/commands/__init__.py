@@ -1,0 +1,1 @@
+"""Sub-commands of the `millflow` command line, one module each (see millflow.cli)."""

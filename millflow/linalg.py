@@ -1,0 +1,374 @@
+"""Exact linear algebra for first-order breakage: the breakage matrix and its functions.
+
+First-order breakage (eq. 4) is dM/dt = K M with the lower-triangular breakage matrix
+
+    K = (b - I) diag(S),     K_ii = -S_i,   K_ij = b_ij S_j (i > j).
+
+Every linear result of millflow is a function of this matrix applied to a feed vector:
+exp(K t) f for batch grinding and plug flow, (I - tau K)^-1 f for a perfectly mixed
+mill, E_hat(-K) f for any residence time distribution (segregated flow). This module
+evaluates them without the failure of Reid's (1965) closed form, which divides by
+S_i - S_j and loses everything when rates coincide.
+
+Method (block eigen-decomposition). With A = -K (eigenvalues S_i >= 0), the rates are
+grouped into clusters of nearly equal values (relative gap below ``cluster_gap``).
+A is then factored exactly as A = X D X^-1, X unit lower triangular with X = I on the
+rows of each cluster, D lower triangular and block diagonal over the clusters (blocks
+sit at the clusters' own, possibly scattered, indices). Row i of A X = X D gives the
+recurrence
+
+    x_i (D_<i - S_i I) = sum_{k<i} A_ik x_k          (i outside a cluster C)
+    D_i = S_i e_i + sum_{k<i} A_ik x_k               (i inside C)
+
+solved row by row. Columns of different clusters never divide by a difference smaller
+than ``cluster_gap`` times the rates, so X stays well conditioned; inside a cluster
+the function of the small block D_C is evaluated directly (``scipy.linalg.expm``, an
+exact finite series for equal rates, or a contour integral for a general transform).
+For distinct rates (all clusters of size one) this reduces to Reid's eigenvectors,
+computed stably, and each function value costs one O(N^2) product.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+import scipy.linalg
+
+from millflow.errors import BreakageError, InputError
+
+__all__ = ["breakage_matrix", "cluster_rates", "SpectralBlocks"]
+
+#: Rates closer than this relative gap are treated as one cluster.
+DEFAULT_CLUSTER_GAP = 0.05
+_SMALL_CLUSTER = 8
+
+
+def breakage_matrix(S: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """Breakage matrix K = (b - I) diag(S) of eq. 4 [1/s].
+
+    Parameters
+    ----------
+    S : (N,) specific breakage rates [1/s], S_N = 0 for the sink.
+    b : (N, N) fractional breakage distribution, strictly lower triangular,
+        b[i, j] = fraction of material broken out of class j that lands in class i.
+    """
+    S = np.asarray(S, dtype=float)
+    b = np.asarray(b, dtype=float)
+    K = b * S[np.newaxis, :]
+    K[np.diag_indices_from(K)] = -S
+    return K
+
+
+def cluster_rates(S: np.ndarray, gap: float = DEFAULT_CLUSTER_GAP) -> np.ndarray:
+    """Label each class with its cluster of nearly equal rates.
+
+    Two rates are close when |S_a - S_b| <= gap * max(S_a, S_b); clusters are the
+    transitive closure of that relation over the sorted rates. Returns integer labels
+    (N,) numbered 0.. in order of first appearance.
+    """
+    S = np.asarray(S, dtype=float)
+    order = np.argsort(S, kind="stable")
+    s_sorted = S[order]
+    close = np.abs(np.diff(s_sorted)) <= gap * np.maximum(s_sorted[1:], s_sorted[:-1])
+    sorted_labels = np.concatenate(([0], np.cumsum(~close)))
+    labels = np.empty_like(sorted_labels)
+    labels[order] = sorted_labels
+    # renumber by first appearance so that labels read naturally from coarse to fine
+    _, first = np.unique(labels, return_index=True)
+    rank = np.empty(first.size, dtype=int)
+    rank[np.argsort(first)] = np.arange(first.size)
+    return rank[labels]
+
+
+@dataclass(frozen=True)
+class SpectralBlocks:
+    """Block eigen-decomposition A = X D X^-1 of A = -K = (I - b) diag(S).
+
+    Attributes
+    ----------
+    S : (N,) rates [1/s].
+    X : (N, N) unit lower-triangular basis.
+    labels : (N,) cluster label of each class.
+    clusters : list of index arrays of clusters with more than one member.
+    blocks : list of the lower-triangular blocks D_C of those clusters.
+    """
+
+    S: np.ndarray
+    X: np.ndarray
+    labels: np.ndarray
+    clusters: list = field(default_factory=list)
+    blocks: list = field(default_factory=list)
+    gap: float = DEFAULT_CLUSTER_GAP
+
+    @classmethod
+    def from_rates(
+        cls, S, b, gap: float | None = None, *, feed=None, target: float = 1e-13
+    ) -> "SpectralBlocks":
+        """Decompose the breakage matrix of rates S [1/s] and distribution b.
+
+        With ``gap=None`` the cluster gap adapts: it starts at 0.05 and widens
+        (0.2, 0.8, then one cluster) until the cancellation estimate
+        ``eps * max |X| |X^-1 f|`` is below ``target`` (for ``feed`` if given, else
+        for the worst unit feed). One cluster is Taylor scaling and squaring of the
+        whole Metzler matrix: slower, but accurate because no term cancels.
+        """
+        S = np.asarray(S, dtype=float)
+        b = np.asarray(b, dtype=float)
+        A = -breakage_matrix(S, b)
+        if gap is not None:
+            return cls._build(A, S, gap)
+        for trial in (DEFAULT_CLUSTER_GAP, 0.2, 0.8, np.inf):
+            blocks = cls._build(A, S, trial)
+            if blocks.cancellation(feed) <= target:
+                break
+        return blocks
+
+    @classmethod
+    def _build(cls, A, S, gap):
+        labels = cluster_rates(S, gap) if np.isfinite(gap) else np.zeros(S.size, dtype=int)
+        counts = np.bincount(labels)
+        if np.all(counts == 1):
+            return cls(S=S, X=_eigenvectors_distinct(A, S), labels=labels, gap=gap)
+        X, D = _block_basis(A, S, labels)
+        clusters = [np.flatnonzero(labels == c) for c in np.flatnonzero(counts > 1)]
+        blocks = [D[np.ix_(idx, idx)] for idx in clusters]
+        return cls(S=S, X=X, labels=labels, clusters=clusters, blocks=blocks, gap=gap)
+
+    def cancellation(self, v: np.ndarray | None = None) -> float:
+        """Rounding-error estimate eps * max_i (|X| |X^-1 v|)_i for a feed v (default:
+        the worst unit feed, i.e. eps * max |X| |X^-1|). It bounds the absolute error
+        of every function value computed through this basis, for |v| <= 1."""
+        eps = np.finfo(float).eps
+        if v is None:
+            Xinv = self.coordinates(np.eye(self.n))
+            return float(eps * (np.abs(self.X) @ np.abs(Xinv)).max()) if np.isfinite(Xinv).all() else np.inf
+        w = self.coordinates(v)
+        return float(eps * (np.abs(self.X) @ np.abs(w)).max()) if np.isfinite(w).all() else np.inf
+
+    @property
+    def n(self) -> int:
+        return self.S.size
+
+    def coordinates(self, v: np.ndarray) -> np.ndarray:
+        """w = X^-1 v (one unit lower-triangular solve); v may be (N,) or (N, m)."""
+        return scipy.linalg.solve_triangular(
+            self.X, v, lower=True, unit_diagonal=True, check_finite=False
+        )
+
+    def expm_apply(self, v: np.ndarray, t: np.ndarray) -> np.ndarray:
+        """exp(-A t) v = exp(K t) v for each time in t; returns (T, N)."""
+        t = np.atleast_1d(np.asarray(t, dtype=float))
+        w = self.coordinates(v)
+        # singleton clusters: exp(-S_j t) w_j, underflow to zero is exact enough
+        coeff = np.exp(-np.outer(t, self.S)) * w[np.newaxis, :]
+        for members, blocks in self._clusters_by_size():
+            coeff[:, members] = _blocks_expm_apply(blocks, t, w[members])
+        return coeff @ self.X.T
+
+    def _clusters_by_size(self):
+        """Clusters grouped by size: (members (k, p), blocks (k, p, p)) per size p."""
+        sizes = sorted({idx.size for idx in self.clusters})
+        for p in sizes:
+            pick = [k for k, idx in enumerate(self.clusters) if idx.size == p]
+            yield (np.array([self.clusters[k] for k in pick]), np.array([self.blocks[k] for k in pick]))
+
+    def apply(self, fun, v: np.ndarray, *, block_fun=None) -> np.ndarray:
+        """fun(A) v for a scalar function fun of the rate s (A = -K, eigenvalues S).
+
+        fun must be vectorised over arrays. Inside a cluster, ``block_fun(block)``
+        (if given) returns fun of the small lower-triangular block directly;
+        otherwise fun(block) is a contour integral of fun around the cluster, so fun
+        must then accept complex arrays and be analytic in a disc around it.
+        """
+        w = self.coordinates(np.asarray(v, dtype=float))
+        coeff = np.real(np.asarray(fun(self.S))) * w
+        for idx, block in zip(self.clusters, self.blocks):
+            fb = block_fun(block) if block_fun is not None else contour_funm(fun, block)
+            coeff[idx] = np.real(fb) @ w[idx]
+        return self.X @ coeff
+
+
+def _eigenvectors_distinct(A: np.ndarray, S: np.ndarray) -> np.ndarray:
+    """Unit lower-triangular eigenvector matrix of A for well separated rates.
+
+    Column j solves (A - S_j I) x = 0 with x_j = 1: for i > j,
+    x_i = sum_{k<i} A_ik x_k / (S_j - S_i). Vectorised over all columns j < i.
+    """
+    n = S.size
+    X = np.eye(n)
+    for i in range(1, n):
+        r = A[i, :i] @ X[:i, :i]
+        X[i, :i] = r / (S[:i] - S[i])
+    return X
+
+
+def _block_basis(A: np.ndarray, S: np.ndarray, labels: np.ndarray):
+    """Basis X and block-diagonal D for clustered rates (see module docstring).
+
+    Row i: r = A[i, :i] X[:i, :i]. Singleton columns divide by S_j - S_i; small
+    clusters (<= 8 members) are back-substituted rank by rank, all clusters at once;
+    large clusters get one small triangular solve each; the row's own cluster
+    receives the row of D instead.
+    """
+    n = S.size
+    X = np.eye(n)
+    D = np.diag(S).astype(float)
+    counts = np.bincount(labels)
+    single = counts[labels] == 1
+    clusters = [np.flatnonzero(labels == c) for c in np.flatnonzero(counts > 1)]
+    small = [c for c in clusters if c.size <= _SMALL_CLUSTER]
+    large = [c for c in clusters if c.size > _SMALL_CLUSTER]
+    pmax = max((c.size for c in small), default=0)
+    members = np.full((len(small), pmax), n)  # padding points at a dummy slot n
+    for k, c in enumerate(small):
+        members[k, : c.size] = c
+    rank = np.full(n + 1, -1)
+    which = np.full(n + 1, -1)
+    for k, c in enumerate(small):
+        rank[c] = np.arange(c.size)
+        which[c] = k
+    S_pad = np.append(S, np.inf)[members]  # padding divides to zero
+    D_small = np.zeros((len(small), pmax, pmax))
+    small_label = np.array([labels[c[0]] for c in small], dtype=int)
+    for i in range(1, n):
+        r = A[i, :i] @ X[:i, :i]
+        row = np.zeros(n + 1)
+        row[:i] = r
+        xi = np.zeros(n + 1)
+        sing = single[:i]
+        xi[:i][sing] = r[sing] / (S[:i][sing] - S[i])
+        if pmax:
+            denom = S_pad - S[i]
+            denom[small_label == labels[i]] = np.inf  # own cluster: x = 0 there
+            for q in range(pmax - 1, -1, -1):
+                m = members[:, q]
+                acc = row[m] - np.einsum("kb,kb->k", xi[members[:, q + 1:]], D_small[:, q + 1:, q])
+                xi[m] = acc / denom[:, q]
+            xi[n] = 0.0
+        for c in large:
+            if labels[c[0]] == labels[i]:
+                continue
+            sub = c[c < i]
+            if sub.size:
+                M = D[np.ix_(sub, sub)] - S[i] * np.eye(sub.size)
+                xi[sub] = scipy.linalg.solve_triangular(M, row[sub], trans="T", lower=True, check_finite=False)
+        if counts[labels[i]] > 1:
+            own = np.flatnonzero(labels[:i] == labels[i])
+            D[i, own] = r[own]
+            xi[own] = 0.0
+            if which[i] >= 0:
+                D_small[which[i], rank[i], rank[own]] = r[own]
+        X[i, :i] = xi[:i]
+    return X, D
+
+
+def _blocks_expm_apply(blocks: np.ndarray, t: np.ndarray, w: np.ndarray) -> np.ndarray:
+    """exp(-B_k t) w_k for k clusters of equal size p and each t: (T, k, p).
+
+    A cluster has diagonal entries close to their mean mu, so B = mu I + Delta + L
+    (Delta small diagonal, L strictly lower). Where |Delta| t <= 1 the Taylor series
+    of exp(-(Delta + L) t) applied to exp(-mu t) w is summed on the vector: L is
+    nilpotent, so the series ends after about p terms plus a few for Delta, and for
+    breakage -L >= 0, so the terms do not cancel. Elsewhere each block is
+    exponentiated by scaling and squaring (:func:`_block_expm`).
+    """
+    k, p, _ = blocks.shape
+    diag = np.diagonal(blocks, axis1=1, axis2=2)
+    mu = diag.mean(axis=1)
+    spread = np.abs(diag - mu[:, np.newaxis]).max(axis=1)
+    G = -(blocks - mu[:, np.newaxis, np.newaxis] * np.eye(p))
+    out = np.empty((t.size, k, p))
+    tight = spread.max() * t <= 1.0
+    if tight.any():
+        out[tight] = _tight_block_series(G, mu, t[tight], w)
+    for j in np.flatnonzero(~tight):
+        out[j] = np.einsum("kpq,kq->kp", _block_expm_stack(blocks, t[j]), w)
+    return out
+
+
+def _tight_block_series(G: np.ndarray, mu: np.ndarray, t: np.ndarray, w: np.ndarray) -> np.ndarray:
+    """sum_n (G t)^n exp(-mu t) w / n!, for k blocks G (k, p, p) and times t; (T, k, p)."""
+    term = np.exp(-np.outer(mu, t))[:, np.newaxis, :] * w[:, :, np.newaxis]  # (k, p, T)
+    total = term.copy()
+    growth = np.abs(G).sum(axis=1).max() * t.max()
+    for n in range(1, 10 * G.shape[1] + 200):
+        term = np.matmul(G, term)
+        term *= t / n
+        total += term
+        if n >= growth and np.abs(term).max() <= 1e-18 * max(np.abs(total).max(), 1e-300):
+            break
+    return total.transpose(2, 0, 1)
+
+
+def _block_expm_stack(blocks: np.ndarray, t: float) -> np.ndarray:
+    """exp(-B_k t) for a stack of blocks (k, p, p) at one time."""
+    return np.array([_block_expm(B, np.array([t]))[0] for B in blocks])
+
+
+def _block_expm(block: np.ndarray, t: np.ndarray) -> np.ndarray:
+    """exp(-block t) for each t: (T, p, p), by Taylor series with scaling and squaring.
+
+    The block of a cluster has nearly equal diagonal entries mu and, for breakage, a
+    non-negative strictly lower part of -block, so the shifted Taylor terms
+    (-(block - mu I) h)^k / k! barely cancel; scipy.linalg.expm's Pade step loses up
+    to 1e-9 on such nilpotent-dominated blocks, this loses ~1e-15. The factor
+    exp(-mu h) stays inside the squaring so that nothing overflows when mu t is huge.
+    """
+    p = block.shape[0]
+    mu = float(np.mean(np.diag(block)))
+    shifted = block - mu * np.eye(p)
+    norm = np.abs(shifted).sum(axis=0).max()
+    squarings = np.maximum(0, np.ceil(np.log2(np.maximum(norm * t, 1e-300)))).astype(int)
+    h = t / 2.0 ** squarings
+    E = -shifted[np.newaxis] * h[:, np.newaxis, np.newaxis]
+    term = np.broadcast_to(np.eye(p), E.shape).copy()
+    total = term.copy()
+    for k in range(1, 19):  # |E| <= 1: 18 terms reach 1/19! ~ 8e-18
+        term = term @ E / k
+        total += term
+    total *= np.exp(-mu * h)[:, np.newaxis, np.newaxis]
+    for level in range(squarings.max(initial=0), 0, -1):
+        sel = squarings >= level
+        total[sel] = total[sel] @ total[sel]
+    return total
+
+
+def contour_funm(fun, block: np.ndarray, n_points: int = 64) -> np.ndarray:
+    """fun(block) for a small lower-triangular block with clustered eigenvalues.
+
+    Cauchy integral on a circle enclosing the eigenvalues, trapezoidal rule (which
+    converges geometrically for functions analytic in an annulus around the circle):
+    f(B) = (1/2 pi i) \\oint f(z) (z I - B)^-1 dz.
+    """
+    ev = np.diag(block)
+    centre = 0.5 * (ev.max() + ev.min())
+    radius = max(0.5 * (ev.max() - ev.min()) * 2.0, 1e-3 * max(abs(centre), 1e-300))
+    theta = 2.0 * np.pi * (np.arange(n_points) + 0.5) / n_points
+    z = centre + radius * np.exp(1j * theta)
+    p = block.shape[0]
+    values = np.asarray(fun(z), dtype=complex)
+    result = np.zeros((p, p), dtype=complex)
+    eye = np.eye(p)
+    for zk, fk, th in zip(z, values, theta):
+        resolvent = scipy.linalg.solve_triangular(zk * eye - block, eye, lower=True)
+        result += fk * resolvent * (radius * np.exp(1j * th))
+    return (result / n_points).real
+
+
+def solve_well_mixed(S, b, feed, tau: float, d_star=None) -> np.ndarray:
+    """Product of a perfectly mixed mill at steady state, eq. 3, by one triangular solve.
+
+        p_i = f_i - tau (S_i/d_i*) p_i + tau sum_{j<i} b_ij (S_j/d_j*) p_j
+        <=>  (I - tau K diag(1/d*)) p = f,   K = (b - I) diag(S).
+
+    Parameters
+    ----------
+    S : (N,) rates [1/s]; b : (N, N) fractional breakage distribution;
+    feed : (N,) or (N, m) feed flows (any unit; the product has the same unit);
+    tau : mean residence time [s]; d_star : (N,) normalised discharge rates
+        d_i* = tau d_i (> 0), None for no classification (all ones).
+    """
+    S = np.asarray(S, dtype=float)
+    scaled = S if d_star is None else S / np.asarray(d_star, dtype=float)
+    M = np.eye(S.size) - tau * breakage_matrix(scaled, b)
+    return scipy.linalg.solve_triangular(M, np.asarray(feed, dtype=float), lower=True, check_finite=False)

@@ -1,0 +1,368 @@
+"""Particle size distributions on a :class:`~millflow.grid.SizeGrid`, and moving them.
+
+A PSD is held as mass fractions per class (coarse -> fine, the sink last, summing to
+1) or, equivalently, as cumulative passing P(x_i) at the upper class edges x_i [m]
+(Austin's convention: P(x_i) is the mass in classes i..N, so P(x_1) = 1).
+This module converts between the two, computes percentile sizes (P80, P50), reduces a
+fine numerical grid to measured sieve sizes and puts a measured sieve PSD onto a fine
+grid (Principle IV). Between known edges, cumulative passing is interpolated with
+scipy's PCHIP (:class:`scipy.interpolate.PchipInterpolator`) in log size: it passes
+through the data and, unlike a cubic spline, never overshoots, so the interpolated P
+stays monotone and inside [0, 1] and no class ever receives negative mass. Edges that
+coincide with known edges (relative difference < 1e-9) take the known value exactly.
+Every transfer builds the new fractions as differences of one cumulative curve that
+starts at 1, so the total mass is conserved; the rounding residual (a few ulp) is
+put in the largest class so that the sum is 1 to 1e-14.
+"""
+from __future__ import annotations
+
+import math
+import warnings
+
+import numpy as np
+from scipy.interpolate import PchipInterpolator
+from scipy.optimize import brentq
+
+from millflow.errors import GridError
+from millflow.grid import as_sizes, class_label, validate_edges
+
+__all__ = [
+    "validate_fractions",
+    "cum_passing",
+    "cum_retained",
+    "retained",
+    "percentile_size",
+    "p80",
+    "p50",
+    "regrid",
+    "from_sieves",
+    "cum_passing_at",
+]
+
+# Tolerance on sum(fractions) = 1 and P(x_1) = 1: beyond this the input is wrong, not
+# rounded (measured PSDs typed with 4 digits sum to 1 within ~1e-4 and must be
+# normalised explicitly with normalize=True).
+SUM_TOL = 1e-9
+# Relative size difference under which a target edge counts as a known edge.
+_MATCH_RTOL = 1e-9
+
+
+# --------------------------------------------------------------------- validation
+def validate_fractions(frac, grid=None, *, normalize: bool = False, name: str = "frac") -> np.ndarray:
+    """Check mass fractions per class and return them as a float array.
+
+    Parameters
+    ----------
+    frac : array_like
+        Mass fractions [-], coarse -> fine, the sink last.
+    grid : SizeGrid or array_like, optional
+        If given, the length must be N and error messages show the class sizes.
+    normalize : bool
+        If True, fractions whose sum differs from 1 are divided by their sum and a
+        ``UserWarning`` states the sum; otherwise such input raises.
+    name : str
+        Argument name for messages.
+
+    Raises
+    ------
+    GridError
+        On NaN/inf, negative fractions (naming the class), a wrong length, or a sum
+        differing from 1 by more than 1e-9 (naming the sum).
+    """
+    f = np.array(frac, dtype=float)
+    x = None if grid is None else as_sizes(grid)
+    if f.ndim != 1 or f.size < 1:
+        raise GridError(f"{name}: expected a 1-D array of mass fractions, got shape {f.shape}")
+    if x is not None and f.size != x.size:
+        raise GridError(f"{name}: {f.size} fractions for a grid of {x.size} classes")
+    bad = np.flatnonzero(~np.isfinite(f))
+    if bad.size:
+        raise GridError(f"{name}: {class_label(bad[0], x)} has fraction {float(f[bad[0]])!r}; expected a finite value")
+    bad = np.flatnonzero(f < 0)
+    if bad.size:
+        raise GridError(f"{name}: {class_label(bad[0], x)} has fraction {float(f[bad[0]])!r}; expected >= 0")
+    total = math.fsum(f)
+    if abs(total - 1.0) > SUM_TOL:
+        if not normalize:
+            raise GridError(
+                f"{name}: mass fractions sum to {total!r}, expected 1 (tolerance {SUM_TOL:g}); "
+                "pass normalize=True to rescale them explicitly"
+            )
+        if total <= 0:
+            raise GridError(f"{name}: mass fractions sum to {total!r}; cannot normalise")
+        warnings.warn(f"{name}: mass fractions summed to {total!r}; divided by the sum (normalize=True)",
+                      UserWarning, stacklevel=2)
+        f = f / total
+        f = _fix_sum(f)
+    return f
+
+
+def _validate_cum(cum, x=None, name: str = "cum") -> np.ndarray:
+    """Cumulative passing at upper edges coarse -> fine: finite, in [0, 1], non-increasing."""
+    P = np.array(cum, dtype=float)
+    if P.ndim != 1 or P.size < 1:
+        raise GridError(f"{name}: expected a 1-D array of cumulative passing, got shape {P.shape}")
+    if x is not None and P.size != x.size:
+        raise GridError(f"{name}: {P.size} values for {x.size} sizes")
+    bad = np.flatnonzero(~np.isfinite(P))
+    if bad.size:
+        raise GridError(f"{name}: value at {class_label(bad[0], x)} is {float(P[bad[0]])!r}; expected finite")
+    bad = np.flatnonzero((P < 0) | (P > 1 + SUM_TOL))
+    if bad.size:
+        k = bad[0]
+        hint = " (give fractions, not percent)" if P[k] > 1.5 else ""
+        raise GridError(f"{name}: value at {class_label(k, x)} is {float(P[k])!r}; expected 0 <= P <= 1{hint}")
+    bad = np.flatnonzero(np.diff(P) > 0)
+    if bad.size:
+        k = bad[0] + 1
+        raise GridError(
+            f"{name}: cumulative passing rises from {float(P[k - 1])!r} to {float(P[k])!r} at {class_label(k, x)}; "
+            "it must not increase from coarse to fine sizes"
+        )
+    return np.minimum(P, 1.0)
+
+
+def _fix_sum(f: np.ndarray) -> np.ndarray:
+    """Put the rounding residual 1 - sum(f) (a few ulp) into the largest class."""
+    k = int(np.argmax(f))
+    f[k] += 1.0 - math.fsum(f)
+    return f
+
+
+# ---------------------------------------------------------- cumulative <-> fractions
+def cum_passing(frac) -> np.ndarray:
+    """Cumulative passing P(x_i) [-] at the upper edges: the mass in classes i..N.
+
+    ``cum_passing(frac)[0]`` is the total mass (1 for a valid PSD). No validation,
+    so it also serves for mass flows per class [kg/s].
+    """
+    f = np.asarray(frac, dtype=float)
+    return np.cumsum(f[::-1])[::-1]
+
+
+def cum_retained(frac) -> np.ndarray:
+    """Cumulative retained [-] at the lower edge of each class: the mass in classes 1..i."""
+    return np.cumsum(np.asarray(frac, dtype=float))
+
+
+def retained(cum, *, name: str = "cum") -> np.ndarray:
+    """Mass fractions per class from cumulative passing at the upper edges.
+
+    frac_i = P(x_i) - P(x_{i+1}) for i < N and frac_N = P(x_N) (the sink).
+
+    Parameters
+    ----------
+    cum : array_like
+        Cumulative passing [-] at the upper edges, coarse -> fine, with P(x_1) = 1
+        (to 1e-9; the top edge must pass everything, else the mass above it has no
+        class), non-increasing, within [0, 1].
+
+    Raises
+    ------
+    GridError
+        For NaN, values outside [0, 1], a rise from coarse to fine, or P(x_1) != 1.
+    """
+    P = _validate_cum(cum, name=name)
+    if abs(P[0] - 1.0) > SUM_TOL:
+        raise GridError(f"{name}: cumulative passing at the top edge is {float(P[0])!r}; expected 1 (100 % passing)")
+    P = P.copy()
+    P[0] = 1.0
+    return _fix_sum(np.append(P[:-1] - P[1:], P[-1]))
+
+
+# --------------------------------------------------------------- interpolation core
+def _pchip_logx(x_desc: np.ndarray, P_desc: np.ndarray) -> PchipInterpolator:
+    """Monotone interpolant of P against ln x from data ordered coarse -> fine."""
+    # scipy's harmonic-mean slopes overflow to inf for subnormal secants and then give
+    # derivative 0, which is the right (monotone) answer: silence only that warning
+    with np.errstate(over="ignore", divide="ignore"):
+        return PchipInterpolator(np.log(x_desc[::-1]), P_desc[::-1], extrapolate=False)
+
+
+def _eval_cum(x_known, P_known, x_new) -> np.ndarray:
+    """P at x_new from known (x, P) coarse -> fine; flat outside the known range.
+
+    Above the coarsest known size P keeps its value there (1 for a complete PSD);
+    below the finest known size P keeps its value there: mass finer than the finest
+    known size is not spread, it stays together in the finest class (the sink).
+    Exact at sizes that match a known size (relative difference < 1e-9).
+    """
+    x_new = np.asarray(x_new, dtype=float)
+    out = np.empty_like(x_new)
+    above = x_new >= x_known[0]
+    below = x_new <= x_known[-1]
+    out[above] = P_known[0]
+    out[below] = P_known[-1]
+    inside = ~(above | below)
+    if np.any(inside):
+        f = _pchip_logx(x_known, P_known)  # inside is empty for a single size
+        out[inside] = f(np.log(x_new[inside]))
+    # known edges: take the data value, not the interpolant's rounding
+    idx = np.searchsorted(-x_known, -x_new)  # x_known is decreasing
+    for off in (0, -1):
+        j = np.clip(idx + off, 0, x_known.size - 1)
+        hit = np.abs(x_known[j] - x_new) <= _MATCH_RTOL * x_known[j]
+        out[hit] = P_known[j[hit]]
+    # PCHIP is monotone and bounded in exact arithmetic; clip rounding only
+    out = np.clip(out, 0.0, 1.0)
+    return np.minimum.accumulate(out)  # non-increasing coarse -> fine, as new sizes are
+
+
+def cum_passing_at(grid, frac, sizes_m) -> np.ndarray:
+    """Cumulative passing [-] of a PSD on ``grid`` at arbitrary sizes [m] (decreasing).
+
+    Uses the module's monotone interpolation (PCHIP in ln x); P = 1 above the top
+    edge; below the sink's upper edge x_N the value P(x_N) is returned (the grid says
+    nothing about how the sink's mass is spread).
+    """
+    x = as_sizes(grid)
+    f = validate_fractions(frac, x)
+    s = np.atleast_1d(np.asarray(sizes_m, dtype=float))
+    P = cum_passing(f)
+    P[0] = 1.0
+    order = np.argsort(-s, kind="stable")
+    out = np.empty_like(s)
+    out[order] = _eval_cum(x, P, s[order])
+    return out
+
+
+def _fractions_from_cum(P_new: np.ndarray) -> np.ndarray:
+    f = np.append(P_new[:-1] - P_new[1:], P_new[-1])
+    return _fix_sum(np.maximum(f, 0.0))
+
+
+# ---------------------------------------------------------------- public transfers
+def regrid(frac, from_grid, to_grid, *, lump_top: bool = False) -> np.ndarray:
+    """Move a PSD from one grid to another, conserving mass.
+
+    P is evaluated at the target edges: exactly where they coincide with source edges
+    (so the reduction of a fine numerical grid to sieve sizes that are a subset of
+    its edges, e.g. from :meth:`SizeGrid.refine`, is exact), otherwise by PCHIP in
+    ln x. Target classes below the source sink edge x_N receive nothing: the source
+    sink's mass goes to the target sink.
+
+    Parameters
+    ----------
+    frac : array_like
+        Mass fractions on ``from_grid`` [-], summing to 1.
+    from_grid, to_grid : SizeGrid or array_like of upper edges [m]
+    lump_top : bool
+        Mass coarser than the target's top edge has no target class. By default that
+        is an error (beyond 1e-12); with ``lump_top=True`` it is added to target class
+        1 and a ``UserWarning`` states how much.
+
+    Returns
+    -------
+    numpy.ndarray
+        Mass fractions on ``to_grid``, >= 0, summing to 1 to within 1e-14.
+    """
+    xs = as_sizes(from_grid)
+    xt = as_sizes(to_grid)
+    f = validate_fractions(frac, xs)
+    P = cum_passing(f)
+    P[0] = 1.0
+    P_new = _eval_cum(xs, P, xt)
+    _handle_top(P_new, xt, lump_top, "regrid")
+    return _fractions_from_cum(P_new)
+
+
+def from_sieves(size_m, cum_passing_frac, grid, *, oversize: str = "error") -> np.ndarray:
+    """Put a measured sieve PSD onto a (usually finer) grid, conserving mass.
+
+    Cumulative passing is interpolated between the sieves by PCHIP in ln x (monotone,
+    no overshoot); grid edges equal to a sieve size take the measured value exactly.
+    The mass finer than the smallest sieve goes to the grid's sink (it is not spread
+    over finer grid classes, about which the data say nothing). Above the top sieve
+    P keeps the top sieve's value.
+
+    Parameters
+    ----------
+    size_m : array_like
+        Sieve sizes [m], strictly decreasing (coarse -> fine), at least 2.
+    cum_passing_frac : array_like
+        Cumulative passing at each sieve, as a fraction in [0, 1] (not percent),
+        non-increasing from coarse to fine.
+    grid : SizeGrid or array_like
+        Target grid.
+    oversize : {"error", "lump"}
+        What to do when the grid's top edge does not pass 100 % (the top sieve
+        retains material, or the grid top is below it): "error" raises (beyond
+        1e-9); "lump" adds the oversize mass to class 1 and warns how much.
+
+    Returns
+    -------
+    numpy.ndarray
+        Mass fractions on ``grid``, summing to 1 to within 1e-14.
+    """
+    s = validate_edges(size_m, name="size_m")
+    if s.size < 2:
+        raise GridError(f"size_m: expected at least 2 sieve sizes [m] in a 1-D array, got {size_m!r}")
+    P = _validate_cum(cum_passing_frac, s, name="cum_passing_frac")
+    if oversize not in ("error", "lump"):
+        raise GridError(f"oversize = {oversize!r}: expected 'error' or 'lump'")
+    x = as_sizes(grid)
+    P_new = _eval_cum(s, P, x)
+    _handle_top(P_new, x, oversize == "lump", "from_sieves", tol=SUM_TOL)
+    return _fractions_from_cum(P_new)
+
+
+def _handle_top(P_new, x, lump: bool, where: str, tol: float = 1e-12) -> None:
+    over = 1.0 - P_new[0]
+    if over > tol and not lump:
+        raise GridError(
+            f"{where}: mass fraction {over:.6g} is coarser than the top edge {x[0]:.6g} m "
+            f"(cumulative passing there is {float(P_new[0])!r}, expected 1); use a coarser grid "
+            "or lump it into class 1 explicitly"
+        )
+    if over > tol:
+        warnings.warn(f"{where}: mass fraction {over:.6g} coarser than {x[0]:.6g} m was added to class 1",
+                      UserWarning, stacklevel=3)
+    P_new[0] = 1.0
+
+
+# ---------------------------------------------------------------------- percentiles
+def percentile_size(grid, frac, percent: float) -> float:
+    """Size [m] at which ``percent`` % of the mass passes (P80: percent = 80).
+
+    Cumulative passing is known at the upper edges; between them it is interpolated
+    by PCHIP in ln x (the same monotone interpolation as :func:`from_sieves`) and the
+    crossing is found by Brent's method on the one bracketing interval.
+
+    Raises
+    ------
+    GridError
+        If ``percent`` is not in (0, 100], or the percentile lies inside the sink
+        (P(x_N) >= percent/100: the grid has no information below x_N; extend the grid
+        to finer sizes).
+    """
+    x = as_sizes(grid)
+    f = validate_fractions(frac, x)
+    if not (np.isfinite(percent) and 0 < percent <= 100):
+        raise GridError(f"percent = {percent!r}: expected 0 < percent <= 100")
+    q = percent / 100.0
+    P = cum_passing(f)
+    P[0] = 1.0
+    if P[-1] >= q:
+        raise GridError(
+            f"P{percent:g} lies below the grid: {P[-1]:.6g} of the mass passes the finest edge "
+            f"{x[-1]:.6g} m ({class_label(x.size - 1, x)} is the sink); extend the grid to finer sizes"
+        )
+    # first edge (from fine to coarse) where P reaches q: the crossing is between it
+    # and the edge below it
+    k = int(np.flatnonzero(P >= q)[-1])
+    if P[k] == q:
+        return float(x[k])
+    ln_hi, ln_lo = math.log(x[k]), math.log(x[k + 1])
+    spline = _pchip_logx(x, P)
+    root = brentq(lambda u: float(spline(u)) - q, ln_lo, ln_hi, xtol=1e-14, rtol=4 * np.finfo(float).eps)
+    return float(math.exp(root))
+
+
+def p80(grid, frac) -> float:
+    """80 % passing size [m]; see :func:`percentile_size`."""
+    return percentile_size(grid, frac, 80)
+
+
+def p50(grid, frac) -> float:
+    """Median size [m] (50 % passing); see :func:`percentile_size`."""
+    return percentile_size(grid, frac, 50)

@@ -1,0 +1,304 @@
+"""Compartment networks: well-mixed cells joined by flows, as a linear system.
+
+A network of n well-mixed cells has tracer amounts m (n,) obeying dm/dt = A m, with A
+the system matrix built from the cell volumes and the flow matrix. A unit pulse split
+over the cells by ``inlet`` leaves through ``outlet``, so
+
+    E(t)     = (1 - b) w^T expm(A t) u + b delta(t),     w = outlet / volumes, u = inlet,
+    F(t)     = b + (1 - b) [1 - 1^T expm(A t) u],
+    E_hat(s) = b + (1 - b) w^T (s I - A)^-1 u,
+
+b the bypass fraction: E(t) by matrix exponential, the transform by one linear solve per
+s. The mill reuses the structure (volumes, flows, system matrix) to put breakage inside
+every cell. ``RecirculatingCells`` is the usual cells-in-series model with back-mixing,
+dead volume and bypass, built on such a network.
+"""
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+from typing import ClassVar
+
+import numpy as np
+from scipy import linalg, optimize
+
+from rtd.models import ParameterError, RTDModel, as_s, as_time, check_fraction, check_positive
+
+
+def _frozen(a) -> np.ndarray:
+    arr = np.array(a, dtype=float)
+    arr.setflags(write=False)
+    return arr
+
+
+@dataclass(frozen=True, eq=False)
+class CompartmentNetwork:
+    """Well-mixed cells with volumes and flows between them.
+
+    Parameters
+    ----------
+    volumes : array (n,)
+        Volume of each cell [any volume unit], > 0.
+    flows : array (n, n)
+        ``flows[i, j]`` = volumetric flow from cell j into cell i [volume/time], >= 0,
+        zero diagonal.
+    inlet : array (n,)
+        Fraction of the (non-bypassed) feed entering each cell, >= 0, sum 1.
+    outlet : array (n,)
+        Volumetric flow from each cell to the exit [volume/time], >= 0, not all zero.
+    bypass : float
+        Fraction of the total feed that goes straight to the exit (an atom of E at
+        t = 0, not part of ``pdf``), in [0, 1).
+
+    Notes
+    -----
+    Volume balance of every cell is checked: sum_j flows[i, j] + inlet_i Q_c =
+    sum_k flows[k, i] + outlet_i, with Q_c = sum(outlet) the flow through the cells
+    (total feed Q = Q_c / (1 - bypass)). The system matrix, acting on tracer amounts per
+    cell (dm/dt = A m), is A[i, j] = flows[i, j]/volumes[j] (i != j),
+    A[i, i] = -(sum_k flows[k, i] + outlet_i)/volumes[i]. Mean residence time of the
+    whole vessel: sum(volumes) / Q for a network in which every cell is flushed.
+    """
+
+    volumes: np.ndarray
+    flows: np.ndarray
+    inlet: np.ndarray
+    outlet: np.ndarray
+    bypass: float = 0.0
+
+    def __post_init__(self):
+        for name in ("volumes", "flows", "inlet", "outlet"):
+            object.__setattr__(self, name, _frozen(getattr(self, name)))
+        object.__setattr__(self, "bypass",
+                           check_fraction("CompartmentNetwork", "bypass", self.bypass, True))
+        self._validate()
+
+    def _validate(self):
+        v, f, u, o = self.volumes, self.flows, self.inlet, self.outlet
+        n = v.size
+        name = "CompartmentNetwork"
+        if v.ndim != 1 or n == 0 or f.shape != (n, n) or u.shape != (n,) or o.shape != (n,):
+            raise ParameterError(f"{name}: shapes volumes {v.shape}, flows {f.shape}, inlet "
+                                 f"{u.shape}, outlet {o.shape}; expected (n,), (n, n), (n,), (n,)")
+        for key, arr in (("volumes", v), ("flows", f), ("inlet", u), ("outlet", o)):
+            if not np.all(np.isfinite(arr)) or np.any(arr < 0):
+                raise ParameterError(f"{name}: {key} has negative or non-finite entries; expected >= 0")
+        if np.any(v <= 0):
+            raise ParameterError(f"{name}: volumes must be > 0 (cell {int(np.argmin(v))})")
+        if np.any(np.diag(f) != 0):
+            raise ParameterError(f"{name}: flows must have a zero diagonal")
+        if abs(u.sum() - 1) > 1e-9:
+            raise ParameterError(f"{name}: inlet sums to {u.sum()!r}; expected 1")
+        qc = o.sum()
+        if qc <= 0:
+            raise ParameterError(f"{name}: outlet is all zero; expected some flow to the exit")
+        imbalance = f.sum(axis=1) + u * qc - f.sum(axis=0) - o
+        scale = max(qc, f.max(initial=0.0))
+        bad = np.flatnonzero(np.abs(imbalance) > 1e-9 * scale)
+        if bad.size:
+            i = int(bad[0])
+            raise ParameterError(f"{name}: cell {i} gains {imbalance[i]!r} volume/time (in - out); "
+                                 "expected a volume balance in every cell")
+
+    @property
+    def n(self) -> int:
+        """Number of cells."""
+        return self.volumes.size
+
+    @property
+    def feed_flow(self) -> float:
+        """Total feed flow Q = sum(outlet)/(1 - bypass) [volume/time]."""
+        return float(self.outlet.sum()) / (1.0 - self.bypass)
+
+    def system_matrix(self) -> np.ndarray:
+        """A (n, n) [1/time] with dm/dt = A m for tracer amounts m per cell (class doc)."""
+        a = self.flows / self.volumes[None, :]
+        out = self.flows.sum(axis=0) + self.outlet
+        return a - np.diag(out / self.volumes)
+
+    def _w(self) -> np.ndarray:
+        return self.outlet / self.volumes
+
+    def pdf(self, t):
+        """E(t) [1/time] without the bypass atom at t = 0."""
+        t = as_time(t)
+        flat = np.maximum(t.ravel(), 0.0)
+        expm_u = self._expm_u(flat)
+        out = (1 - self.bypass) * (expm_u @ self._w())
+        return np.where(t.ravel() >= 0, out, 0.0).reshape(t.shape)
+
+    def cdf(self, t):
+        """F(t) [-], including the bypass atom at t = 0."""
+        t = as_time(t)
+        flat = np.maximum(t.ravel(), 0.0)
+        remaining = self._expm_u(flat).sum(axis=1)
+        out = self.bypass + (1 - self.bypass) * (1 - remaining)
+        return np.where(t.ravel() >= 0, np.clip(out, 0, 1), 0.0).reshape(t.shape)
+
+    def _expm_u(self, t: np.ndarray) -> np.ndarray:
+        """expm(A t_k) u for every t_k, shape (len(t), n)."""
+        a = self.system_matrix()
+        lam, vec = np.linalg.eig(a)
+        # the eigen route is exact and fast when A is diagonalisable and well conditioned;
+        # tanks in series give a defective A, handled by one expm per time
+        if np.linalg.cond(vec) < 1e6:
+            coef = np.linalg.solve(vec, self.inlet.astype(complex))
+            return ((np.exp(np.outer(t, lam)) * coef[None, :]) @ vec.T).real
+        mats = linalg.expm(a[None, :, :] * t[:, None, None])
+        return mats @ self.inlet
+
+    def laplace(self, s):
+        """E_hat(s) = b + (1 - b) w^T (s I - A)^-1 u for real or complex s (any shape)."""
+        s, real = as_s(s)
+        flat = s.ravel().astype(complex)
+        a = self.system_matrix()
+        m = flat[:, None, None] * np.eye(self.n)[None] - a[None]
+        x = np.linalg.solve(m, np.broadcast_to(self.inlet, (flat.size, self.n))[..., None])[..., 0]
+        out = (self.bypass + (1 - self.bypass) * (x @ self._w())).reshape(s.shape)
+        return out.real if real else out
+
+    def _moment(self, k: int) -> float:
+        """k-th raw moment k! w^T (-A)^-(k+1) u times (1 - b)."""
+        a = -self.system_matrix()
+        x = self.inlet.copy()
+        for _ in range(k + 1):
+            x = np.linalg.solve(a, x)
+        return (1 - self.bypass) * math.factorial(k) * float(self._w() @ x)
+
+    @property
+    def mean(self) -> float:
+        return self._moment(1)
+
+    @property
+    def variance(self) -> float:
+        return self._moment(2) - self.mean**2
+
+    @property
+    def analytic_for_re_s_greater_than(self) -> float:
+        """Largest real part of the poles (eigenvalues of A)."""
+        return float(np.linalg.eigvals(self.system_matrix()).real.max())
+
+    @property
+    def atom_at_zero(self) -> float:
+        return self.bypass
+
+    @classmethod
+    def tanks_in_series(cls, tau: float, n: int) -> "CompartmentNetwork":
+        """n equal cells in a row, feed flow 1, each of volume tau/n."""
+        tau = check_positive("CompartmentNetwork.tanks_in_series", "tau", tau)
+        if int(n) != n or n < 1:
+            raise ParameterError(f"tanks_in_series: n = {n!r}; expected an integer >= 1")
+        return cls.cells_in_series(np.full(int(n), tau / n), forward=1.0, backward=0.0)
+
+    @classmethod
+    def cells_in_series(cls, volumes, forward: float, backward: float,
+                        bypass: float = 0.0) -> "CompartmentNetwork":
+        """Cells in a row: flow ``forward`` from cell i to i+1, ``backward`` from i+1 to i.
+
+        The flow through the cells is forward - backward (it enters cell 0 and leaves
+        the last cell).
+        """
+        v = np.asarray(volumes, dtype=float)
+        n = v.size
+        q = forward - backward
+        f = np.zeros((n, n))
+        idx = np.arange(n - 1)
+        f[idx + 1, idx] = forward
+        f[idx, idx + 1] = backward
+        u = np.zeros(n)
+        u[0] = 1.0
+        o = np.zeros(n)
+        o[-1] = q
+        return cls(v, f, u, o, bypass)
+
+
+@dataclass(frozen=True)
+class RecirculatingCells(RTDModel):
+    """``n`` well-mixed cells in a row with back-mixing, dead volume and bypass.
+
+    Feed flow Q (taken as 1); a fraction ``bypass`` of it goes straight to the exit, the
+    rest Q_c = (1 - bypass) Q passes the cells. Between neighbours the forward flow is
+    (1 + r) Q_c and the back-mixing flow r Q_c. A fraction ``dead`` of the total volume
+    V = tau Q is stagnant; the active volume (1 - dead) V is split equally between
+    the cells. Mean residence time (1 - dead) tau (independent of the bypass); with
+    r = dead = bypass = 0 it is ``TanksInSeries(tau, n)``; n = 1 is perfect mixing.
+
+    Parameters
+    ----------
+    tau : float
+        V / Q [time], nominal mean residence time including dead volume, > 0.
+    n : int
+        Number of cells, >= 1 (kept fixed by :func:`rtd.fit`).
+    r : float
+        Back-mixing (recirculation) ratio [-], >= 0.
+    dead, bypass : float
+        Fractions in [0, 1).
+    """
+
+    tau: float
+    n: int
+    r: float = 0.0
+    dead: float = 0.0
+    bypass: float = 0.0
+    param_names: ClassVar[tuple[str, ...]] = ("tau", "n", "r", "dead", "bypass")
+    fixed_by_default: ClassVar[tuple[str, ...]] = ("n", "dead", "bypass")
+
+    def __post_init__(self):
+        name = "RecirculatingCells"
+        object.__setattr__(self, "tau", check_positive(name, "tau", self.tau))
+        if float(self.n) != int(round(float(self.n))) or self.n < 1:
+            raise ParameterError(f"{name}: n = {self.n!r}; expected an integer >= 1")
+        object.__setattr__(self, "n", int(round(float(self.n))))
+        r = float(self.r)
+        if not (math.isfinite(r) and r >= 0):
+            raise ParameterError(f"{name}: r = {r!r}; expected a number >= 0")
+        object.__setattr__(self, "r", r)
+        object.__setattr__(self, "dead", check_fraction(name, "dead", self.dead, True))
+        object.__setattr__(self, "bypass", check_fraction(name, "bypass", self.bypass, True))
+
+    def network(self) -> CompartmentNetwork:
+        """The compartment network (feed flow 1, volumes in units of tau)."""
+        qc = 1.0 - self.bypass
+        v = np.full(self.n, self.tau * (1 - self.dead) / self.n)
+        return CompartmentNetwork.cells_in_series(v, (1 + self.r) * qc, self.r * qc, self.bypass)
+
+    def pdf(self, t):
+        return self.network().pdf(t)
+
+    def cdf(self, t):
+        return self.network().cdf(t)
+
+    def laplace(self, s):
+        return self.network().laplace(s)
+
+    @property
+    def mean(self) -> float:
+        return self.tau * (1 - self.dead)
+
+    @property
+    def variance(self) -> float:
+        return self.network().variance
+
+    @property
+    def atom_at_zero(self) -> float:
+        return self.bypass
+
+    @property
+    def analytic_for_re_s_greater_than(self) -> float:
+        return self.network().analytic_for_re_s_greater_than
+
+    @classmethod
+    def from_moments(cls, mean: float, variance: float, n: int = 3, dead: float = 0.0,
+                     bypass: float = 0.0) -> "RecirculatingCells":
+        """Initial guess: tau from the mean, r from the variance (n, dead, bypass given)."""
+        tau = mean / (1 - dead)
+
+        def excess(r):
+            return cls(tau, n, r, dead, bypass).variance - variance
+
+        if n == 1 or excess(0.0) >= 0:
+            return cls(tau, n, 0.0, dead, bypass)
+        if excess(1e4) <= 0:
+            return cls(tau, n, 1e4, dead, bypass)
+        r = optimize.brentq(lambda x: excess(math.expm1(x)), 0.0, math.log1p(1e4), xtol=1e-10)
+        return cls(tau, n, math.expm1(r), dead, bypass)

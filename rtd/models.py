@@ -1,0 +1,261 @@
+"""Residence time distribution models with closed-form E(t), F(t) and transforms.
+
+Each model is a small frozen dataclass holding its parameters by name. It gives the
+exit-age density E(t) (``pdf``), its integral F(t) (``cdf``), the Laplace transform
+E_hat(s) = int_0^inf E(t) exp(-s t) dt (``laplace``, real or complex s, scalar or array),
+the first two moments (``mean``, ``variance``) and the half plane in which the transform
+is analytic (``analytic_for_re_s_greater_than``), which contour integrals in the mill
+need to avoid poles and branch points. Times are in any unit used consistently
+(tau and t in the same unit). Implemented here: perfect mixing, plug flow, tanks in
+series (gamma form, real n >= 1); axial dispersion lives in :mod:`rtd.axial`, networks of cells in
+:mod:`rtd.compartments`, and the compositions ``Series`` and ``Parallel`` in
+:mod:`rtd.compose`.
+
+References: Levenspiel, Chemical Reaction Engineering (1999), ch. 11-14; Wehner and
+Wilhelm, Chem. Eng. Sci. 6 (1956) 89.
+"""
+from __future__ import annotations
+
+import dataclasses
+import math
+from dataclasses import dataclass
+from typing import ClassVar
+
+import numpy as np
+from scipy import special
+
+
+class RTDError(ValueError):
+    """Base class of rtd errors: a parameter, data value or option is unusable."""
+
+
+class ParameterError(RTDError):
+    """A model parameter is outside its valid range (the message names it)."""
+
+
+def check_positive(model: str, name: str, value) -> float:
+    """Return ``value`` as float, or raise ParameterError if it is not finite and > 0."""
+    value = float(value)
+    if not (math.isfinite(value) and value > 0.0):
+        raise ParameterError(f"{model}: {name} = {value!r}; expected a finite number > 0")
+    return value
+
+
+def check_fraction(model: str, name: str, value, upper_open: bool = False) -> float:
+    """Return ``value`` as float, or raise ParameterError if it is not in [0, 1]."""
+    value = float(value)
+    ok = math.isfinite(value) and 0.0 <= value and (value < 1.0 if upper_open else value <= 1.0)
+    if not ok:
+        upper = "1)" if upper_open else "1]"
+        raise ParameterError(f"{model}: {name} = {value!r}; expected a fraction in [0, {upper}")
+    return value
+
+
+def as_time(t) -> np.ndarray:
+    """Times as a float array (any shape)."""
+    return np.asarray(t, dtype=float)
+
+
+def as_s(s) -> tuple[np.ndarray, bool]:
+    """Transform variable as an array and whether it was real (result is then real)."""
+    arr = np.asarray(s)
+    if np.iscomplexobj(arr):
+        return arr.astype(complex), False
+    return arr.astype(float), True
+
+
+@dataclass(frozen=True)
+class RTDModel:
+    """Common interface of every RTD model (one level of inheritance only).
+
+    Subclasses define ``pdf``, ``cdf``, ``laplace``, ``mean``, ``variance`` and
+    ``analytic_for_re_s_greater_than``; ``param_names`` lists the parameters that
+    :func:`rtd.fit` may vary, ``fixed_by_default`` those it keeps fixed unless asked.
+    """
+
+    param_names: ClassVar[tuple[str, ...]] = ()
+    fixed_by_default: ClassVar[tuple[str, ...]] = ()
+
+    @property
+    def params(self) -> dict[str, float]:
+        """Parameters by name (a new dict)."""
+        return {f.name: getattr(self, f.name) for f in dataclasses.fields(self)
+                if f.name in self.param_names}
+
+    def replace(self, **changes) -> "RTDModel":
+        """A copy with some parameters changed (validated again)."""
+        return dataclasses.replace(self, **changes)
+
+    @property
+    def atom_at_zero(self) -> float:
+        """Probability mass leaving at t = 0 (bypass); not part of ``pdf``."""
+        return 0.0
+
+    def moments_from_transform(self, h: float | None = None) -> tuple[float, float]:
+        """Mean and variance from finite differences of log E_hat at s = 0 (a check)."""
+        h = h or 1e-4 / self.mean
+        lp = np.log(np.array([self.laplace(-h), self.laplace(0.0), self.laplace(h)]))
+        mean = -(lp[2] - lp[0]) / (2 * h)
+        var = (lp[2] - 2 * lp[1] + lp[0]) / h**2
+        return float(mean), float(var)
+
+
+@dataclass(frozen=True)
+class PerfectMixing(RTDModel):
+    """One perfectly mixed vessel (CSTR) with mean residence time ``tau`` [time].
+
+    E(t) = exp(-t/tau)/tau, F(t) = 1 - exp(-t/tau), E_hat(s) = 1/(1 + s tau);
+    mean tau, variance tau^2; pole at s = -1/tau.
+    """
+
+    tau: float
+    param_names: ClassVar[tuple[str, ...]] = ("tau",)
+
+    def __post_init__(self):
+        object.__setattr__(self, "tau", check_positive("PerfectMixing", "tau", self.tau))
+
+    def pdf(self, t):
+        t = as_time(t)
+        return np.where(t >= 0, np.exp(-np.maximum(t, 0) / self.tau) / self.tau, 0.0)
+
+    def cdf(self, t):
+        t = as_time(t)
+        return np.where(t >= 0, -np.expm1(-np.maximum(t, 0) / self.tau), 0.0)
+
+    def laplace(self, s):
+        s, _ = as_s(s)
+        return 1.0 / (1.0 + s * self.tau)
+
+    @property
+    def mean(self) -> float:
+        return self.tau
+
+    @property
+    def variance(self) -> float:
+        return self.tau**2
+
+    @property
+    def analytic_for_re_s_greater_than(self) -> float:
+        return -1.0 / self.tau
+
+    def network(self):
+        """The equivalent one-cell :class:`rtd.CompartmentNetwork` (flow 1, volume tau)."""
+        from rtd.compartments import CompartmentNetwork
+        return CompartmentNetwork.tanks_in_series(self.tau, 1)
+
+    @classmethod
+    def from_moments(cls, mean: float, variance: float) -> "PerfectMixing":
+        """Initial guess: tau = mean."""
+        return cls(mean)
+
+
+@dataclass(frozen=True)
+class PlugFlow(RTDModel):
+    """Plug flow with delay ``tau`` [time]: E = delta(t - tau), E_hat = exp(-s tau).
+
+    ``pdf`` returns 0 everywhere (the delta cannot be sampled); ``cdf`` is the unit
+    step at tau. For large Re s the transform underflows cleanly to 0; it is entire.
+    """
+
+    tau: float
+    param_names: ClassVar[tuple[str, ...]] = ("tau",)
+
+    def __post_init__(self):
+        object.__setattr__(self, "tau", check_positive("PlugFlow", "tau", self.tau))
+
+    def pdf(self, t):
+        return np.zeros_like(as_time(t))
+
+    def cdf(self, t):
+        return np.where(as_time(t) >= self.tau, 1.0, 0.0)
+
+    def laplace(self, s):
+        s, _ = as_s(s)
+        return np.exp(-s * self.tau)
+
+    @property
+    def mean(self) -> float:
+        return self.tau
+
+    @property
+    def variance(self) -> float:
+        return 0.0
+
+    @property
+    def analytic_for_re_s_greater_than(self) -> float:
+        return -math.inf
+
+    @classmethod
+    def from_moments(cls, mean: float, variance: float) -> "PlugFlow":
+        return cls(mean)
+
+
+@dataclass(frozen=True)
+class TanksInSeries(RTDModel):
+    """``n`` equal perfect mixers in series, total mean residence time ``tau`` [time].
+
+    Gamma form, valid for real n >= 1:
+    E(t) = (n/tau)^n t^(n-1) exp(-n t/tau) / Gamma(n),  F(t) = P(n, n t/tau)
+    (regularised lower incomplete gamma),  E_hat(s) = (1 + s tau/n)^(-n);
+    mean tau, variance tau^2/n. For non-integer n the transform has a branch point at
+    s = -n/tau (principal branch, cut along the real axis to the left of it).
+    """
+
+    tau: float
+    n: float
+    param_names: ClassVar[tuple[str, ...]] = ("tau", "n")
+
+    def __post_init__(self):
+        object.__setattr__(self, "tau", check_positive("TanksInSeries", "tau", self.tau))
+        n = float(self.n)
+        if not (math.isfinite(n) and n >= 1.0):
+            raise ParameterError(f"TanksInSeries: n = {n!r}; expected a number >= 1")
+        object.__setattr__(self, "n", n)
+
+    def pdf(self, t):
+        t = as_time(t)
+        x = self.n * np.maximum(t, 0) / self.tau
+        # log form: (n/tau) x^(n-1) e^-x / Gamma(n) overflows piecewise for large n
+        with np.errstate(divide="ignore"):
+            logp = (math.log(self.n / self.tau) + special.xlogy(self.n - 1, x) - x
+                    - special.gammaln(self.n))
+        out = np.exp(logp)
+        return np.where(t > 0, out, (1.0 / self.tau if self.n == 1 else 0.0) * (t == 0))
+
+    def cdf(self, t):
+        t = as_time(t)
+        return special.gammainc(self.n, self.n * np.maximum(t, 0) / self.tau)
+
+    def laplace(self, s):
+        s, real = as_s(s)
+        x = s * self.tau / self.n
+        if real:
+            # left of the branch point only integer n gives a real value (nan otherwise)
+            with np.errstate(invalid="ignore", divide="ignore", over="ignore"):
+                return np.where(x > -1, np.exp(-self.n * np.log1p(np.maximum(x, -1.0))),
+                                np.power(1 + x, -self.n))
+        return np.exp(-self.n * np.log1p(x))
+
+    @property
+    def mean(self) -> float:
+        return self.tau
+
+    @property
+    def variance(self) -> float:
+        return self.tau**2 / self.n
+
+    @property
+    def analytic_for_re_s_greater_than(self) -> float:
+        return -self.n / self.tau
+
+    def network(self):
+        """The equivalent :class:`rtd.CompartmentNetwork` (integer n only)."""
+        from rtd.compartments import CompartmentNetwork
+        if self.n != round(self.n):
+            raise ParameterError(f"TanksInSeries.network: n = {self.n!r}; expected an integer")
+        return CompartmentNetwork.tanks_in_series(self.tau, int(round(self.n)))
+
+    @classmethod
+    def from_moments(cls, mean: float, variance: float) -> "TanksInSeries":
+        """Initial guess: tau = mean, n = mean^2/variance (at least 1)."""
+        return cls(mean, max(1.0, mean**2 / variance) if variance > 0 else 50.0)
