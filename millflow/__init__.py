@@ -1,17 +1,49 @@
 """millflow: population-balance simulation of continuous grinding mills.
 
-Class 1 is the coarsest size class, class N the finest (the sink, S_N = 0).
+Class 1 is the coarsest size class, class N the finest (the sink, S_N = 0); sizes are
+upper class edges in metres (Austin's convention), times in seconds, rates in 1/s.
 Equations are numbered as in EQUATIONS.md of the project.
 """
+from millflow.batch import batch_grind, batch_solve, grind, plug_flow_profile
+from millflow.breakage import (
+    AustinRate,
+    NonNormalizedBreakage,
+    NormalizedBreakage,
+    PowerLawRate,
+    TabulatedBreakage,
+    TabulatedRate,
+    b_from_B,
+    non_normalized_B,
+    normalized_B,
+    power_law_rates,
+)
 from millflow.errors import BreakageError, GridError, InputError, MillflowError, SolverError
-from millflow.batch import batch_grind
+from millflow.grid import SizeGrid
+from millflow.linalg import SpectralBlocks, breakage_matrix, solve_well_mixed
 
 __version__ = "0.1.0"
 __all__ = [
-    "batch_grind",
+    "AustinRate",
     "BreakageError",
     "GridError",
     "InputError",
     "MillflowError",
+    "NonNormalizedBreakage",
+    "NormalizedBreakage",
+    "PowerLawRate",
+    "SizeGrid",
     "SolverError",
+    "SpectralBlocks",
+    "TabulatedBreakage",
+    "TabulatedRate",
+    "b_from_B",
+    "batch_grind",
+    "batch_solve",
+    "breakage_matrix",
+    "grind",
+    "non_normalized_B",
+    "normalized_B",
+    "plug_flow_profile",
+    "power_law_rates",
+    "solve_well_mixed",
 ]

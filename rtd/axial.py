@@ -43,9 +43,11 @@ def closed_transform(p, pe: float):
     """
     q = 0.5 * pe
     a = np.sqrt(1 + 4 * np.asarray(p, dtype=complex) / pe)
-    with np.errstate(over="ignore", invalid="ignore"):
+    with np.errstate(over="ignore", invalid="ignore", divide="ignore"):
         den = (1 + a)**2 - (1 - a)**2 * np.exp(-2 * q * a)
-        out = 4 * a * np.exp(q * (1 - a)) / den
+        # one exponential of the summed logs: an overflowing factor exp(q (1 - a)) times
+        # a finite one would give inf * 0j = nan in complex arithmetic
+        out = np.exp(np.log(4 * a) + q * (1 - a) - np.log(den))
     # at a = 0 (p = -Pe/4) the expression is 0/0; the limit is 4 e^q/(4 + 2q)
     return np.where(a == 0, 4 * math.exp(q) / (4 + 2 * q) if q < 700 else np.inf, out)
 

@@ -15,6 +15,7 @@ dead volume and bypass, built on such a network.
 """
 from __future__ import annotations
 
+import functools
 import math
 from dataclasses import dataclass, field
 from typing import ClassVar
@@ -135,16 +136,22 @@ class CompartmentNetwork:
         out = self.bypass + (1 - self.bypass) * (1 - remaining)
         return np.where(t.ravel() >= 0, np.clip(out, 0, 1), 0.0).reshape(t.shape)
 
-    def _expm_u(self, t: np.ndarray) -> np.ndarray:
-        """expm(A t_k) u for every t_k, shape (len(t), n)."""
-        a = self.system_matrix()
-        lam, vec = np.linalg.eig(a)
+    @functools.cached_property
+    def _modes(self):
+        """(eigenvalues, eigenvectors, V^-1 u) of A, or None if A is not safely diagonal."""
+        lam, vec = np.linalg.eig(self.system_matrix())
         # the eigen route is exact and fast when A is diagonalisable and well conditioned;
         # tanks in series give a defective A, handled by one expm per time
         if np.linalg.cond(vec) < 1e6:
-            coef = np.linalg.solve(vec, self.inlet.astype(complex))
+            return lam, vec, np.linalg.solve(vec, self.inlet.astype(complex))
+        return None
+
+    def _expm_u(self, t: np.ndarray) -> np.ndarray:
+        """expm(A t_k) u for every t_k, shape (len(t), n)."""
+        if self._modes is not None:
+            lam, vec, coef = self._modes
             return ((np.exp(np.outer(t, lam)) * coef[None, :]) @ vec.T).real
-        mats = linalg.expm(a[None, :, :] * t[:, None, None])
+        mats = linalg.expm(self.system_matrix()[None, :, :] * t[:, None, None])
         return mats @ self.inlet
 
     def laplace(self, s):

@@ -13,6 +13,7 @@ Austin's mill model (plug flow + one large + two small mixers) is
 """
 from __future__ import annotations
 
+import functools
 import math
 from dataclasses import dataclass
 from typing import ClassVar
@@ -118,13 +119,18 @@ class Series(RTDModel):
             return chain_networks(rest)
         return None
 
+    @functools.cached_property
+    def _plan(self):
+        """(delay, rest, exact model of the rest or None); built once per instance."""
+        delay, rest = self._split()
+        return delay, rest, (self._rest_model(rest) if rest else None)
+
     def _evaluate(self, t, which: str):
         t = as_time(t)
-        delay, rest = self._split()
+        delay, rest, model = self._plan
         if not rest:
             return getattr(PlugFlow(delay), which)(t) if delay > 0 else np.zeros_like(t)
         shifted = t - delay
-        model = self._rest_model(rest)
         if model is not None:
             return getattr(model, which)(shifted)
 
