@@ -40,7 +40,6 @@ __all__ = ["breakage_matrix", "cluster_rates", "SpectralBlocks"]
 
 #: Rates closer than this relative gap are treated as one cluster.
 DEFAULT_CLUSTER_GAP = 0.05
-_SMALL_CLUSTER = 8
 
 
 def breakage_matrix(S: np.ndarray, b: np.ndarray) -> np.ndarray:
@@ -205,60 +204,43 @@ def _eigenvectors_distinct(A: np.ndarray, S: np.ndarray) -> np.ndarray:
 def _block_basis(A: np.ndarray, S: np.ndarray, labels: np.ndarray):
     """Basis X and block-diagonal D for clustered rates (see module docstring).
 
-    Row i: r = A[i, :i] X[:i, :i]. Singleton columns divide by S_j - S_i; small
-    clusters (<= 8 members) are back-substituted rank by rank, all clusters at once;
-    large clusters get one small triangular solve each; the row's own cluster
-    receives the row of D instead.
+    Row i: r = A[i, :i] X[:i, :i]. Singleton columns divide by S_j - S_i. The
+    columns of all multi-member clusters together form a compact lower-triangular
+    system x (D_cc - S_i I) = r_c, solved once per row; the row's own cluster is
+    decoupled (unit diagonal, zero right-hand side) and receives the row of D.
     """
     n = S.size
     X = np.eye(n)
-    D = np.diag(S).astype(float)
     counts = np.bincount(labels)
     single = counts[labels] == 1
-    clusters = [np.flatnonzero(labels == c) for c in np.flatnonzero(counts > 1)]
-    small = [c for c in clusters if c.size <= _SMALL_CLUSTER]
-    large = [c for c in clusters if c.size > _SMALL_CLUSTER]
-    pmax = max((c.size for c in small), default=0)
-    members = np.full((len(small), pmax), n)  # padding points at a dummy slot n
-    for k, c in enumerate(small):
-        members[k, : c.size] = c
-    rank = np.full(n + 1, -1)
-    which = np.full(n + 1, -1)
-    for k, c in enumerate(small):
-        rank[c] = np.arange(c.size)
-        which[c] = k
-    S_pad = np.append(S, np.inf)[members]  # padding divides to zero
-    D_small = np.zeros((len(small), pmax, pmax))
-    small_label = np.array([labels[c[0]] for c in small], dtype=int)
+    cc = np.flatnonzero(~single)  # clustered columns, in index order
+    pos = np.full(n, -1)
+    pos[cc] = np.arange(cc.size)
+    D_cc = np.diag(S[cc])  # D restricted to clustered indices (block diagonal)
+    diag_cc = np.arange(cc.size)
+    label_cc = labels[cc]
     for i in range(1, n):
         r = A[i, :i] @ X[:i, :i]
-        row = np.zeros(n + 1)
-        row[:i] = r
-        xi = np.zeros(n + 1)
+        xi = np.zeros(n)
         sing = single[:i]
         xi[:i][sing] = r[sing] / (S[:i][sing] - S[i])
-        if pmax:
-            denom = S_pad - S[i]
-            denom[small_label == labels[i]] = np.inf  # own cluster: x = 0 there
-            for q in range(pmax - 1, -1, -1):
-                m = members[:, q]
-                acc = row[m] - np.einsum("kb,kb->k", xi[members[:, q + 1:]], D_small[:, q + 1:, q])
-                xi[m] = acc / denom[:, q]
-            xi[n] = 0.0
-        for c in large:
-            if labels[c[0]] == labels[i]:
+        k = np.searchsorted(cc, i)  # clustered columns < i
+        if k:
+            rc = r[cc[:k]]
+            own = label_cc[:k] == labels[i]
+            if own.any():
+                D_cc[pos[i], :k][own] = rc[own]
+                rc = np.where(own, 0.0, rc)
+            if not rc.any():
+                X[i, :i] = xi[:i]
                 continue
-            sub = c[c < i]
-            if sub.size:
-                M = D[np.ix_(sub, sub)] - S[i] * np.eye(sub.size)
-                xi[sub] = scipy.linalg.solve_triangular(M, row[sub], trans="T", lower=True, check_finite=False)
-        if counts[labels[i]] > 1:
-            own = np.flatnonzero(labels[:i] == labels[i])
-            D[i, own] = r[own]
-            xi[own] = 0.0
-            if which[i] >= 0:
-                D_small[which[i], rank[i], rank[own]] = r[own]
+            M = D_cc[:k, :k].copy()
+            M[diag_cc[:k], diag_cc[:k]] -= S[i]
+            M[diag_cc[:k][own], diag_cc[:k][own]] = 1.0
+            xi[cc[:k]] = scipy.linalg.solve_triangular(M, rc, trans="T", lower=True, check_finite=False)
         X[i, :i] = xi[:i]
+    D = np.diag(S).astype(float)
+    D[np.ix_(cc, cc)] = D_cc
     return X, D
 
 

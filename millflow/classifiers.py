@@ -1,0 +1,214 @@
+"""Classifier efficiency curves: the fraction of each size sent to the coarse stream.
+
+Every curve is a plain function of the representative sizes x [m] (a
+:class:`~millflow.grid.SizeGrid` or an array) that returns c_i in [0, 1], the mass
+fraction of class i reporting to the coarse product (hydrocyclone underflow, screen
+oversize, air-separator rejects); 1 - c_i goes to the fine product. A classifier is
+therefore linear in the feed: coarse = diag(c) feed, fine = diag(1 - c) feed, which is
+how the flowsheet solver uses it. Bypass is the fraction of every size that short-cuts
+to the coarse stream unclassified (for a hydrocyclone, the water split to underflow,
+R_f), so the actual curve is c = bypass + (1 - bypass) c_corr with c_corr the
+corrected curve (0 for fines, 1 for coarse, 1/2 at the corrected cut size d50c).
+
+Forms implemented (x' = x/d50c):
+
+- Whiten (1966, JKSimMet form), with optional fish-hook beta >= 0:
+  to overflow E_oc = (1 + beta beta* x')(e^alpha - 1) / (e^(alpha beta* x') + e^alpha - 2),
+  beta* chosen so that E_oc(1) = 1/2 (beta* = 1 for beta = 0); c_corr = 1 - E_oc.
+  With beta > 0 the actual curve dips below the bypass for fine sizes (the fish-hook);
+  it is clipped to [0, 1].
+- Plitt (1976) / Rosin-Rammler form: c_corr = 1 - exp(-ln 2 x'^m).
+- Screen: probability of a particle not passing the aperture, same Rosin-Rammler form in
+  x/d50 with the sharpness m, plus ``bypass`` (fines misplaced to oversize).
+- Tromp (air separators, dynamic classifiers): log-logistic c_corr = 1/(1 + x'^-m);
+  sharpness kappa = d25/d75 = 3^(-2/m) of the corrected curve.
+
+The registry :data:`CURVES` maps the names used in flowsheet files to these functions;
+:func:`efficiency` looks a name up and lists the valid names when it is unknown.
+
+References: Whiten (1974); Plitt, CIM Bull. 69 (1976) 114; Napier-Munn et al.,
+Mineral Comminution Circuits (JKMRC, 1996), ch. 10.
+"""
+from __future__ import annotations
+
+import math
+
+import numpy as np
+from scipy.optimize import brentq
+
+from millflow.errors import InputError
+from millflow.grid import as_sizes
+
+__all__ = ["whiten", "plitt", "screen_efficiency", "tromp", "CURVES", "efficiency", "mill_discharge_rates"]
+
+_LN2 = math.log(2.0)
+
+
+def _positive(value, name: str, curve: str) -> float:
+    v = float(value)
+    if not (math.isfinite(v) and v > 0):
+        raise InputError(f"{curve}: {name} = {value!r}; expected a finite number > 0")
+    return v
+
+
+def _fraction(value, name: str, curve: str, upper_open: bool = True) -> float:
+    v = float(value)
+    ok = math.isfinite(v) and 0.0 <= v and (v < 1.0 if upper_open else v <= 1.0)
+    if not ok:
+        raise InputError(f"{curve}: {name} = {value!r}; expected a fraction in [0, {'1)' if upper_open else '1]'}")
+    return v
+
+
+def _with_bypass(c_corr: np.ndarray, bypass: float) -> np.ndarray:
+    return np.clip(bypass + (1.0 - bypass) * c_corr, 0.0, 1.0)
+
+
+def _whiten_to_overflow(u: np.ndarray, alpha: float, beta: float, beta_star: float) -> np.ndarray:
+    """E_oc at reduced sizes u = x/d50c, evaluated without overflow for large alpha u."""
+    # divide numerator and denominator by e^alpha: (1 + b b* u)(1 - e^-a) / (e^(a(b* u - 1)) + 1 - 2 e^-a)
+    ea = math.exp(-alpha)
+    with np.errstate(over="ignore"):
+        den = np.exp(np.minimum(alpha * (beta_star * u - 1.0), 700.0)) + 1.0 - 2.0 * ea
+    return (1.0 + beta * beta_star * u) * (1.0 - ea) / den
+
+
+def _whiten_beta_star(alpha: float, beta: float) -> float:
+    if beta == 0.0:
+        return 1.0
+    f = lambda bs: float(_whiten_to_overflow(np.array(1.0), alpha, beta, bs)) - 0.5  # noqa: E731
+    hi = 2.0
+    while f(hi) > 0:
+        hi *= 2.0
+        if hi > 1e6:
+            raise InputError(f"whiten: no beta* found for alpha = {alpha!r}, beta = {beta!r}")
+    return brentq(f, 1e-9, hi, xtol=1e-15, rtol=4e-16)
+
+
+def whiten(x, d50c: float, alpha: float, beta: float = 0.0, bypass: float = 0.0) -> np.ndarray:
+    """Whiten efficiency curve to the coarse stream (underflow), with optional fish-hook.
+
+    Parameters
+    ----------
+    x : SizeGrid or array_like
+        Sizes [m].
+    d50c : float
+        Corrected cut size [m] (> 0).
+    alpha : float
+        Sharpness [-] (> 0; 2-6 for hydrocyclones).
+    beta : float
+        Fish-hook parameter [-] (>= 0; 0 = no fish-hook).
+    bypass : float
+        Fraction R_f of every size short-cut to underflow [-], in [0, 1).
+
+    Returns
+    -------
+    numpy.ndarray
+        Fraction of each class to underflow, c = R_f + (1 - R_f)(1 - E_oc), clipped to [0, 1].
+
+    Examples
+    --------
+    >>> round(float(whiten([1e-4], 1e-4, 3.0, bypass=0.2)[0]), 12)
+    0.6
+    """
+    xs = as_sizes(x)
+    d50c = _positive(d50c, "d50c", "whiten")
+    alpha = _positive(alpha, "alpha", "whiten")
+    beta = float(beta)
+    if not (math.isfinite(beta) and beta >= 0):
+        raise InputError(f"whiten: beta = {beta!r}; expected a finite number >= 0 (0 = no fish-hook)")
+    bypass = _fraction(bypass, "bypass", "whiten")
+    bs = _whiten_beta_star(alpha, beta)
+    return _with_bypass(1.0 - _whiten_to_overflow(xs / d50c, alpha, beta, bs), bypass)
+
+
+def plitt(x, d50c: float, m: float, bypass: float = 0.0) -> np.ndarray:
+    """Plitt (Rosin-Rammler) efficiency curve to underflow: c_corr = 1 - exp(-ln2 (x/d50c)^m).
+
+    Parameters: sizes x [m], corrected cut size d50c [m], sharpness m [-] (> 0; 1.5-4),
+    bypass to underflow [-] in [0, 1).
+
+    >>> round(float(plitt([2e-4], 2e-4, 3.0)[0]), 12)
+    0.5
+    """
+    xs = as_sizes(x)
+    d50c = _positive(d50c, "d50c", "plitt")
+    m = _positive(m, "m", "plitt")
+    bypass = _fraction(bypass, "bypass", "plitt")
+    return _with_bypass(-np.expm1(-_LN2 * (xs / d50c) ** m), bypass)
+
+
+def screen_efficiency(x, d50: float, m: float = 5.0, bypass: float = 0.0) -> np.ndarray:
+    """Screen partition curve: fraction of each class retained on the deck (oversize).
+
+    c = bypass + (1 - bypass)(1 - exp(-ln2 (x/d50)^m)). d50 [m] is the size retained
+    with probability 1/2 (a little below the aperture); m [-] the sharpness (5-10 for
+    a well operated screen); bypass [-] the undersize carried over with the oversize.
+    """
+    xs = as_sizes(x)
+    d50 = _positive(d50, "d50", "screen")
+    m = _positive(m, "m", "screen")
+    bypass = _fraction(bypass, "bypass", "screen")
+    return _with_bypass(-np.expm1(-_LN2 * (xs / d50) ** m), bypass)
+
+
+def tromp(x, d50c: float, m: float, bypass: float = 0.0) -> np.ndarray:
+    """Tromp curve of an air separator / dynamic classifier: fraction to rejects (coarse).
+
+    c = bypass + (1 - bypass) / (1 + (d50c/x)^m): log-logistic corrected curve with cut
+    size d50c [m] and exponent m [-] (sharpness kappa = d25/d75 = 3^(-2/m)); bypass [-]
+    in [0, 1) is the fraction of fines carried to the rejects.
+
+    >>> round(float(tromp([3e-5], 3e-5, 4.0, bypass=0.1)[0]), 12)
+    0.55
+    """
+    xs = as_sizes(x)
+    d50c = _positive(d50c, "d50c", "tromp")
+    m = _positive(m, "m", "tromp")
+    bypass = _fraction(bypass, "bypass", "tromp")
+    with np.errstate(over="ignore"):
+        c_corr = 1.0 / (1.0 + (d50c / xs) ** m)
+    return _with_bypass(c_corr, bypass)
+
+
+#: Efficiency curves by the name used in flowsheet files (``curve = "whiten"``).
+CURVES = {"whiten": whiten, "plitt": plitt, "screen": screen_efficiency, "tromp": tromp}
+
+
+def efficiency(curve, x, **params) -> np.ndarray:
+    """Evaluate a curve given by name (a key of :data:`CURVES`) or as a callable ``f(x, **params)``.
+
+    The result is checked to be finite and in [0, 1].
+    """
+    if isinstance(curve, str):
+        try:
+            fun = CURVES[curve]
+        except KeyError:
+            raise InputError(f"unknown efficiency curve {curve!r}; valid names: {', '.join(sorted(CURVES))}") from None
+    elif callable(curve):
+        fun = curve
+    else:
+        raise InputError(f"curve = {curve!r}: expected a name ({', '.join(sorted(CURVES))}) or a callable")
+    try:
+        c = np.asarray(fun(x, **params), dtype=float)
+    except TypeError as exc:
+        raise InputError(f"efficiency curve {curve!r}: bad parameters {sorted(params)} ({exc})") from exc
+    if c.shape != as_sizes(x).shape or not np.all(np.isfinite(c)) or np.any((c < 0) | (c > 1)):
+        raise InputError(f"efficiency curve {curve!r} must return one finite value in [0, 1] per size")
+    return c
+
+
+def mill_discharge_rates(c) -> np.ndarray:
+    """Normalised discharge rates d_i* of a mill whose exit is a screen or grate.
+
+    A class retained with probability c_i by the discharge screen leaves the mill
+    (1 - c_i) times as fast as freely discharging material, so
+    d_i* = (1 - c_i) / (1 - c_N): the finest class (the sink) discharges freely
+    (d* = 1 when c_N = 0) and ``tau`` is the mean residence time of freely
+    discharging material (eq. 1 and 3 of EQUATIONS.md).
+    """
+    c = np.asarray(c, dtype=float)
+    free = 1.0 - c[-1]
+    if free <= 0:
+        raise InputError("discharge classification retains the finest class completely (c_N = 1): "
+                         "nothing can leave the mill")
+    return (1.0 - c) / free

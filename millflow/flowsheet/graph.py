@@ -1,0 +1,127 @@
+"""The flowsheet: units and the streams connecting them, checked on construction.
+
+A :class:`Flowsheet` holds only connections (units are stateless): each stream leaves
+one outlet port of one unit and enters one unit. Construction checks that every outlet
+port carries exactly one stream, that streams name existing units and ports, that feeds
+have no inlets and every other unit has at least one, and that there is a product.
+Recycle loops are found as strongly connected components of the unit graph (used for
+circulating loads and to name loops in errors).
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+from scipy.sparse import csr_matrix
+from scipy.sparse.csgraph import connected_components
+
+from millflow.errors import InputError
+from millflow.grid import SizeGrid
+
+__all__ = ["Stream", "Flowsheet"]
+
+
+@dataclass(frozen=True)
+class Stream:
+    """A stream from ``source`` unit (outlet ``port``) to ``target`` unit."""
+
+    name: str
+    source: str
+    port: str
+    target: str
+
+
+@dataclass(frozen=True, eq=False)
+class Flowsheet:
+    """Units and streams on one size grid.
+
+    Parameters
+    ----------
+    grid : SizeGrid
+    units : dict name -> unit (see :mod:`millflow.flowsheet.units`)
+    streams : dict name -> Stream (order kept: it is the order of results)
+    title : str
+    passing_sizes : tuple of sizes [m] at which % passing is reported
+    """
+
+    grid: SizeGrid
+    units: dict
+    streams: dict
+    title: str = ""
+    passing_sizes: tuple = ()
+    source_file: str = ""
+    meta: dict = field(default_factory=dict)
+
+    def __post_init__(self):
+        self._check()
+
+    # ------------------------------------------------------------------ checks
+    def _check(self) -> None:
+        used: dict[tuple[str, str], str] = {}
+        n_in = {u: 0 for u in self.units}
+        for name, s in self.streams.items():
+            where = f"streams.{name}"
+            if s.source not in self.units:
+                raise InputError(f"{where}.from: unknown unit {s.source!r}; units: {', '.join(self.units)}")
+            if s.target not in self.units:
+                raise InputError(f"{where}.to: unknown unit {s.target!r}; units: {', '.join(self.units)}")
+            ports = self.units[s.source].ports
+            if s.port not in ports:
+                valid = ", ".join(f"{s.source}.{p}" for p in ports) or "none: it has no outlets"
+                raise InputError(f"{where}.from: unit {s.source!r} has no outlet {s.port!r}; valid: {valid}")
+            key = (s.source, s.port)
+            if key in used:
+                raise InputError(f"{where}: outlet {s.source}.{s.port} is doubly connected "
+                                 f"(also to stream {used[key]!r}); split it with a splitter unit")
+            used[key] = name
+            n_in[s.target] += 1
+        for uname, unit in self.units.items():
+            for p in unit.ports:
+                if (uname, p) not in used:
+                    raise InputError(f"units.{uname}: outlet {uname}.{p} is dangling (no stream leaves it); "
+                                     f"add a stream with from = \"{uname}.{p}\"")
+            if unit.max_inlets == 0 and n_in[uname]:
+                raise InputError(f"units.{uname}: a {unit.type} takes no inlet streams, but "
+                                 f"{', '.join(self.inlets(uname))} enter it")
+            if unit.max_inlets != 0 and n_in[uname] == 0:
+                raise InputError(f"units.{uname}: dangling {unit.type} (no stream enters it); "
+                                 f"add a stream with to = \"{uname}\"")
+        if not any(u.type == "product" for u in self.units.values()):
+            raise InputError("units: the flowsheet has no product unit (type = \"product\")")
+        if not any(u.type == "feed" for u in self.units.values()):
+            raise InputError("units: the flowsheet has no feed unit (type = \"feed\")")
+
+    # ----------------------------------------------------------------- queries
+    @property
+    def stream_names(self) -> list[str]:
+        return list(self.streams)
+
+    def inlets(self, unit: str) -> list[str]:
+        return [n for n, s in self.streams.items() if s.target == unit]
+
+    def outlets(self, unit: str) -> list[str]:
+        return [n for n, s in self.streams.items() if s.source == unit]
+
+    def outlet(self, unit: str, port: str) -> str:
+        for n, s in self.streams.items():
+            if s.source == unit and s.port == port:
+                return n
+        raise KeyError(f"{unit}.{port}")
+
+    def components(self) -> np.ndarray:
+        """Strongly connected component label of each unit (order of ``units``)."""
+        names = list(self.units)
+        idx = {u: k for k, u in enumerate(names)}
+        rows = [idx[s.source] for s in self.streams.values()]
+        cols = [idx[s.target] for s in self.streams.values()]
+        g = csr_matrix((np.ones(len(rows)), (rows, cols)), shape=(len(names), len(names)))
+        return connected_components(g, directed=True, connection="strong")[1]
+
+    def recycle_streams(self) -> list[str]:
+        """Streams whose source and target lie in the same recycle loop."""
+        lab = dict(zip(self.units, self.components()))
+        return [n for n, s in self.streams.items() if lab[s.source] == lab[s.target]]
+
+    def __repr__(self) -> str:
+        return (f"Flowsheet({self.title!r}, {len(self.units)} units, {len(self.streams)} streams, "
+                f"{self.grid!r})")

@@ -1,0 +1,301 @@
+"""Flowsheet units: stateless, each a linear map from its (mixed) inlet to its outlets.
+
+Every unit mixes whatever enters it and sends to each outlet port a linear image of
+that mixed feed: outlet_p = B_p (sum of inlets) + s_p, with B_p an (N, N) block for a
+mill (the transfer matrix P of eq. 3 or of any residence time distribution), a vector
+(a diagonal block) for classifiers (diag(c), diag(1 - c)), mixers (ones) and splitters
+(fraction * ones), and s_p a constant source for feeds. All flows are solids mass flows
+per size class [kg/s], coarse -> fine. A mill whose hold-up is given instead of its
+residence time (tau = holdup / throughput) is the one nonlinear unit: its block depends
+on its own throughput, which the solver tears (see :mod:`millflow.flowsheet.solve`).
+
+``unit.blocks(grid, throughput=None)`` returns ``(blocks, info)``: ``blocks`` maps each
+outlet port to its block, ``info`` holds ``method``, ``error_estimate`` and
+``runtime_s`` of building it. Units hold only parameters (SI) and never change.
+"""
+from __future__ import annotations
+
+import math
+import time
+from dataclasses import dataclass, field
+from typing import Callable, ClassVar
+
+import numpy as np
+
+from millflow.classifiers import efficiency, mill_discharge_rates
+from millflow.errors import InputError, SolverError
+from millflow.linalg import solve_well_mixed
+
+__all__ = [
+    "Feed", "Mill", "Classifier", "Mixer", "Splitter", "Product", "UNIT_TYPES", "TRANSPORTS",
+    "CLASSIFIER_PORTS", "mill_transfer_matrix",
+]
+
+
+def _transport_registry() -> dict:
+    import rtd
+
+    return {
+        "perfect_mixing": lambda tau: rtd.PerfectMixing(tau),
+        "tanks_in_series": lambda tau, n: rtd.TanksInSeries(tau, n),
+        "plug_flow": lambda tau: rtd.PlugFlow(tau),
+        "axial_dispersion": lambda tau, pe: rtd.AxialDispersion(tau, pe),
+    }
+
+
+#: Transport (residence time distribution) models by the name used in flowsheet files;
+#: each builds an ``rtd`` model from tau [s] and its own parameters.
+TRANSPORTS = _transport_registry()
+
+
+# ------------------------------------------------------------------ mill transfer
+def _fallback_transfer_matrix(S, b, transport, d=None) -> np.ndarray:
+    """Transfer matrix of n equal well-mixed cells in series (eq. 3 per cell, d* in the last).
+
+    Used only while :func:`millflow.mill.transfer_matrix` is unavailable.
+    """
+    import rtd
+
+    if isinstance(transport, rtd.PerfectMixing):
+        n = 1
+    elif isinstance(transport, rtd.TanksInSeries) and float(transport.n).is_integer():
+        n = int(transport.n)
+    else:
+        raise InputError(f"transport {transport!r} needs millflow.mill.transfer_matrix, which is not available")
+    P = np.eye(len(S))
+    for k in range(n):
+        P = solve_well_mixed(S, b, P, transport.mean / n, d if k == n - 1 else None)
+    return P
+
+
+def mill_transfer_matrix(S, b, transport, d=None) -> tuple[np.ndarray, str]:
+    """P with product = P @ feed, from :func:`millflow.mill.transfer_matrix` (or the fallback)."""
+    try:
+        from millflow.mill import transfer_matrix
+    except ImportError:
+        return _fallback_transfer_matrix(S, b, transport, d), "well-mixed cells in series (flowsheet fallback)"
+    return transfer_matrix(S, b, transport, d), "millflow.mill.transfer_matrix"
+
+
+# ------------------------------------------------------------------------- units
+@dataclass(frozen=True)
+class Feed:
+    """Fresh feed: a constant solids flow ``solids`` [kg/s] with mass fractions ``psd`` on the grid."""
+
+    name: str
+    solids: float
+    psd: np.ndarray = field(repr=False)
+    type: ClassVar[str] = "feed"
+    max_inlets: ClassVar[int | None] = 0
+
+    @property
+    def ports(self) -> tuple[str, ...]:
+        return ("out",)
+
+    def blocks(self, grid, throughput=None):
+        return {}, {"method": "constant source", "error_estimate": 0.0, "runtime_s": 0.0}
+
+    def source(self) -> dict:
+        return {"out": self.solids * np.asarray(self.psd, dtype=float)}
+
+
+@dataclass(frozen=True)
+class Mill:
+    """Continuous mill: breakage (``rate``, ``breakage``) with a transport model and optional
+    discharge classification.
+
+    Parameters
+    ----------
+    rate : callable
+        x [m] -> S [1/s] (e.g. :class:`millflow.breakage.PowerLawRate`).
+    breakage : object with ``.b(x)`` or callable x -> b.
+    transport : str
+        Key of :data:`TRANSPORTS`; ``transport_params`` its parameters (e.g. ``{"n": 10}``).
+    tau : float or None
+        Mean residence time [s] (linear unit), or
+    holdup : float or None
+        Solids hold-up [kg]; tau = holdup / throughput (nonlinear unit, torn by the solver).
+    classification : dict or None
+        ``{"curve": name, **params}`` (sizes in m) of a discharge screen/grate; the
+        efficiency c_i becomes d_i* = (1 - c_i)/(1 - c_N)
+        (:func:`millflow.classifiers.mill_discharge_rates`).
+    power : float or None
+        Mill power draw [W], for the specific energy.
+    """
+
+    name: str
+    rate: Callable
+    breakage: object
+    transport: str = "perfect_mixing"
+    transport_params: dict = field(default_factory=dict)
+    tau: float | None = None
+    holdup: float | None = None
+    classification: dict | None = None
+    power: float | None = None
+    type: ClassVar[str] = "mill"
+    max_inlets: ClassVar[int | None] = None
+
+    def __post_init__(self):
+        if (self.tau is None) == (self.holdup is None):
+            raise InputError(f"units.{self.name}: give exactly one of tau (e.g. tau_min) or holdup (e.g. holdup_t)")
+        if self.transport not in TRANSPORTS:
+            raise InputError(f"units.{self.name}.transport: unknown model {self.transport!r}; "
+                             f"valid names: {', '.join(sorted(TRANSPORTS))}")
+
+    @property
+    def ports(self) -> tuple[str, ...]:
+        return ("out",)
+
+    @property
+    def nonlinear(self) -> bool:
+        return self.holdup is not None
+
+    def discharge_efficiency(self, grid) -> np.ndarray | None:
+        if self.classification is None:
+            return None
+        params = dict(self.classification)
+        return efficiency(params.pop("curve"), grid.x, **params)
+
+    def residence_time(self, throughput=None) -> float:
+        if self.tau is not None:
+            return float(self.tau)
+        if throughput is None or not throughput > 0:
+            raise SolverError(f"units.{self.name}: hold-up given but the throughput is {throughput!r} kg/s; "
+                              "the mill receives no solids")
+        return float(self.holdup) / float(throughput)
+
+    def breakage_functions(self, grid):
+        S = np.asarray(self.rate(grid.x), dtype=float)
+        fun = getattr(self.breakage, "b", self.breakage)
+        b = np.asarray(fun(grid.x), dtype=float)
+        return S, b
+
+    def blocks(self, grid, throughput=None):
+        t0 = time.perf_counter()
+        tau = self.residence_time(throughput)
+        S, b = self.breakage_functions(grid)
+        c = self.discharge_efficiency(grid)
+        d = None
+        if c is not None:
+            d = mill_discharge_rates(c)
+            trapped = np.flatnonzero((d <= 1e-12) & (S <= 0))
+            if trapped.size:
+                raise SolverError(f"units.{self.name}: {grid.label(trapped[0])} is retained by the discharge "
+                                  "classification and never breaks (S = 0): it can never leave the mill")
+            d = np.maximum(d, 1e-12)  # c = 1 in floating point: retained, leaves only as breakage products
+        P, how = mill_transfer_matrix(S, b, TRANSPORTS[self.transport](tau, **self.transport_params), d)
+        err = float(np.max(np.abs(P.sum(axis=0) - 1.0)))
+        info = {"method": f"transfer matrix, {self.transport} ({how})", "error_estimate": err,
+                "runtime_s": time.perf_counter() - t0, "tau_s": tau}
+        return {"out": P}, info
+
+
+#: Outlet port names (coarse, fine) of each classifier type.
+CLASSIFIER_PORTS = {
+    "hydrocyclone": ("underflow", "overflow"),
+    "screen": ("oversize", "undersize"),
+    "air_separator": ("rejects", "fines"),
+}
+
+
+@dataclass(frozen=True)
+class Classifier:
+    """Hydrocyclone, screen or air separator: coarse = diag(c) feed, fine = diag(1 - c) feed.
+
+    ``kind`` is a key of :data:`CLASSIFIER_PORTS`; ``curve`` a key of
+    :data:`millflow.classifiers.CURVES` with ``params`` (sizes in m).
+    """
+
+    name: str
+    kind: str
+    curve: str
+    params: dict
+    type: ClassVar[str] = "classifier"
+    max_inlets: ClassVar[int | None] = None
+
+    @property
+    def ports(self) -> tuple[str, ...]:
+        return CLASSIFIER_PORTS[self.kind]
+
+    def efficiency(self, grid) -> np.ndarray:
+        return efficiency(self.curve, grid.x, **self.params)
+
+    def blocks(self, grid, throughput=None):
+        t0 = time.perf_counter()
+        c = self.efficiency(grid)
+        coarse, fine = self.ports
+        return ({coarse: c, fine: 1.0 - c},
+                {"method": f"efficiency curve ({self.curve})", "error_estimate": 0.0,
+                 "runtime_s": time.perf_counter() - t0})
+
+
+@dataclass(frozen=True)
+class Mixer:
+    """Mixer (or a well-mixed tank at steady state, ``holdup`` [kg] for information): out = sum of inlets."""
+
+    name: str
+    holdup: float | None = None
+    type: ClassVar[str] = "mixer"
+    max_inlets: ClassVar[int | None] = None
+
+    @property
+    def ports(self) -> tuple[str, ...]:
+        return ("out",)
+
+    def blocks(self, grid, throughput=None):
+        return {"out": np.ones(grid.n)}, {"method": "sum", "error_estimate": 0.0, "runtime_s": 0.0}
+
+
+@dataclass(frozen=True)
+class Splitter:
+    """Splitter: each outlet port gets a fixed fraction of the mixed feed, same PSD."""
+
+    name: str
+    fractions: dict
+    type: ClassVar[str] = "splitter"
+    max_inlets: ClassVar[int | None] = None
+
+    def __post_init__(self):
+        total = math.fsum(self.fractions.values())
+        if len(self.fractions) < 2 or abs(total - 1.0) > 1e-12:
+            raise InputError(f"units.{self.name}.fractions: {dict(self.fractions)} must name at least two outlets "
+                             f"with fractions summing to 1 (sum = {total!r})")
+
+    @property
+    def ports(self) -> tuple[str, ...]:
+        return tuple(self.fractions)
+
+    def blocks(self, grid, throughput=None):
+        return ({p: np.full(grid.n, float(f)) for p, f in self.fractions.items()},
+                {"method": "fixed fractions", "error_estimate": 0.0, "runtime_s": 0.0})
+
+
+@dataclass(frozen=True)
+class Product:
+    """Product (a sink of the flowsheet): no outlets."""
+
+    name: str
+    type: ClassVar[str] = "product"
+    max_inlets: ClassVar[int | None] = None
+
+    @property
+    def ports(self) -> tuple[str, ...]:
+        return ()
+
+    def blocks(self, grid, throughput=None):
+        return {}, {"method": "sink", "error_estimate": 0.0, "runtime_s": 0.0}
+
+
+#: Unit types by the ``type`` name used in flowsheet files.
+UNIT_TYPES = {
+    "feed": Feed,
+    "mill": Mill,
+    "hydrocyclone": Classifier,
+    "screen": Classifier,
+    "air_separator": Classifier,
+    "dynamic_classifier": Classifier,
+    "mixer": Mixer,
+    "tank": Mixer,
+    "splitter": Splitter,
+    "product": Product,
+}
