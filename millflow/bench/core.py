@@ -163,3 +163,221 @@ def rate_degeneracy(S: np.ndarray) -> dict:
     gaps = d[iu]
     return {"min_rel_gap": float(gaps.min()), "equal_pairs": int((gaps == 0).sum()),
             "near_pairs_below_1e-6": int(((gaps > 0) & (gaps < 1e-6)).sum())}
+
+
+# ----------------------------------------------------------------------- references
+def load_reference(name: str, n: int, case: CoreCase | None = None, directory: Path | None = None):
+    """Cached high-precision M (T, N) for case ``name`` at n classes, or (None, reason).
+
+    Returns ``(M, entry)`` where entry holds the verification numbers of
+    benchmarks/reference_core.py; ``M`` is None and ``entry`` a message when the file
+    or the size is missing or the case inputs changed since it was made (digest).
+    """
+    path = Path(directory or REFERENCE_DIR) / f"core_{name}.json"
+    if not path.exists():
+        return None, f"missing {path}"
+    entry = json.loads(path.read_text()).get("entries", {}).get(str(n))
+    if entry is None:
+        return None, f"{path} has no N = {n}"
+    case = case or core_cases(n)[name]
+    if entry["input_sha256"] != case.sha256():
+        return None, f"{path} N = {n} was made for other inputs (core_cases changed): regenerate it"
+    return np.array(entry["M"]), entry
+
+
+# ------------------------------------------------------------------------- timings
+def _median_time(fn, repeats: int):
+    """Run fn() repeats times; return (median wall time [s], last result)."""
+    times = []
+    for _ in range(repeats):
+        start = time.perf_counter()
+        out = fn()
+        times.append(time.perf_counter() - start)
+    return statistics.median(times), out
+
+
+def _plain_bdf(case: CoreCase) -> np.ndarray:
+    """The plain baseline: solve_ivp(BDF) on dM/dt = K M with the array Jacobian."""
+    K = breakage_matrix(case.S, case.b)
+    sol = solve_ivp(lambda _t, y: K @ y, (0.0, float(case.t_s[-1])), case.feed, method="BDF",
+                    t_eval=case.t_s, jac=K, rtol=BASELINE["rtol"], atol=BASELINE["atol"])
+    return sol.y.T
+
+
+def _row(case, n, method, rtol, atol, seconds, M, ref, extra=None) -> dict:
+    err = None if ref is None else float(np.abs(M - ref).max())
+    row = {
+        "table": "work_precision", "case": case.name, "n_classes": n, "method": method,
+        "rtol": rtol, "atol": atol, "max_abs_error": err, "min_value": float(M.min()),
+        "mass_balance_error": float(np.abs(M.sum(axis=1) - case.feed.sum()).max()),
+        "runtime_s": seconds, "median_ms": 1e3 * seconds,
+    }
+    row.update(extra or {})
+    return row
+
+
+def work_precision(case: CoreCase, n: int, quick: bool) -> list[dict]:
+    """Rows of the work-precision table for one case and size."""
+    ref, entry = load_reference(case.name, n, case)
+    note = {} if ref is not None else {"reference": entry}
+    rep_exact, rep_ode = (5, 1) if quick else (21, 3)
+    rows = []
+    base_s, M = _median_time(lambda: _plain_bdf(case), rep_ode)
+    rows.append(_row(case, n, "solve_ivp BDF (plain)", BASELINE["rtol"], BASELINE["atol"], base_s, M, ref, note))
+    sec, res = _median_time(lambda: batch_solve(case.S, case.b, case.feed, case.t_s, "exact"), rep_exact)
+    rows.append(_row(case, n, "exact", None, None, sec, res.M, ref,
+                     {"error_estimate": res.error_estimate, "cluster_gap": res.info.get("cluster_gap"),
+                      "cluster_sizes": res.info.get("cluster_sizes"), **note}))
+    for method in ODE_METHODS:
+        for rtol in ODE_RTOLS:
+            atol = rtol * ATOL_FACTOR
+            sec, res = _median_time(lambda: batch_solve(case.S, case.b, case.feed, case.t_s, method,
+                                                        rtol=rtol, atol=atol), rep_ode)
+            rows.append(_row(case, n, method, rtol, atol, sec, res.M, ref,
+                             {"error_estimate": res.error_estimate, **res.info, **note}))
+    for r in rows:
+        r["ratio_vs_baseline"] = r["runtime_s"] / base_s
+    return rows
+
+
+def targets(rows: list[dict], n: int = 100) -> list[dict]:
+    """Issue-2 targets for the exact path at N = n, from the work-precision rows.
+
+    The speed-up against an ODE method is its cheapest run (any tolerance) whose error
+    is equal to or worse than the exact path's: time(ODE) / time(exact).
+    """
+    out = []
+    for name in CASE_NAMES:
+        sel = [r for r in rows if r["case"] == name and r["n_classes"] == n]
+        exact = next((r for r in sel if r["method"] == "exact"), None)
+        if exact is None:
+            continue
+        err = exact["max_abs_error"]
+        row = {
+            "table": "targets", "case": name, "n_classes": n, "method": "exact",
+            "runtime_s": exact["runtime_s"], "median_ms": exact["median_ms"],
+            "target_ms": TARGET_MS[name], "time_ok": exact["median_ms"] < TARGET_MS[name],
+            "max_abs_error": err, "error_ok": None if err is None else err <= TARGET_ERR,
+            "min_value": exact["min_value"], "min_ok": exact["min_value"] >= TARGET_MIN,
+            "mass_balance_error": exact["mass_balance_error"], "mass_ok": exact["mass_balance_error"] <= TARGET_MASS,
+            "ratio_vs_baseline": exact["ratio_vs_baseline"],
+        }
+        for method in ODE_METHODS:
+            runs = [r for r in sel if r["method"] == method
+                    and (err is None or r["max_abs_error"] is None or r["max_abs_error"] >= err)]
+            best = min(runs, key=lambda r: r["runtime_s"], default=None)
+            row[f"speedup_vs_{method}"] = None if best is None else best["runtime_s"] / exact["runtime_s"]
+            row[f"speedup_vs_{method}_rtol"] = None if best is None else best["rtol"]
+        out.append(row)
+    return out
+
+
+# ------------------------------------------------------------------ grid independence
+GRID_REFINEMENTS = (1, 2, 4, 8, 16)  # numerical ratio 2^(1/2) ... 2^(1/32)
+GRID_TIMES_S = np.array([10.0, 60.0, 300.0])
+
+
+def grid_independence(refinements=GRID_REFINEMENTS) -> list[dict]:
+    """PSD error on the sqrt(2) sieve grid against numerical grid ratio (Principle IV).
+
+    Sieves: 4 mm down to 62.5 um in sqrt(2) steps and a sink. On each numerical grid
+    (the sieve grid refined k times, ratio 2^(1/(2k))) the rates S = 0.02 (x/4 mm)
+    1/s (eq. 5) and B (eq. 6: phi 0.4, gamma 0.8, beta 3) are evaluated at the
+    numerical classes; the feed fills the top sieve class evenly in log size. The
+    batch grind at 10, 60, 300 s is reduced to the sieves with
+    :func:`millflow.psd.regrid` (exact: the sieve edges are numerical edges). Error:
+    max |P - P_lim| of cumulative passing over sieves and times, P_lim the
+    Richardson extrapolation of the two finest grids with the observed order; the
+    observed order of level k is log2(d_k / d_{k+1}), d_k = max |P_k - P_{2k}|.
+    """
+    sieve = SizeGrid.geometric(4e-3, 2.0 ** 0.5, 13)
+    P, info = [], []
+    for k in refinements:
+        grid = sieve.refine(k)
+        S = power_law_rates(grid, A=0.02, alpha=1.0, x0=4e-3)
+        b = b_from_B(normalized_B(grid, phi=0.4, gamma=0.8, beta=3.0))
+        feed = np.zeros(grid.n)
+        feed[:k] = 1.0 / k
+        res = batch_solve(S, b, feed, GRID_TIMES_S, "exact")
+        P.append(np.array([cum_passing(regrid(m / m.sum(), grid, sieve)) for m in res.M]))
+        info.append((k, grid.n, res))
+    diffs = [float(np.abs(P[i] - P[i + 1]).max()) for i in range(len(P) - 1)]
+    p = math.log2(diffs[-2] / diffs[-1]) if len(diffs) >= 2 and diffs[-1] > 0 else 1.0
+    P_lim = P[-1] + (P[-1] - P[-2]) / (2.0 ** p - 1.0)
+    rows = []
+    for i, (k, n, res) in enumerate(info):
+        order = math.log2(diffs[i] / diffs[i + 1]) if i + 1 < len(diffs) and diffs[i + 1] > 0 else None
+        rows.append({
+            "table": "grid_independence", "case": "batch power law on sqrt(2) sieves", "method": "exact",
+            "numerical_ratio": f"2^(1/{2 * k})", "n_classes": n,
+            "max_abs_error": float(np.abs(P[i] - P_lim).max()),
+            "error_vs_finest": float(np.abs(P[i] - P[-1]).max()) if i + 1 < len(P) else 0.0,
+            "observed_order": order, "extrapolation_order": p,
+            "mass_balance_error": res.mass_balance_error, "runtime_s": res.runtime_s,
+        })
+    return rows
+
+
+# ------------------------------------------------------------------------- the suite
+def run(quick: bool = False) -> list[dict]:
+    """All rows: work precision per case and size, targets at N = 100, grid independence."""
+    sizes = SIZES_QUICK if quick else SIZES_FULL
+    rows = []
+    for n in sizes:
+        for case in core_cases(n).values():
+            rows.extend(work_precision(case, n, quick))
+    rows.extend(targets(rows))
+    rows.extend(grid_independence(GRID_REFINEMENTS[:4] if quick else GRID_REFINEMENTS))
+    return rows
+
+
+def _fmt(v, spec: str, width: int) -> str:
+    if v is None:
+        return "-".rjust(width)
+    if isinstance(v, bool):
+        return ("yes" if v else "NO").rjust(width)
+    return format(v, spec).rjust(width)
+
+
+def format_table(rows: list[dict]) -> str:
+    """Fixed-width text of the three tables."""
+    lines = []
+    wp = [r for r in rows if r.get("table") == "work_precision"]
+    if wp:
+        lines.append("Work precision (error vs mpmath reference, all classes and 10 times; "
+                     "ratio = time / plain solve_ivp BDF rtol 1e-10)")
+        head = f"{'case':<11}{'N':>4}  {'method':<22}{'rtol':>7}{'max_abs_err':>12}{'min_value':>11}" \
+               f"{'mass_err':>10}{'median_ms':>11}{'ratio_vs_BDF':>13}"
+        lines += [head, "-" * len(head)]
+        for r in wp:
+            lines.append(f"{r['case']:<11}{r['n_classes']:>4}  {r['method']:<22}{_fmt(r['rtol'], '.0e', 7)}"
+                         f"{_fmt(r['max_abs_error'], '.1e', 12)}{_fmt(r['min_value'], '.1e', 11)}"
+                         f"{_fmt(r['mass_balance_error'], '.1e', 10)}{_fmt(r['median_ms'], '.3f', 11)}"
+                         f"{_fmt(r['ratio_vs_baseline'], '.4f', 13)}")
+        missing = sorted({r["reference"] for r in wp if "reference" in r})
+        lines += [f"  no reference: {m} (python benchmarks/reference_core.py, or --make-references)"
+                  for m in missing]
+    tg = [r for r in rows if r.get("table") == "targets"]
+    if tg:
+        lines += ["", "Targets, exact path at N = 100 (speed-up = cheapest ODE run with error >= exact's / exact)"]
+        head = f"{'case':<11}{'ms':>8}{'target':>7}{'ok':>4}{'max_abs_err':>12}{'ok':>4}{'min_value':>11}{'ok':>4}" \
+               f"{'mass_err':>10}{'ok':>4}{'x BDF':>8}{'x Radau':>9}{'x LSODA':>9}"
+        lines += [head, "-" * len(head)]
+        for r in tg:
+            lines.append(f"{r['case']:<11}{r['median_ms']:>8.3f}{r['target_ms']:>7.1f}{_fmt(r['time_ok'], '', 4)}"
+                         f"{_fmt(r['max_abs_error'], '.1e', 12)}{_fmt(r['error_ok'], '', 4)}"
+                         f"{_fmt(r['min_value'], '.1e', 11)}{_fmt(r['min_ok'], '', 4)}"
+                         f"{_fmt(r['mass_balance_error'], '.1e', 10)}{_fmt(r['mass_ok'], '', 4)}"
+                         f"{_fmt(r['speedup_vs_BDF'], '.0f', 8)}{_fmt(r['speedup_vs_Radau'], '.0f', 9)}"
+                         f"{_fmt(r['speedup_vs_LSODA'], '.0f', 9)}")
+    gi = [r for r in rows if r.get("table") == "grid_independence"]
+    if gi:
+        lines += ["", "Grid independence: cumulative passing on sqrt(2) sieves, batch t = 10, 60, 300 s "
+                  f"(limit: Richardson, order {gi[0]['extrapolation_order']:.2f})"]
+        head = f"{'numerical ratio':<16}{'N':>5}{'err_vs_limit':>13}{'err_vs_finest':>14}{'order':>7}{'ms':>9}"
+        lines += [head, "-" * len(head)]
+        for r in gi:
+            lines.append(f"{r['numerical_ratio']:<16}{r['n_classes']:>5}{r['max_abs_error']:>13.2e}"
+                         f"{r['error_vs_finest']:>14.2e}{_fmt(r['observed_order'], '.2f', 7)}"
+                         f"{1e3 * r['runtime_s']:>9.2f}")
+    return "\n".join(lines)

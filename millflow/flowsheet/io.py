@@ -1,0 +1,399 @@
+"""Reading flowsheet files (TOML) into a :class:`~millflow.flowsheet.graph.Flowsheet`.
+
+Units of measure are part of every dimensional key name (``feed_tph``, ``tau_min``,
+``d50c_um``) and are converted to SI here, at the edge, and nowhere else. A
+dimensional key written without a suffix (``tau = 5``) is an error naming the key and
+the suffixes it accepts; unknown keys, unknown unit types, missing or negative
+parameters, and streams that dangle or connect an outlet twice are errors naming the
+key or stream. The format is described in docs/flowsheets.md.
+"""
+from __future__ import annotations
+
+import inspect
+import math
+import tomllib
+from pathlib import Path
+
+import numpy as np
+
+from millflow.breakage import AustinRate, NonNormalizedBreakage, NormalizedBreakage, PowerLawRate
+from millflow.classifiers import CURVES
+from millflow.errors import GridError, InputError, MillflowError
+from millflow.flowsheet.graph import Flowsheet, Stream
+from millflow.flowsheet.units import (CLASSIFIER_PORTS, TRANSPORTS, UNIT_TYPES, Classifier, Feed, Mill, Mixer,
+                                      Product, Splitter)
+from millflow.grid import SizeGrid
+from millflow.psd import from_sieves
+
+__all__ = ["load", "loads", "from_dict", "DIMENSIONS"]
+
+#: Accepted unit suffixes per dimension, with the factor to SI.
+DIMENSIONS = {
+    "length": {"um": 1e-6, "mm": 1e-3, "m": 1.0},
+    "time": {"s": 1.0, "min": 60.0, "h": 3600.0},
+    "mass_flow": {"tph": 1000.0 / 3600.0, "kg_s": 1.0},
+    "mass": {"t": 1000.0, "kg": 1.0},
+    "power": {"W": 1.0, "kW": 1e3, "MW": 1e6},
+    "rate": {"per_s": 1.0, "per_min": 1.0 / 60.0, "per_h": 1.0 / 3600.0},
+    "fraction": {"pct": 0.01, "frac": 1.0},
+}
+_SI = {"length": "m", "time": "s", "mass_flow": "kg/s", "mass": "kg", "power": "W", "rate": "1/s", "fraction": "-"}
+
+
+def _suffixes(dim: str) -> str:
+    return ", ".join(f"_{s}" for s in DIMENSIONS[dim])
+
+
+class _Table:
+    """A TOML table with its dotted location, handing out values by name and tracking use."""
+
+    def __init__(self, data, where: str):
+        if not isinstance(data, dict):
+            raise InputError(f"{where}: expected a table {{...}}, got {data!r}")
+        self.data, self.where, self.used = data, where, set()
+
+    def _at(self, key: str) -> str:
+        return f"{self.where}.{key}" if self.where else key
+
+    def plain(self, key, default=..., *, kind=None):
+        if key not in self.data:
+            bad = [k for k in self.data if k.startswith(key + "_")]
+            if bad:
+                raise InputError(f"{self._at(bad[0])}: {key!r} is dimensionless; write it as {key} = ...")
+            if default is ...:
+                raise InputError(f"{self.where or 'top level'}: missing parameter {key!r}")
+            return default
+        self.used.add(key)
+        v = self.data[key]
+        if kind is float:
+            return _number(v, self._at(key))
+        if kind is str and not isinstance(v, str):
+            raise InputError(f"{self._at(key)} = {v!r}: expected a string")
+        return v
+
+    def quantity(self, base: str, dim: str, default=..., *, positive=True, allow_zero=False):
+        """Value of ``base_<suffix>`` in SI; error if written without a unit or missing."""
+        found = [k for k in self.data if k.startswith(base + "_") and k[len(base) + 1:] in DIMENSIONS[dim]]
+        if base in self.data:
+            raise InputError(f"{self._at(base)}: units of measure missing; write {base}_<unit> with one of "
+                             f"{_suffixes(dim)} (e.g. {base}_{next(iter(DIMENSIONS[dim]))})")
+        if len(found) > 1:
+            raise InputError(f"{self.where or 'top level'}: {', '.join(found)} give {base!r} twice; keep one")
+        if not found:
+            wrong = [k for k in self.data if k.startswith(base + "_")]
+            if wrong:
+                raise InputError(f"{self._at(wrong[0])}: unknown unit {wrong[0][len(base) + 1:]!r} for {base} "
+                                 f"({dim}); expected one of {_suffixes(dim)}")
+            if default is ...:
+                raise InputError(f"{self.where or 'top level'}: missing parameter {base}_<unit> ({dim}: {_suffixes(dim)})")
+            return default
+        key = found[0]
+        self.used.add(key)
+        v = _number(self.data[key], self._at(key), array_ok=True)
+        arr = np.asarray(v, dtype=float)
+        if positive and (np.any(arr < 0) or (not allow_zero and np.any(arr == 0))):
+            raise InputError(f"{self._at(key)} = {self.data[key]!r}: expected a value "
+                             f"{'>= 0' if allow_zero else '> 0'}")
+        out = arr * DIMENSIONS[dim][key[len(base) + 1:]]
+        return float(out) if out.ndim == 0 else out
+
+    def sub(self, key, default=...):
+        if key not in self.data:
+            if default is ...:
+                raise InputError(f"{self.where or 'top level'}: missing table {key!r}")
+            return default
+        self.used.add(key)
+        return _Table(self.data[key], self._at(key))
+
+    def finish(self, valid: str = "") -> None:
+        extra = [k for k in self.data if k not in self.used]
+        if extra:
+            hint = f"; valid keys: {valid}" if valid else ""
+            raise InputError(f"{self._at(extra[0])}: unknown key{hint}")
+
+
+def _number(v, where: str, array_ok: bool = False):
+    if isinstance(v, bool):
+        raise InputError(f"{where} = {v!r}: expected a number")
+    if isinstance(v, (int, float)):
+        if not math.isfinite(v):
+            raise InputError(f"{where} = {v!r}: expected a finite number")
+        return float(v)
+    if array_ok and isinstance(v, list) and all(isinstance(e, (int, float)) and not isinstance(e, bool) for e in v):
+        return [float(e) for e in v]
+    raise InputError(f"{where} = {v!r}: expected a number{' or a list of numbers' if array_ok else ''}")
+
+
+def _wrap(where: str, fun, *args, **kw):
+    try:
+        return fun(*args, **kw)
+    except MillflowError as exc:
+        raise type(exc)(f"{where}: {exc}") from exc
+    except (ValueError, TypeError) as exc:  # e.g. rtd.ParameterError
+        raise InputError(f"{where}: {exc}") from exc
+
+
+# ------------------------------------------------------------------------ grid
+def _grid(t: _Table) -> SizeGrid:
+    if "edges_um" in t.data or "edges_mm" in t.data or "edges_m" in t.data:
+        edges = t.quantity("edges", "length")
+        t.finish("edges_um")
+        return _wrap("grid.edges", SizeGrid.from_edges, edges)
+    top = t.quantity("top", "length")
+    bottom = t.quantity("bottom", "length")
+    n = t.plain("n", None, kind=float)
+    ratio = t.plain("ratio", None, kind=float)
+    t.finish("top_um, bottom_um, and n or ratio (or edges_um)")
+    if (n is None) == (ratio is None):
+        raise InputError("grid: give exactly one of n (number of classes) or ratio (e.g. 1.189207 = 2^(1/4))")
+    if n is not None:
+        if n != int(n) or n < 2:
+            raise InputError(f"grid.n = {n!r}: expected an integer >= 2")
+        if bottom >= top:
+            raise InputError(f"grid.bottom = {bottom!r} m must be below grid.top = {top!r} m")
+        return _wrap("grid", SizeGrid.geometric, top, (top / bottom) ** (1.0 / (int(n) - 1)), int(n))
+    return _wrap("grid", SizeGrid.between, top, bottom, ratio)
+
+
+# ------------------------------------------------------------------------ PSD
+def _feed_psd(t: _Table, grid: SizeGrid) -> np.ndarray:
+    form = t.plain("form", kind=str)
+    if form == "sieves":
+        size = t.quantity("size", "length")
+        if "passing_pct" in t.data or "passing_frac" in t.data:
+            passing = t.quantity("passing", "fraction", allow_zero=True)
+        else:
+            passing = t.quantity("passing", "fraction")  # raises the "units missing" error
+        t.finish("form, size_um, passing_pct")
+        size, passing = np.atleast_1d(size), np.atleast_1d(passing)
+        if size.shape != passing.shape:
+            raise InputError(f"{t.where}: {size.size} sizes but {passing.size} passing values")
+        order = np.argsort(-size)
+        size, passing = size[order], passing[order]
+        if passing[0] < 1 - 1e-9:
+            raise GridError(f"{t.where}: the coarsest sieve ({size[0] * 1e6:.6g} um) passes only "
+                            f"{passing[0] * 100:.6g} %; add a sieve that passes 100 %")
+        try:
+            return from_sieves(size, passing, grid)
+        except GridError as exc:
+            raise GridError(f"{t.where}: the size grid does not cover the feed (grid.top = {grid.x[0] * 1e6:.6g} um, "
+                            f"coarsest sieve {size[0] * 1e6:.6g} um): {exc}") from exc
+    if form in ("rosin_rammler", "ggs"):
+        if form == "rosin_rammler":
+            x63 = t.quantity("x63", "length")
+            n = t.plain("n", kind=float)
+            t.finish("form, x63_um, n")
+            if n <= 0:
+                raise InputError(f"{t.where}.n = {n!r}: expected > 0")
+            P = -np.expm1(-(grid.x / x63) ** n)
+        else:
+            xmax = t.quantity("xmax", "length")
+            m = t.plain("m", kind=float)
+            t.finish("form, xmax_um, m")
+            if m <= 0:
+                raise InputError(f"{t.where}.m = {m!r}: expected > 0")
+            P = np.minimum(grid.x / xmax, 1.0) ** m
+        if P[0] < 1 - 1e-4:
+            raise GridError(f"{t.where}: the size grid does not cover the feed: {100 * (1 - P[0]):.3g} % of it is "
+                            f"coarser than grid.top = {grid.x[0] * 1e6:.6g} um (at most 0.01 % is lumped into "
+                            "class 1); raise grid.top_um")
+        P = P / P[0]  # the <= 0.01 % above the top edge is lumped into class 1
+        return from_sieves(grid.x, P, grid) if grid.n >= 2 else np.ones(1)
+    raise InputError(f"{t.where}.form = {form!r}: unknown feed PSD form; valid: ggs, rosin_rammler, sieves")
+
+
+# ------------------------------------------------------------------ breakage
+def _rate(t: _Table):
+    form = t.plain("form", kind=str)
+    if form == "power":
+        A = t.quantity("A", "rate", allow_zero=True)
+        alpha = t.plain("alpha", kind=float)
+        x0 = t.quantity("x0", "length", 1e-3)
+        t.finish("form, A_per_min, alpha, x0_um")
+        return _wrap(t.where, PowerLawRate, A, alpha, x0)
+    if form == "austin":
+        A = t.quantity("A", "rate", allow_zero=True)
+        alpha = t.plain("alpha", kind=float)
+        mu = t.quantity("mu", "length")
+        Lam = t.plain("Lambda", kind=float)
+        x0 = t.quantity("x0", "length", 1e-3)
+        t.finish("form, A_per_min, alpha, mu_um, Lambda, x0_um")
+        return _wrap(t.where, AustinRate, A, alpha, mu, Lam, x0=x0)
+    raise InputError(f"{t.where}.form = {form!r}: unknown rate form; valid: austin, power")
+
+
+def _breakage(t: _Table):
+    form = t.plain("form", kind=str)
+    if form == "normalized":
+        args = [t.plain(k, kind=float) for k in ("phi", "gamma", "beta")]
+        t.finish("form, phi, gamma, beta")
+        return _wrap(t.where, NormalizedBreakage, *args)
+    if form == "non_normalized":
+        args = [t.plain(k, kind=float) for k in ("phi0", "gamma", "beta", "theta")]
+        xmax = t.quantity("x_max", "length", None)
+        t.finish("form, phi0, gamma, beta, theta, x_max_um")
+        return _wrap(t.where, NonNormalizedBreakage, *args, xmax)
+    raise InputError(f"{t.where}.form = {form!r}: unknown breakage form; valid: non_normalized, normalized")
+
+
+# --------------------------------------------------------------- curves
+_SIZE_PARAMS = {"d50", "d50c"}
+
+
+def _curve_params(t: _Table, curve: str, skip=()) -> dict:
+    if curve not in CURVES:
+        raise InputError(f"{t.where}.curve = {curve!r}: unknown efficiency curve; valid: {', '.join(sorted(CURVES))}")
+    sig = inspect.signature(CURVES[curve])
+    params = {}
+    for name, p in list(sig.parameters.items())[1:]:
+        required = p.default is inspect.Parameter.empty
+        if name in _SIZE_PARAMS:
+            params[name] = t.quantity(name, "length", ... if required else None)
+        else:
+            v = t.plain(name, ... if required else None, kind=float)
+            if v is not None and v < 0:
+                raise InputError(f"{t.where}.{name} = {v!r}: expected a value >= 0")
+            if v is not None:
+                params[name] = v
+        if params.get(name, 0) is None:
+            params.pop(name)
+    names = ", ".join(("curve",) + tuple(skip) + tuple(
+        f"{n}_um" if n in _SIZE_PARAMS else n for n in list(sig.parameters)[1:]))
+    t.finish(names)
+    _wrap(t.where, CURVES[curve], np.array([1e-3, 1e-4]), **params)  # validate once
+    return params
+
+
+# --------------------------------------------------------------- units
+def _unit(name: str, t: _Table, grid: SizeGrid, materials: dict):
+    utype = t.plain("type", kind=str)
+    if utype not in UNIT_TYPES:
+        raise InputError(f"units.{name}.type = {utype!r}: unknown unit type; valid: {', '.join(sorted(UNIT_TYPES))}")
+    if utype == "feed":
+        solids = t.quantity("solids", "mass_flow")
+        psd = _feed_psd(t.sub("psd"), grid)
+        t.plain("material", None)
+        t.finish("type, solids_tph, psd, material")
+        return Feed(name, solids, psd)
+    if utype == "mill":
+        mat_name = t.plain("material", None, kind=str)
+        mat = {}
+        if mat_name is not None:
+            if mat_name not in materials:
+                raise InputError(f"units.{name}.material = {mat_name!r}: unknown material; defined: "
+                                 f"{', '.join(materials) or 'none (add a [materials.NAME] table)'}")
+            mat = materials[mat_name]
+        rate = _rate(t.sub("rate")) if "rate" in t.data else mat.get("rate")
+        brk = _breakage(t.sub("breakage")) if "breakage" in t.data else mat.get("breakage")
+        if rate is None or brk is None:
+            missing = "rate" if rate is None else "breakage"
+            raise InputError(f"units.{name}: missing parameter {missing!r} (give it in the mill or in its material)")
+        tr = t.sub("transport", None)
+        model, tparams = "perfect_mixing", {}
+        if tr is not None:
+            model = tr.plain("model", kind=str)
+            if model not in TRANSPORTS:
+                raise InputError(f"{tr.where}.model = {model!r}: unknown transport model; valid: "
+                                 f"{', '.join(sorted(TRANSPORTS))}")
+            for k in list(inspect.signature(TRANSPORTS[model]).parameters)[1:]:
+                tparams[k] = tr.plain(k, kind=float)
+                if tparams[k] <= 0:
+                    raise InputError(f"{tr.where}.{k} = {tparams[k]!r}: expected > 0")
+            tr.finish(", ".join(["model"] + list(tparams)))
+        tau = t.quantity("tau", "time", None)
+        holdup = t.quantity("holdup", "mass", None)
+        if tau is None and holdup is None:
+            raise InputError(f"units.{name}: missing parameter tau_<unit> (time: {_suffixes('time')}) "
+                             f"or holdup_<unit> (mass: {_suffixes('mass')})")
+        power = t.quantity("power", "power", None, allow_zero=True)
+        cls = None
+        if "classification" in t.data:
+            ct = t.sub("classification")
+            curve = ct.plain("curve", kind=str)
+            cls = {"curve": curve, **_curve_params(ct, curve)}
+        t.finish("type, material, rate, breakage, transport, tau_min, holdup_t, power_kW, classification")
+        unit = _wrap(f"units.{name}", Mill, name, rate, brk, model, tparams, tau, holdup, cls, power)
+        _wrap(f"units.{name}", TRANSPORTS[model], tau or 1.0, **tparams)
+        return unit
+    if utype in ("hydrocyclone", "screen", "air_separator", "dynamic_classifier"):
+        kind = "air_separator" if utype == "dynamic_classifier" else utype
+        default = {"hydrocyclone": None, "screen": "screen", "air_separator": "tromp"}[kind]
+        curve = t.plain("curve", default, kind=str)
+        if curve is None:
+            raise InputError(f"units.{name}: missing parameter 'curve' (whiten or plitt for a hydrocyclone)")
+        return Classifier(name, kind, curve, _curve_params(t, curve, skip=("type",)))
+    if utype in ("mixer", "tank"):
+        holdup = t.quantity("holdup", "mass", None)
+        t.finish("type, holdup_t")
+        return Mixer(name, holdup)
+    if utype == "splitter":
+        ft = t.sub("fractions")
+        fr = {k: ft.plain(k, kind=float) for k in list(ft.data)}
+        for k, v in fr.items():
+            if not 0 <= v <= 1:
+                raise InputError(f"units.{name}.fractions.{k} = {v!r}: expected a fraction in [0, 1]")
+        t.finish("type, fractions")
+        return _wrap(f"units.{name}", Splitter, name, fr)
+    t.finish("type")
+    return Product(name)
+
+
+def from_dict(data: dict, *, source: str = "<dict>") -> Flowsheet:
+    """Build a Flowsheet from the parsed TOML document ``data`` (see docs/flowsheets.md)."""
+    top = _Table(data, "")
+    title = top.plain("title", "", kind=str)
+    grid = _grid(top.sub("grid"))
+    passing = ()
+    rep = top.sub("report", None)
+    if rep is not None:
+        passing = tuple(np.atleast_1d(rep.quantity("passing", "length", ())))
+        rep.finish("passing_um")
+    materials = {}
+    mt = top.sub("materials", None)
+    if mt is not None:
+        for mname in mt.data:
+            m = mt.sub(mname)
+            materials[mname] = {k: f(m.sub(k)) for k, f in (("rate", _rate), ("breakage", _breakage)) if k in m.data}
+            m.finish("rate, breakage")
+    units = {}
+    ut = top.sub("units")
+    for uname in ut.data:
+        units[uname] = _unit(uname, ut.sub(uname), grid, materials)
+    streams = {}
+    st = top.sub("streams")
+    for sname in st.data:
+        s = st.sub(sname)
+        src = s.plain("from", kind=str)
+        dst = s.plain("to", kind=str)
+        s.finish("from, to")
+        uname, _, port = src.partition(".")
+        if uname in units and not port:
+            ports = units[uname].ports
+            if len(ports) != 1:
+                raise InputError(f"streams.{sname}.from = {src!r}: unit {uname!r} has outlets "
+                                 f"{', '.join(ports) or 'none'}; write from = \"{uname}.<outlet>\"")
+            port = ports[0]
+        streams[sname] = Stream(sname, uname, port, dst)
+    top.finish("title, grid, report, materials, units, streams")
+    return Flowsheet(grid=grid, units=units, streams=streams, title=title, passing_sizes=passing,
+                     source_file=source)
+
+
+def loads(text: str, *, source: str = "<string>") -> Flowsheet:
+    """Flowsheet from TOML text."""
+    try:
+        data = tomllib.loads(text)
+    except tomllib.TOMLDecodeError as exc:
+        raise InputError(f"{source}: not valid TOML ({exc})") from exc
+    try:
+        return from_dict(data, source=source)
+    except MillflowError as exc:
+        raise type(exc)(f"{source}: {exc}") from exc
+
+
+def load(path) -> Flowsheet:
+    """Flowsheet from a TOML file."""
+    p = Path(path)
+    if not p.is_file():
+        raise InputError(f"{p}: flowsheet file not found")
+    return loads(p.read_text(encoding="utf-8"), source=str(p))

@@ -1,0 +1,137 @@
+"""PNG plots of a solved flowsheet (matplotlib, Agg backend; imported only here).
+
+- ``psd.png``: cumulative passing of every stream on a log size axis [um].
+- ``classifiers.png``: partition curves of every classifier and mill discharge screen
+  (fraction of each size to the coarse stream).
+- ``flowsheet.png``: a simple drawing of units (boxes, placed by distance from the
+  feeds) and streams (arrows, recycles curved) labelled with solids rates [t/h].
+"""
+from __future__ import annotations
+
+from collections import deque
+from pathlib import Path
+
+import numpy as np
+
+__all__ = ["save_plots", "plot_psd", "plot_classifiers", "plot_flowsheet"]
+
+
+def _plt():
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    return plt
+
+
+def plot_psd(ds, ax):
+    """Cumulative passing [%] of every stream against size [um] (log axis)."""
+    x = ds["size"].values * 1e6
+    for s in ds["stream"].values:
+        y = ds["cum_passing"].sel(stream=s).values * 100
+        if np.all(np.isnan(y)):
+            continue
+        ax.semilogx(x, y, marker=".", ms=3, label=f"{s} ({float(ds['solids'].sel(stream=s)) * 3.6:.4g} t/h)")
+    ax.set_xlabel("size [um] (upper class edge)")
+    ax.set_ylabel("cumulative passing [%]")
+    ax.set_ylim(0, 100)
+    ax.grid(True, which="both", alpha=0.3)
+    ax.legend(fontsize=8)
+
+
+def plot_classifiers(sol, ax):
+    """Partition curves (fraction to the coarse stream) of classifiers and mill discharge screens."""
+    fs = sol.flowsheet
+    x = fs.grid.x * 1e6
+    n = 0
+    for name, unit in fs.units.items():
+        c = None
+        if unit.type == "classifier":
+            c, label = unit.efficiency(fs.grid), f"{name} ({unit.kind}, {unit.curve}) to {unit.ports[0]}"
+        elif unit.type == "mill" and unit.classification is not None:
+            c, label = unit.discharge_efficiency(fs.grid), f"{name} discharge ({unit.classification['curve']}), retained"
+        if c is not None:
+            ax.semilogx(x, c, label=label)
+            n += 1
+    if not n:
+        ax.text(0.5, 0.5, "no classifiers in this flowsheet", ha="center", transform=ax.transAxes)
+    ax.set_xlabel("size [um]")
+    ax.set_ylabel("fraction to coarse stream [-]")
+    ax.set_ylim(-0.02, 1.02)
+    ax.grid(True, which="both", alpha=0.3)
+    if n:
+        ax.legend(fontsize=8)
+
+
+def _levels(fs) -> dict:
+    adj = {u: [] for u in fs.units}
+    for s in fs.streams.values():
+        adj[s.source].append(s.target)
+    level = {}
+    q = deque()
+    for u, unit in fs.units.items():
+        if unit.type == "feed":
+            level[u] = 0
+            q.append(u)
+    while q:
+        u = q.popleft()
+        for v in adj[u]:
+            if v not in level:
+                level[v] = level[u] + 1
+                q.append(v)
+    for u in fs.units:
+        level.setdefault(u, 0)
+    return level
+
+
+def plot_flowsheet(sol, ax):
+    """Boxes for units, arrows for streams with their solids rates [t/h]."""
+    fs = sol.flowsheet
+    level = _levels(fs)
+    pos, count = {}, {}
+    for u in fs.units:
+        k = count.get(level[u], 0)
+        count[level[u]] = k + 1
+        pos[u] = (3.0 * level[u], -1.6 * k)
+    for u, (x, y) in pos.items():
+        unit = fs.units[u]
+        ax.text(x, y, f"{u}\n[{getattr(unit, 'kind', unit.type)}]", ha="center", va="center", fontsize=8,
+                bbox=dict(boxstyle="round", fc="#e8f0fa", ec="#3060a0"), zorder=3)
+    tot = {n: float(sol.flows[k].sum()) * 3.6 for k, n in enumerate(fs.stream_names)}
+    for n, s in fs.streams.items():
+        (x0, y0), (x1, y1) = pos[s.source], pos[s.target]
+        back = level[s.target] <= level[s.source]
+        rad = 0.5 if back else 0.0
+        if back and (x0, y0) == (x1, y1):
+            x1, y1 = x1 + 0.01, y1 - 0.01
+        ax.annotate("", xy=(x1, y1), xytext=(x0, y0),
+                    arrowprops=dict(arrowstyle="-|>", color="#a03030" if back else "#303030", shrinkA=22,
+                                    shrinkB=22, connectionstyle=f"arc3,rad={rad}"))
+        mx, my = (x0 + x1) / 2, (y0 + y1) / 2 + (0.9 if back else 0.25)
+        ax.text(mx, my, f"{n}\n{tot[n]:.4g} t/h", ha="center", va="center", fontsize=7, color="#202020")
+    xs = [p[0] for p in pos.values()]
+    ys = [p[1] for p in pos.values()]
+    ax.set_xlim(min(xs) - 1.5, max(xs) + 1.5)
+    ax.set_ylim(min(ys) - 1.5, max(ys) + 2.0)
+    ax.set_axis_off()
+    ax.set_title(fs.title or "flowsheet", fontsize=10)
+
+
+def save_plots(sol, ds, out_dir) -> dict:
+    """Write psd.png, classifiers.png and flowsheet.png to ``out_dir``; returns name -> path."""
+    plt = _plt()
+    out = Path(out_dir)
+    files = {}
+    for key, fname, fun, arg, size in (
+        ("psd_png", "psd.png", plot_psd, ds, (8, 5)),
+        ("classifiers_png", "classifiers.png", plot_classifiers, sol, (8, 5)),
+        ("flowsheet_png", "flowsheet.png", plot_flowsheet, sol, (10, 5)),
+    ):
+        fig, ax = plt.subplots(figsize=size)
+        fun(arg, ax)
+        fig.tight_layout()
+        files[key] = out / fname
+        fig.savefig(files[key], dpi=110)
+        plt.close(fig)
+    return files

@@ -1,0 +1,270 @@
+"""Results of a solved flowsheet: xarray Dataset, tables, summary and the output folder.
+
+Everything is computed from :class:`~millflow.flowsheet.solve.FlowsheetSolution`
+(stream flows per size class [kg/s] and unit reports). Per stream: solids rate,
+mass fractions and cumulative passing on the grid, P80, P50 and % passing named sizes
+(monotone PCHIP interpolation in log size, :mod:`millflow.psd`). Per unit: method,
+error estimate, run time and mass balance error |out - in| / in. Circulating load of a
+unit with several outlets inside a recycle loop (classifier or splitter): the flow of
+its outlets that return into the loop divided by the flow of those that leave it
+(U/O for a closed-circuit hydrocyclone). Specific energy of a mill [kWh/t] = power [kW] /
+mill throughput [t/h]; of the circuit = total mill power / total product rate.
+
+:func:`to_dataset` keeps SI units (attributes ``units`` and ``long_name`` on every
+variable); tables, ``summary.json`` and the terminal use um and t/h.
+"""
+from __future__ import annotations
+
+import json
+import math
+from pathlib import Path
+
+import numpy as np
+
+from millflow.errors import GridError
+from millflow.psd import cum_passing, cum_passing_at, percentile_size
+
+__all__ = ["stream_properties", "circulating_loads", "mass_balance", "to_dataset", "summary",
+           "stream_table", "unit_table", "psd_table", "save"]
+
+TPH = 3.6  # kg/s -> t/h
+
+
+def _percentile(grid, frac, q):
+    try:
+        return percentile_size(grid, frac, q)
+    except GridError:
+        return float("nan")  # the percentile lies in the sink: unknown on this grid
+
+
+def stream_properties(sol) -> dict:
+    """Per stream: ``solids_kg_s``, ``fraction``, ``cum_passing``, ``p80_m``, ``p50_m``, ``passing`` (at named sizes)."""
+    fs = sol.flowsheet
+    out = {}
+    for k, name in enumerate(fs.stream_names):
+        f = sol.flows[k]
+        total = math.fsum(f)
+        n = fs.grid.n
+        if total > 0:
+            frac = np.maximum(f, 0.0) / math.fsum(np.maximum(f, 0.0))
+            frac[np.argmax(frac)] += 1.0 - math.fsum(frac)
+            cum = cum_passing(frac)
+            p80, p50 = _percentile(fs.grid, frac, 80), _percentile(fs.grid, frac, 50)
+            passing = (cum_passing_at(fs.grid, frac, np.array(fs.passing_sizes)) if fs.passing_sizes
+                       else np.zeros(0))
+        else:
+            frac = cum = np.full(n, np.nan)
+            p80 = p50 = float("nan")
+            passing = np.full(len(fs.passing_sizes), np.nan)
+        out[name] = {"solids_kg_s": total, "fraction": frac, "cum_passing": cum, "p80_m": p80, "p50_m": p50,
+                     "passing": np.asarray(passing, dtype=float)}
+    return out
+
+
+def circulating_loads(sol) -> dict:
+    """Circulating load [-] of each multi-outlet unit in a recycle loop: returning / leaving flow."""
+    fs = sol.flowsheet
+    lab = dict(zip(fs.units, fs.components()))
+    tot = {n: math.fsum(sol.flows[k]) for k, n in enumerate(fs.stream_names)}
+    out = {}
+    for uname, unit in fs.units.items():
+        outs = fs.outlets(uname)
+        if len(outs) < 2:
+            continue
+        back = [s for s in outs if lab[fs.streams[s].target] == lab[uname]]
+        if not back or len(back) == len(outs):
+            continue
+        leave = math.fsum(tot[s] for s in outs if s not in back)
+        out[uname] = math.fsum(tot[s] for s in back) / leave if leave > 0 else float("inf")
+    return out
+
+
+def mass_balance(sol) -> dict:
+    """Relative mass balance errors: ``overall`` (products vs feeds) and per unit."""
+    fs = sol.flowsheet
+    tot = {n: math.fsum(sol.flows[k]) for k, n in enumerate(fs.stream_names)}
+    feed = math.fsum(u.solids for u in fs.units.values() if u.type == "feed")
+    prod = math.fsum(tot[s] for n, u in fs.units.items() if u.type == "product" for s in fs.inlets(n))
+    return {"overall": abs(prod - feed) / feed if feed > 0 else 0.0,
+            "units": {n: r["mass_balance_error"] for n, r in sol.units.items()}}
+
+
+def _specific_energy(sol) -> float | None:
+    fs = sol.flowsheet
+    power = [u.power for u in fs.units.values() if u.type == "mill" and u.power is not None]
+    if not power:
+        return None
+    prod = math.fsum(math.fsum(sol.flow(s)) for n, u in fs.units.items() if u.type == "product"
+                     for s in fs.inlets(n))
+    return (math.fsum(power) / 1e3) / (prod * TPH) if prod > 0 else float("nan")
+
+
+def to_dataset(sol, props=None):
+    """The solution as an xarray Dataset with dimensions ``stream``, ``size`` (and ``unit``, ``classifier``)."""
+    import xarray as xr
+
+    fs = sol.flowsheet
+    props = props or stream_properties(sol)
+    names = fs.stream_names
+    size = fs.grid.size_coord()
+    ds = xr.Dataset(coords={"stream": ("stream", names, {"long_name": "stream name"}), "size": size})
+
+    def var(dims, data, units, long_name):
+        return (dims, np.asarray(data), {"units": units, "long_name": long_name})
+
+    ds["mass_flow"] = var(("stream", "size"), sol.flows, "kg/s", "solids mass flow per size class")
+    ds["mass_fraction"] = var(("stream", "size"), [props[n]["fraction"] for n in names], "1",
+                              "mass fraction per size class")
+    ds["cum_passing"] = var(("stream", "size"), [props[n]["cum_passing"] for n in names], "1",
+                            "cumulative mass fraction passing the upper class size")
+    ds["solids"] = var("stream", [props[n]["solids_kg_s"] for n in names], "kg/s", "solids mass flow")
+    ds["p80"] = var("stream", [props[n]["p80_m"] for n in names], "m", "80 % passing size")
+    ds["p50"] = var("stream", [props[n]["p50_m"] for n in names], "m", "50 % passing size")
+    ds["source"] = var("stream", [f"{fs.streams[n].source}.{fs.streams[n].port}" for n in names], "",
+                       "unit and outlet the stream leaves")
+    ds["target"] = var("stream", [fs.streams[n].target for n in names], "", "unit the stream enters")
+    if fs.passing_sizes:
+        ds = ds.assign_coords(named_size=("named_size", np.array(fs.passing_sizes),
+                                          {"units": "m", "long_name": "size for % passing"}))
+        ds["passing_named"] = var(("stream", "named_size"), [props[n]["passing"] for n in names], "1",
+                                  "cumulative mass fraction passing the named size")
+    units = list(fs.units)
+    ds = ds.assign_coords(unit=("unit", units, {"long_name": "unit name"}))
+    ds["unit_type"] = var("unit", [sol.units[u]["type"] for u in units], "", "unit type")
+    ds["unit_method"] = var("unit", [sol.units[u]["method"] for u in units], "", "method of the unit model")
+    ds["unit_mass_balance_error"] = var("unit", [sol.units[u]["mass_balance_error"] for u in units], "1",
+                                        "relative mass balance error |out - in| / in")
+    ds["unit_error_estimate"] = var("unit", [sol.units[u]["error_estimate"] for u in units], "1",
+                                    "error estimate of the unit model")
+    ds["unit_runtime"] = var("unit", [sol.units[u]["runtime_s"] for u in units], "s", "run time of the unit model")
+    cls = [u for u, unit in fs.units.items() if unit.type == "classifier"]
+    if cls:
+        ds = ds.assign_coords(classifier=("classifier", cls))
+        ds["efficiency"] = var(("classifier", "size"), [fs.units[u].efficiency(fs.grid) for u in cls], "1",
+                               "fraction of each size to the coarse stream (partition curve)")
+    mb = mass_balance(sol)
+    ds.attrs.update({
+        "title": fs.title, "source_file": fs.source_file,
+        "method": sol.solver["method"], "structure": sol.solver["structure"],
+        "relative_residual": sol.solver["relative_residual"], "runtime_s": sol.runtime_s,
+        "mass_balance_error": mb["overall"],
+        "circulating_load": json.dumps(circulating_loads(sol)),
+        "tear": json.dumps(sol.solver["tear"]) if sol.solver["tear"] else "none (all units linear)",
+        "conventions": "class 1 coarsest, class N the sink; size = upper class edge (Austin)",
+    })
+    return ds
+
+
+def _clean(v):
+    if isinstance(v, dict):
+        return {k: _clean(x) for k, x in v.items()}
+    if isinstance(v, (list, tuple, np.ndarray)):
+        return [_clean(x) for x in np.asarray(v, dtype=object).tolist()] if not isinstance(v, (list, tuple)) \
+            else [_clean(x) for x in v]
+    if isinstance(v, (float, np.floating)):
+        return None if not math.isfinite(float(v)) else float(v)
+    if isinstance(v, np.integer):
+        return int(v)
+    return v
+
+
+def summary(sol, props=None) -> dict:
+    """JSON-ready summary: streams, circulating_load, mass_balance_error, specific energy, units, runtime_s."""
+    fs = sol.flowsheet
+    props = props or stream_properties(sol)
+    streams = {}
+    for n in fs.stream_names:
+        p = props[n]
+        s = fs.streams[n]
+        streams[n] = {
+            "from": f"{s.source}.{s.port}", "to": s.target,
+            "solids_tph": p["solids_kg_s"] * TPH,
+            "p80_um": p["p80_m"] * 1e6, "p50_um": p["p50_m"] * 1e6,
+            "passing_pct": {f"{x * 1e6:g}": v * 100 for x, v in zip(fs.passing_sizes, p["passing"])},
+            "size_um": fs.grid.x * 1e6, "cum_passing": p["cum_passing"],
+        }
+    mb = mass_balance(sol)
+    units = {}
+    for u, r in sol.units.items():
+        units[u] = {k: v for k, v in r.items() if k not in ("solids_in_kg_s", "solids_out_kg_s")}
+        units[u]["solids_in_tph"] = r["solids_in_kg_s"] * TPH
+    return _clean({
+        "title": fs.title, "source_file": fs.source_file,
+        "grid": {"n": fs.grid.n, "top_um": fs.grid.x[0] * 1e6, "sink_below_um": fs.grid.x[-1] * 1e6},
+        "streams": streams,
+        "circulating_load": circulating_loads(sol),
+        "mass_balance_error": mb["overall"],
+        "unit_mass_balance_error": mb["units"],
+        "specific_energy_kWh_per_t": _specific_energy(sol),
+        "units": units,
+        "solver": {k: v for k, v in sol.solver.items()},
+        "runtime_s": sol.runtime_s,
+    })
+
+
+def stream_table(sol, props=None):
+    """pandas DataFrame: one row per stream (t/h, P80 and P50 in um, % passing named sizes)."""
+    import pandas as pd
+
+    fs = sol.flowsheet
+    props = props or stream_properties(sol)
+    rows = []
+    for n in fs.stream_names:
+        p, s = props[n], fs.streams[n]
+        row = {"stream": n, "from": f"{s.source}.{s.port}", "to": s.target, "solids_tph": p["solids_kg_s"] * TPH,
+               "p80_um": p["p80_m"] * 1e6, "p50_um": p["p50_m"] * 1e6}
+        for x, v in zip(fs.passing_sizes, p["passing"]):
+            row[f"passing_{x * 1e6:g}um_pct"] = v * 100
+        rows.append(row)
+    return pd.DataFrame(rows).set_index("stream")
+
+
+def unit_table(sol):
+    """pandas DataFrame: one row per unit (type, method, error estimate, run time, mass balance, energy)."""
+    import pandas as pd
+
+    rows = []
+    for u, r in sol.units.items():
+        rows.append({"unit": u, "type": r["type"], "method": r["method"], "solids_in_tph": r["solids_in_kg_s"] * TPH,
+                     "mass_balance_error": r["mass_balance_error"], "error_estimate": r["error_estimate"],
+                     "runtime_s": r["runtime_s"], "power_kW": r.get("power_kW"),
+                     "specific_energy_kWh_per_t": r.get("specific_energy_kWh_per_t")})
+    return pd.DataFrame(rows).set_index("unit")
+
+
+def psd_table(sol, props=None):
+    """pandas DataFrame: cumulative passing [%] of every stream (columns) at every grid size (rows, um)."""
+    import pandas as pd
+
+    fs = sol.flowsheet
+    props = props or stream_properties(sol)
+    data = {n: props[n]["cum_passing"] * 100 for n in fs.stream_names}
+    df = pd.DataFrame(data, index=pd.Index(fs.grid.x * 1e6, name="size_um"))
+    return df
+
+
+def save(sol, out_dir, *, plots: bool = True) -> dict:
+    """Write results.nc, streams.csv, units.csv, psd.csv, summary.json (and PNG plots) to ``out_dir``.
+
+    Returns a dict name -> path of the files written.
+    """
+    out = Path(out_dir)
+    out.mkdir(parents=True, exist_ok=True)
+    props = stream_properties(sol)
+    files = {}
+    ds = to_dataset(sol, props)
+    files["netcdf"] = out / "results.nc"
+    ds.to_netcdf(files["netcdf"], engine="scipy")
+    files["streams_csv"] = out / "streams.csv"
+    stream_table(sol, props).to_csv(files["streams_csv"])
+    files["units_csv"] = out / "units.csv"
+    unit_table(sol).to_csv(files["units_csv"])
+    files["psd_csv"] = out / "psd.csv"
+    psd_table(sol, props).to_csv(files["psd_csv"])
+    files["summary"] = out / "summary.json"
+    files["summary"].write_text(json.dumps(summary(sol, props), indent=2), encoding="utf-8")
+    if plots:
+        from millflow.flowsheet.plots import save_plots
+
+        files.update(save_plots(sol, ds, out))
+    return files
