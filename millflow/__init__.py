@@ -20,6 +20,7 @@ from millflow.breakage import (
 from millflow.errors import BreakageError, GridError, InputError, MillflowError, SolverError
 from millflow.grid import SizeGrid
 from millflow.linalg import SpectralBlocks, breakage_matrix, solve_well_mixed
+from millflow.mill import Mill, steady_mill, transfer_matrix
 
 __version__ = "0.1.0"
 __all__ = [
@@ -27,6 +28,7 @@ __all__ = [
     "BreakageError",
     "GridError",
     "InputError",
+    "Mill",
     "MillflowError",
     "NonNormalizedBreakage",
     "NormalizedBreakage",
@@ -46,4 +48,6 @@ __all__ = [
     "plug_flow_profile",
     "power_law_rates",
     "solve_well_mixed",
+    "steady_mill",
+    "transfer_matrix",
 ]

@@ -172,13 +172,11 @@ def _square(M, x, name: str) -> tuple[np.ndarray, np.ndarray | None]:
         raise BreakageError(f"{name}: expected a square (N, N) array, got shape {A.shape}")
     if xs is not None and A.shape[0] != xs.size:
         raise BreakageError(f"{name}: shape {A.shape} does not match a grid of {xs.size} classes")
-    bad = np.argwhere(~np.isfinite(A))
-    if bad.size:
-        i, j = bad[0]
+    if not np.isfinite(A).all():  # locate the offender only on failure (hot path)
+        i, j = np.argwhere(~np.isfinite(A))[0]
         raise BreakageError(f"{name}: {_entry(i, j, xs)} is {float(A[i, j])!r}; expected finite")
-    bad = np.argwhere(np.triu(A) != 0)
-    if bad.size:
-        i, j = bad[0]
+    if np.triu(A).any():
+        i, j = np.argwhere(np.triu(A) != 0)[0]
         raise BreakageError(
             f"{name}: {_entry(i, j, xs)} is {float(A[i, j])!r}; expected 0 on and above the diagonal "
             "(only finer classes i > j receive broken material)"
@@ -241,9 +239,8 @@ def validate_b(b, x=None, *, tol: float = COLUMN_TOL) -> np.ndarray:
         Naming the classes (1-based, with sizes if ``x`` is given) and the value.
     """
     b, xs = _square(b, x, "b")
-    bad = np.argwhere(b < 0)
-    if bad.size:
-        i, j = bad[0]
+    if (b < 0).any():
+        i, j = np.argwhere(b < 0)[0]
         raise BreakageError(f"b: {_entry(i, j, xs)} is {float(b[i, j])!r}; expected >= 0")
     sums = b.sum(axis=0)
     bad = np.flatnonzero(np.abs(sums[:-1] - 1.0) > tol)

@@ -81,7 +81,7 @@ def _whiten_beta_star(alpha: float, beta: float) -> float:
         hi *= 2.0
         if hi > 1e6:
             raise InputError(f"whiten: no beta* found for alpha = {alpha!r}, beta = {beta!r}")
-    return brentq(f, 1e-9, hi, xtol=1e-15, rtol=4e-16)
+    return brentq(f, 1e-9, hi, xtol=1e-15, rtol=1e-15)
 
 
 def whiten(x, d50c: float, alpha: float, beta: float = 0.0, bypass: float = 0.0) -> np.ndarray:

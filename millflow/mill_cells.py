@@ -13,7 +13,9 @@ with the transport matrix of class i
 
 h_i = d_i* the normalised discharge rate at the exit (grate, screen, diaphragm) and
 g_i = d_i* when classification acts at every cell outlet (``where="cells"``), g_i = 1
-when it acts only at the discharge (``where="discharge"``). The product is
+when it acts only at the discharge (``where="discharge"``); ``where`` may also list
+the (1-based) cells whose every outlet flow is classified (g and h then depend on the
+cell l: g_il = h_il = d_i* there, 1 elsewhere). The product is
 p_i = beta f_i + h_i sum_l (o_l / V_l) m_il. With one cell (perfect mixing) this is
 eq. (3) and hold-up m_i = tau p_i / d_i*.
 
@@ -31,7 +33,13 @@ from dataclasses import dataclass
 import numpy as np
 import scipy.linalg
 
-from millflow.linalg import solve_well_mixed
+from scipy.linalg import lapack
+
+from millflow.errors import SolverError
+from millflow.linalg import breakage_matrix
+
+_gtsv = lapack.get_lapack_funcs("gtsv", dtype=np.float64)
+_trtrs = lapack.get_lapack_funcs("trtrs", dtype=np.float64)
 
 __all__ = ["CellSolution", "solve_cells", "network_of", "is_chain", "cell_operators"]
 
@@ -83,86 +91,103 @@ def is_chain(net) -> bool:
     )
 
 
-def _d_factors(d, n_cls: int, where: str):
-    """Scale factors (g on inter-cell flows, h on exit flows) per class, (N,) each."""
+def classified_cells(n: int, where) -> np.ndarray:
+    """Boolean (n,): cells whose every outlet flow is classified (``where`` "cells" or
+    a sequence of 1-based cell numbers); "discharge" gives none (exit flows only)."""
+    if where == "cells":
+        return np.ones(n, dtype=bool)
+    mask = np.zeros(n, dtype=bool)
+    if where not in (None, "discharge"):
+        mask[np.asarray(list(where), dtype=int) - 1] = True
+    return mask
+
+
+def _factors(d, n_cls: int, n: int, where):
+    """Scale factors (G on inter-cell flows, H on exit flows) per class and cell, (N, n)."""
+    ones = np.ones((n_cls, n))
     if d is None:
-        ones = np.ones(n_cls)
         return ones, ones
-    h = np.asarray(d, dtype=float)
-    g = h if where == "cells" else np.ones(n_cls)
-    return g, h
+    d = np.asarray(d, dtype=float)[:, np.newaxis]
+    mask = classified_cells(n, where)
+    G = np.where(mask[np.newaxis, :], d, 1.0)
+    H = G.copy() if where not in (None, "discharge") else np.broadcast_to(d, (n_cls, n)).copy()
+    return G, H
 
 
 def _solve_chain(S, b, feed, net, d, where) -> CellSolution:
-    """Tanks in a row: cell k is eq. (3) with tau_k = V_k / Q_k, fed by cell k - 1."""
+    """Tanks in a row: cell k is eq. (3) with tau_k = V_k / Q_k, fed by cell k - 1.
+
+    Cells with the same tau_k and classification share one triangular matrix
+    I - tau_k K diag(1/d*) (tanks in series: one matrix, or two with a grate)."""
     n = net.n
     q_through = np.append(np.diag(net.flows, -1), net.outlet[-1])  # flow leaving cell k
     tau_k = net.volumes / q_through
     feed = np.asarray(feed, dtype=float)
     stream = (1.0 - net.bypass) * feed
     holdup = np.empty((n,) + feed.shape)
+    K = breakage_matrix(S, b)
+    eye = np.eye(S.size)
+    cache = {}
+    mask = classified_cells(n, where)
     for k in range(n):
-        d_k = None if d is None or (where == "discharge" and k < n - 1) else d
-        stream = solve_well_mixed(S, b, stream, tau_k[k], d_k)
-        dd = 1.0 if d_k is None else (d_k if feed.ndim == 1 else d_k[:, np.newaxis])
-        holdup[k] = tau_k[k] * stream / dd
+        classified = d is not None and (mask[k] or (k == n - 1 and where in (None, "discharge")))
+        key = (float(tau_k[k]), classified)
+        if key not in cache:
+            scale = tau_k[k] / d if classified else np.full(S.size, tau_k[k])
+            cache[key] = (eye - K * scale[np.newaxis, :], scale)
+        M, scale = cache[key]
+        stream, info = _trtrs(M, stream, lower=1)
+        if info != 0:
+            raise SolverError(f"cells: singular triangular system in cell {k + 1} (info {info})")
+        holdup[k] = stream * (scale if feed.ndim == 1 else scale[:, np.newaxis])
     return CellSolution(stream + net.bypass * feed, holdup, "cells_chain")
 
 
-def cell_operators(net, d, where: str, n_cls: int):
-    """Per-class transport pieces of the network: (offdiag (n, n) [1/s], drain (n,)
-    [1/s] inter-cell outflow rate, exit (n,) [1/s] exit rate, g (N,), h (N,))."""
+def cell_operators(net, d, where, n_cls: int):
+    """Transport pieces of the network: (offdiag (n, n) [1/s] = F[k, l] / V_l,
+    drain (n,) [1/s] inter-cell outflow rate, exit (n,) [1/s] exit rate,
+    G (N, n) and H (N, n) classification factors on inter-cell and exit flows)."""
     V = np.asarray(net.volumes, dtype=float)
     F = np.asarray(net.flows, dtype=float)
     offdiag = F / V[np.newaxis, :]
     drain = F.sum(axis=0) / V
     exit_rate = np.asarray(net.outlet, dtype=float) / V
-    g, h = _d_factors(d, n_cls, where)
-    return offdiag, drain, exit_rate, g, h
-
-
-def _bandwidths(F: np.ndarray) -> tuple[int, int]:
-    rows, cols = np.nonzero(F)
-    if rows.size == 0:
-        return 0, 0
-    return int(max(0, (rows - cols).max())), int(max(0, (cols - rows).max()))
+    G, H = _factors(d, n_cls, net.n, where)
+    return offdiag, drain, exit_rate, G, H
 
 
 def _solve_block(S, b, feed, net, d, where) -> CellSolution:
-    """Class by class: (S_i I - T^i) m_i = (1 - beta) u f_i + sum_{j<i} b_ij S_j m_j."""
+    """Class by class: (S_i I - T^i) m_i = (1 - beta) u f_i + sum_{j<i} b_ij S_j m_j.
+
+    Tridiagonal networks (cells in a row with back-mixing) use LAPACK gtsv; others a
+    dense solve per class."""
     n_cls = S.size
     n = net.n
     feed = np.asarray(feed, dtype=float)
     cols = feed.shape[1:]  # () or (m,)
-    offdiag, drain, exit_rate, g, h = cell_operators(net, d, where, n_cls)
-    lower, upper = _bandwidths(np.asarray(net.flows))
-    banded = lower + upper + 1 < n
+    offdiag, drain, exit_rate, G, H = cell_operators(net, d, where, n_cls)
+    F = np.asarray(net.flows)
+    rows, cls_ = np.nonzero(F)
+    tridiagonal = n > 2 and (rows.size == 0 or np.abs(rows - cls_).max() <= 1)
     inlet = (1.0 - net.bypass) * np.asarray(net.inlet, dtype=float)
-    # source[i] = (1 - beta) u f_i plus breakage inflow accumulated from coarser classes
-    source = inlet[np.newaxis, :].reshape((1, n) + (1,) * len(cols)) * feed[:, np.newaxis]
-    source = np.array(source, dtype=float)
+    source = np.array(inlet.reshape((1, n) + (1,) * len(cols)) * feed[:, np.newaxis], dtype=float)
     holdup = np.empty((n_cls, n) + cols)
-    eye = np.eye(n)
+    diag_all = S[:, np.newaxis] + G * drain + H * exit_rate  # (N, n)
+    sub, sup = np.diag(offdiag, -1), np.diag(offdiag, 1)  # flows l -> l+1 and l+1 -> l
+    bshape = (-1,) + (1,) * (1 + len(cols))
     for i in range(n_cls):
-        M = (S[i] * eye - g[i] * offdiag) + np.diag(g[i] * drain + h[i] * exit_rate)
-        if banded:
-            ab = np.zeros((lower + upper + 1, n))
-            for k in range(-lower, upper + 1):  # k = col - row offset
-                diag = np.diagonal(M, k)
-                if k >= 0:
-                    ab[upper - k, k:] = diag
-                else:
-                    ab[upper - k, : n + k] = diag
-            m_i = scipy.linalg.solve_banded((lower, upper), ab, source[i], check_finite=False)
+        if tridiagonal:
+            rhs = source[i] if cols else source[i][:, np.newaxis]
+            _, _, _, m_i, info = _gtsv(-G[i, :-1] * sub, diag_all[i].copy(), -G[i, 1:] * sup, rhs)
+            m_i = m_i if cols else m_i[:, 0]
         else:
+            M = np.diag(diag_all[i]) - offdiag * G[i][np.newaxis, :]
             m_i = scipy.linalg.solve(M, source[i], check_finite=False)
         holdup[i] = m_i
         if i + 1 < n_cls and S[i] > 0:
-            w = b[i + 1:, i] * S[i]
-            source[i + 1:] += w.reshape((-1,) + (1,) * (1 + len(cols))) * m_i[np.newaxis]
-    out = np.tensordot(exit_rate, holdup, axes=([0], [1]))  # (N,) + cols
-    hh = h.reshape((-1,) + (1,) * len(cols))
-    product = hh * out + net.bypass * feed
+            source[i + 1:] += (b[i + 1:, i] * S[i]).reshape(bshape) * m_i[np.newaxis]
+    weights = H * exit_rate  # (N, n): classified exit rate of each class from each cell
+    product = np.einsum("il,il...->i...", weights, holdup) + net.bypass * feed
     return CellSolution(product, np.moveaxis(holdup, 1, 0), "cells_block")
 
 
@@ -176,10 +201,11 @@ def solve_cells(S, b, feed, net, d=None, where: str = "discharge") -> CellSoluti
         unit of it, in s).
     net : rtd.CompartmentNetwork (volumes in units of time x feed flow).
     d : (N,) normalised discharge rates d_i* or None.
-    where : "discharge" (exit flows only) or "cells" (every cell outlet).
+    where : "discharge" (exit flows only), "cells" (every cell outlet) or a sequence
+        of 1-based cell numbers whose outlets are classified.
     """
     S = np.asarray(S, dtype=float)
     b = np.asarray(b, dtype=float)
-    if is_chain(net) and (d is None or where in ("discharge", "cells")):
+    if is_chain(net):
         return _solve_chain(S, b, feed, net, d, where)
     return _solve_block(S, b, feed, net, d, where)

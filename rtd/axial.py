@@ -13,8 +13,8 @@ and each regime gets the method that is accurate there (theta = t/tau, q = Pe/2)
   exp(-sqrt(Pe w / 2)) (like a Gaussian for large Pe), so a few hundred nodes give
   ~1e-13 absolute accuracy; the period is chosen so that E(theta + T) < 1e-28.
 
-Where the open-vessel bound gives exp(-Pe (1-theta)^2/(4 theta) + Pe theta/4) < e^-700
-E is returned as 0. For Pe -> 0 E approaches exp(-theta)/tau (one perfect mixer), for
+Where E is below ~e^-700 (very early times; late times for Pe > 1000) it is returned
+as 0, which also keeps the number of series terms to a few hundred. For Pe -> 0 E approaches exp(-theta)/tau (one perfect mixer), for
 Pe -> inf a Gaussian of variance 2/Pe around theta = 1 (plug flow).
 """
 from __future__ import annotations
@@ -31,7 +31,7 @@ from rtd.models import ParameterError, RTDModel, as_s, as_time, check_positive
 
 SERIES_MAX_PE = 16.0   # below: series cancellation costs < exp(Pe/4) ~ 55 ulp
 SERIES_MIN_THETA = 2.0  # above: every series term is <= O(1), no cancellation
-_CHUNK = 4096
+_CHUNK = 1024
 
 
 # ----------------------------------------------------------------------------- closed
@@ -61,11 +61,14 @@ def _eigen(pe: float, k_max: int) -> tuple[np.ndarray, np.ndarray]:
     beta = hi.copy()
     # f = 2 atan(b) + q b - k pi is increasing and concave: Newton from the right
     # undershoots once, then climbs monotonically to the root
+    done = 0
     for _ in range(100):
         f = 2 * np.arctan(beta) + q * beta - k * np.pi
         step = f / (2 / (1 + beta**2) + q)
         beta = np.clip(beta - step, lo, hi)
-        if np.all(np.abs(step) <= 4e-16 * np.maximum(beta, 1e-300)):
+        # quadratic convergence: one more step after 1e-10 reaches round-off
+        done = done + 1 if np.all(np.abs(step) <= 1e-10 * beta) else 0
+        if done == 2:
             break
     z = (1 + 1j * beta) * (2 + q * (1 + 1j * beta)) * np.exp(1j * beta * q)
     dprime = 2 * z.real
@@ -83,9 +86,17 @@ def _n_terms(pe: float, theta_min: float) -> int:
 
 
 def _negligible(theta: np.ndarray, pe: float) -> np.ndarray:
+    """Where E < ~e^-700: early times, and for Pe > 1000 late times as well.
+
+    Early: the open-vessel bound exp(-Pe (1-theta)^2/(4 theta) + Pe theta/4). Late: the
+    reflections of the closed vessel carry exp(-m Pe), negligible for Pe > 1000, and the
+    direct front is Gaussian-like, exp(-Pe (theta-1)^2/(4 theta)) times powers of Pe.
+    """
     with np.errstate(divide="ignore"):
-        expo = pe * (1 - theta)**2 / (4 * theta) - pe * theta / 4
-    return (theta < 1) & (expo > 700)
+        spread = pe * (1 - theta)**2 / (4 * theta)
+    early = (theta < 1) & (spread - pe * theta / 4 > 700)
+    late = (theta > 1) & (pe > 1000) & (spread > 800)
+    return early | late
 
 
 def _closed_series(theta: np.ndarray, pe: float, integral: bool) -> np.ndarray:
@@ -143,6 +154,8 @@ def closed_density(theta, pe: float, integral: bool = False) -> np.ndarray:
     zero = pos & _negligible(flat, pe)
     series = pos & ~zero & ((pe <= SERIES_MAX_PE) | (flat >= SERIES_MIN_THETA))
     fourier = pos & ~zero & ~series
+    if integral:  # negligible density: F is 0 before the front and 1 after it
+        out[zero & (flat > 1)] = 1.0
     out[series] = _closed_series(flat[series], pe, integral)
     out[fourier] = _closed_fourier(flat[fourier], pe, integral)
     # round-off of the Fourier sums (~1e-13) may dip below 0 or above 1

@@ -12,6 +12,7 @@ Student's t, AIC = n ln(SSR/n) + 2p, BIC = n ln(SSR/n) + p ln n (p counts A).
 """
 from __future__ import annotations
 
+import dataclasses
 import inspect
 import math
 from dataclasses import dataclass, field
@@ -71,6 +72,11 @@ class FitResult:
     message: str = ""
     nfev: int = 0
     notes: tuple = field(default_factory=tuple)
+    inlet: np.ndarray | None = None
+
+    def curve(self, t) -> np.ndarray:
+        """Fitted curve A g(t) at any times (needs the data times when an inlet was used)."""
+        return self.scale * _curve(self.model, np.asarray(t, float), self.kind, self.inlet)
 
     @property
     def params(self) -> dict:
@@ -138,13 +144,19 @@ def _start(cls, kw, instance, mom, guess):
 
 
 def _curve(model, t, kind, inlet):
+    if inlet is not None and isinstance(model, PlugFlow):
+        # a pure delay: shift the linearly interpolated inlet, smooth in tau (the
+        # piecewise-constant convolution would be flat between sampling times)
+        area = np.trapezoid(inlet, t)
+        return np.interp(t - model.tau, t, inlet, left=0.0, right=0.0) / area
     if inlet is not None:
         return convolve_inlet(model.cdf, t, inlet)
     return model.pdf(t) if kind == "pulse" else model.cdf(t)
 
 
 def fit(model, t, c=None, *, kind: str | None = None, inlet=None, vary=None,
-        guess: str = "moments", tail="auto", **fixed) -> FitResult:
+        scale: float | None = None, guess: str = "moments", tail="auto",
+        **fixed) -> FitResult:
     """Fit an RTD model to a tracer curve by least squares in the time domain.
 
     Parameters
@@ -162,6 +174,9 @@ def fit(model, t, c=None, *, kind: str | None = None, inlet=None, vary=None,
         Measured inlet concentration on the same times: fit the convolution.
     vary : sequence of str, optional
         Parameters to fit (default: all but the model's ``fixed_by_default``).
+    scale : float, optional
+        Known A (tracer area of a pulse, plateau of a step) instead of fitting it: then
+        a bypass (missing area) becomes identifiable.
     **fixed
         Fixed parameter values, e.g. ``n=4`` for ``"cells"``.
 
@@ -169,6 +184,30 @@ def fit(model, t, c=None, *, kind: str | None = None, inlet=None, vary=None,
     -------
     FitResult
     """
+    t, c, kind, inlet, notes = _unpack(t, c, kind, inlet)
+    cls, kw, instance = resolve_model(model, **fixed)
+    mom = moments(t, c, tail) if kind == "pulse" else step_moments(t, c)
+    if mom.note:
+        notes.append(mom.note)
+    if inlet is not None:  # moments add under convolution: the vessel's are the difference
+        im = moments(t, np.asarray(inlet, float), tail=False)
+        mom = type(mom)(mom.area, max(mom.mean - im.mean, 1e-3 * mom.mean),
+                        max(mom.variance - im.variance, 1e-2 * mom.variance))
+    start = _start(cls, kw, instance, mom, guess)
+    names = tuple(vary) if vary is not None else tuple(
+        k for k in start.param_names if k not in start.fixed_by_default and k not in fixed)
+    bad = [k for k in names if k not in start.param_names or k not in BOUNDS]
+    if bad or (isinstance(start, RecirculatingCells) and "n" in names):
+        raise RTDError(f"vary = {list(names)}: cannot fit {bad or ['n']}; expected names among "
+                       f"{[k for k in start.param_names if k in BOUNDS]} (the number of cells "
+                       "is an integer: fix it with n=... and compare fits)")
+    if cls is PlugFlow and inlet is None:
+        return _plug_by_moments(start, t, c, kind, mom, notes)
+    return _least_squares(start, names, t, c, kind, inlet, mom, notes, scale)
+
+
+def _unpack(t, c, kind, inlet):
+    """Checked (t, c, kind, inlet, notes) from arrays or a TracerCurve."""
     notes = []
     if isinstance(t, TracerCurve):
         curve = t
@@ -180,41 +219,30 @@ def fit(model, t, c=None, *, kind: str | None = None, inlet=None, vary=None,
     if kind not in ("pulse", "step"):
         raise TracerError(f"kind = {kind!r}; expected 'pulse' or 'step'")
     if inlet is not None and kind != "pulse":
-        raise TracerError("an inlet curve is only used with pulse data")
+        raise TracerError("an inlet curve is only used with pulse data", "inlet")
     t, c = check_tracer(t, c, kind, inlet=inlet)
-    cls, kw, instance = resolve_model(model, **fixed)
-    mom = moments(t, c, tail) if kind == "pulse" else step_moments(t, c)
-    if mom.note:
-        notes.append(mom.note)
-    if inlet is not None:
-        im = moments(t, np.asarray(inlet, float), tail=False)
-        mom = type(mom)(mom.area, max(mom.mean - im.mean, 1e-3 * mom.mean),
-                        max(mom.variance - im.variance, 1e-2 * mom.variance))
-    start = _start(cls, kw, instance, mom, guess)
-    names = tuple(vary) if vary is not None else tuple(
-        k for k in start.param_names if k not in start.fixed_by_default and k not in fixed)
-    if cls is PlugFlow and inlet is None:
-        return _plug_by_moments(start, t, c, kind, mom, notes)
-    return _least_squares(start, names, t, c, kind, inlet, mom, notes)
+    return t, c, kind, inlet, notes
 
 
-def _least_squares(start, names, t, c, kind, inlet, mom, notes) -> FitResult:
-    n_par = len(names) + 1
+def _least_squares(start, names, t, c, kind, inlet, mom, notes, scale=None) -> FitResult:
+    free = scale is None  # the scale A is fitted unless given
+    n_par = len(names) + free
     if t.size <= n_par:
-        raise TracerError(f"{t.size} data points for {n_par} parameters ({', '.join(names)}, "
-                          "scale); expected more points than parameters")
-    logs = np.array([BOUNDS[k][2] for k in names] + [True])
-    lo = np.array([BOUNDS[k][0] * (mom.mean if k == "tau" else 1) for k in names] + [1e-12])
-    hi = np.array([BOUNDS[k][1] * (mom.mean if k == "tau" else 1) for k in names] + [np.inf])
-    x0 = np.array([getattr(start, k) for k in names] + [_scale0(start, t, c, kind, inlet)])
+        raise TracerError(f"{t.size} data points for {n_par} parameters ({', '.join(names)}"
+                          f"{', scale' if free else ''}); expected more points than parameters")
+    extra = [(True, 1e-12, np.inf, _scale0(start, t, c, kind, inlet))] if free else []
+    spec = [(BOUNDS[k][2], BOUNDS[k][0] * (mom.mean if k == "tau" else 1),
+             BOUNDS[k][1] * (mom.mean if k == "tau" else 1), getattr(start, k)) for k in names]
+    logs, lo, hi, x0 = (np.array(col, dtype=float) for col in zip(*(spec + extra)))
+    logs = logs.astype(bool)
     x0 = np.clip(x0, lo + 1e-12 * np.abs(lo), hi)
 
     def to_x(z):
         return np.where(logs, np.exp(z), z)
 
     def predict(x):
-        model = start.replace(**dict(zip(names, x[:-1])))
-        return x[-1] * _curve(model, t, kind, inlet)
+        model = start.replace(**dict(zip(names, x[:len(names)])))
+        return (x[-1] if free else scale) * _curve(model, t, kind, inlet)
 
     def resid(z):
         return predict(to_x(z)) - c
@@ -223,13 +251,13 @@ def _least_squares(start, names, t, c, kind, inlet, mom, notes) -> FitResult:
         zlo, zhi, z0 = (np.where(logs, np.log(v), v) for v in (lo, hi, x0))
     z0 = np.clip(z0, zlo, zhi)
     sol = optimize.least_squares(resid, z0, bounds=(zlo, zhi), method="trf",
-                                 x_scale="jac", xtol=1e-12, ftol=1e-12, gtol=1e-12)
+                                 x_scale="jac", xtol=1e-10, ftol=1e-10, gtol=1e-10)
     x = to_x(sol.x)
     fitted = predict(x)
-    r = fitted - c
     jac = _jacobian(predict, x, lo, hi)
-    return _result(start.replace(**dict(zip(names, x[:-1]))), names, x, jac, t, c, fitted, r,
-                   kind, sol, notes)
+    model = start.replace(**dict(zip(names, x[:len(names)])))
+    res = _result(model, names, x, jac, t, c, fitted, kind, sol, notes, scale)
+    return res if inlet is None else dataclasses.replace(res, inlet=np.asarray(inlet, float))
 
 
 def _scale0(model, t, c, kind, inlet) -> float:
@@ -251,21 +279,28 @@ def _jacobian(predict, x, lo, hi) -> np.ndarray:
     return np.column_stack(cols)
 
 
-def _result(model, names, x, jac, t, c, fitted, r, kind, sol, notes) -> FitResult:
+def _result(model, names, x, jac, t, c, fitted, kind, sol, notes, scale) -> FitResult:
+    """Statistics of eq. 9 at the estimate x (model parameters, then the scale if free)."""
+    r = fitted - c
     n, p = c.size, x.size
     ssr = float(r @ r)
     ser = math.sqrt(ssr / (n - p))
+    jtj = jac.T @ jac
     try:
-        cov = ser**2 * np.linalg.inv(jac.T @ jac)
+        cov = ser**2 * np.linalg.inv(jtj)
     except np.linalg.LinAlgError:
         cov = np.full((p, p), np.nan)
-        notes = notes + ["J^T J is singular: parameters not identifiable from these data"]
+    if not np.all(np.isfinite(cov)) or np.linalg.cond(jtj) > 1e14:
+        notes = notes + ["J^T J is (nearly) singular: some parameters are not identifiable "
+                         "from these data; standard errors are unreliable"]
     se = np.sqrt(np.abs(np.diag(cov)))
     with np.errstate(invalid="ignore", divide="ignore"):
         corr = cov / np.outer(se, se)
     sst = float(np.sum((c - c.mean())**2))
     ll = n * math.log(ssr / n) if ssr > 0 else -np.inf
-    return FitResult(model, tuple(names), x[:-1], se[:-1], corr, float(x[-1]), float(se[-1]),
+    k = len(names)
+    a, a_se = (float(x[-1]), float(se[-1])) if scale is None else (float(scale), 0.0)
+    return FitResult(model, tuple(names), x[:k], se[:k], corr, a, a_se,
                      ssr, ser, 1 - ssr / sst, ll + 2 * p, ll + p * math.log(n), n, p, t, c,
                      fitted, r, kind, bool(sol.success), str(sol.message), int(sol.nfev),
                      tuple(notes))

@@ -93,7 +93,7 @@ def check_tracer(t, c, kind: str = "pulse", column: str = "concentration",
                                                         if inlet is not None else ()):
         bad = np.flatnonzero(~np.isfinite(arr))
         if bad.size:
-            raise TracerError(f"column {name!r}: value {arr[bad[0]]!r} at data row {bad[0] + 1}; "
+            raise TracerError(f"column {name!r}: value {arr[bad[0]]} at data row {bad[0] + 1}; "
                               "expected finite numbers (remove or fill the row)", name)
     if t.size < 3:
         raise TracerError(f"only {t.size} data rows; expected at least 3", column)
@@ -102,8 +102,8 @@ def check_tracer(t, c, kind: str = "pulse", column: str = "concentration",
     if bad.size:
         i = int(bad[0])
         what = "repeated" if steps[i] == 0 else "decreasing (negative time step; unsorted rows?)"
-        raise TracerError(f"column {time_column!r}: time {t[i + 1]!r} at data row {i + 2} is "
-                          f"{what} after {t[i]!r}; expected strictly increasing times", time_column)
+        raise TracerError(f"column {time_column!r}: time {t[i + 1]:g} at data row {i + 2} is "
+                          f"{what} after {t[i]:g}; expected strictly increasing times", time_column)
     peak = float(np.max(np.abs(c)))
     if peak == 0.0:
         raise TracerError(f"column {column!r}: all values are zero; expected a tracer response",
@@ -113,7 +113,7 @@ def check_tracer(t, c, kind: str = "pulse", column: str = "concentration",
         bad = np.flatnonzero(c < -limit)
         if bad.size or np.max(c) <= 0:
             i = int(bad[0]) if bad.size else int(np.argmin(c))
-            raise TracerError(f"column {column!r}: value {c[i]!r} at data row {i + 1} is negative "
+            raise TracerError(f"column {column!r}: value {c[i]:.6g} at data row {i + 1} is negative "
                               f"beyond the noise (limit -{limit:.3g}); expected concentrations "
                               ">= 0 (subtract the right baseline?)", column)
     return t, c
@@ -145,8 +145,7 @@ def read_tracer_csv(path, kind: str | None = None) -> TracerCurve:
     if unit not in TIME_UNITS:
         raise TracerError(f"{path}: time unit {unit!r} in {tcol!r}; expected one of "
                           f"{sorted(TIME_UNITS)}", tcol)
-    ccol = "F" if (kind == "step" and "F" in df.columns) or (kind is None and "F" in df.columns) \
-        else "concentration"
+    ccol = "F" if "F" in df.columns and kind in (None, "step") else "concentration"
     if ccol not in df.columns:
         raise TracerError(f"{path}: no column 'concentration' (or 'F' for a step response) in "
                           f"{list(df.columns)}", "concentration")

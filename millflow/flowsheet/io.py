@@ -20,7 +20,7 @@ from millflow.breakage import AustinRate, NonNormalizedBreakage, NormalizedBreak
 from millflow.classifiers import CURVES
 from millflow.errors import GridError, InputError, MillflowError
 from millflow.flowsheet.graph import Flowsheet, Stream
-from millflow.flowsheet.units import (CLASSIFIER_PORTS, TRANSPORTS, UNIT_TYPES, Classifier, Feed, Mill, Mixer,
+from millflow.flowsheet.units import (TRANSPORTS, UNIT_TYPES, Classifier, Feed, Mill, Mixer,
                                       Product, Splitter)
 from millflow.grid import SizeGrid
 from millflow.psd import from_sieves
@@ -265,6 +265,49 @@ def _curve_params(t: _Table, curve: str, skip=()) -> dict:
 
 
 # --------------------------------------------------------------- units
+def _mill(name: str, t: _Table, materials: dict) -> Mill:
+    """A mill table: breakage from its material (or its own), transport, tau or hold-up."""
+    mat_name = t.plain("material", None, kind=str)
+    mat = {}
+    if mat_name is not None:
+        if mat_name not in materials:
+            raise InputError(f"units.{name}.material = {mat_name!r}: unknown material; defined: "
+                             f"{', '.join(materials) or 'none (add a [materials.NAME] table)'}")
+        mat = materials[mat_name]
+    rate = _rate(t.sub("rate")) if "rate" in t.data else mat.get("rate")
+    brk = _breakage(t.sub("breakage")) if "breakage" in t.data else mat.get("breakage")
+    if rate is None or brk is None:
+        missing = "rate" if rate is None else "breakage"
+        raise InputError(f"units.{name}: missing parameter {missing!r} (give it in the mill or in its material)")
+    tr = t.sub("transport", None)
+    model, tparams = "perfect_mixing", {}
+    if tr is not None:
+        model = tr.plain("model", kind=str)
+        if model not in TRANSPORTS:
+            raise InputError(f"{tr.where}.model = {model!r}: unknown transport model; valid: "
+                             f"{', '.join(sorted(TRANSPORTS))}")
+        for k in list(inspect.signature(TRANSPORTS[model]).parameters)[1:]:
+            tparams[k] = tr.plain(k, kind=float)
+            if tparams[k] <= 0:
+                raise InputError(f"{tr.where}.{k} = {tparams[k]!r}: expected > 0")
+        tr.finish(", ".join(["model"] + list(tparams)))
+    tau = t.quantity("tau", "time", None)
+    holdup = t.quantity("holdup", "mass", None)
+    if tau is None and holdup is None:
+        raise InputError(f"units.{name}: missing parameter tau_<unit> (time: {_suffixes('time')}) "
+                         f"or holdup_<unit> (mass: {_suffixes('mass')})")
+    power = t.quantity("power", "power", None, allow_zero=True)
+    cls = None
+    if "classification" in t.data:
+        ct = t.sub("classification")
+        curve = ct.plain("curve", kind=str)
+        cls = {"curve": curve, **_curve_params(ct, curve)}
+    t.finish("type, material, rate, breakage, transport, tau_min, holdup_t, power_kW, classification")
+    unit = _wrap(f"units.{name}", Mill, name, rate, brk, model, tparams, tau, holdup, cls, power)
+    _wrap(f"units.{name}", TRANSPORTS[model], tau or 1.0, **tparams)
+    return unit
+
+
 def _unit(name: str, t: _Table, grid: SizeGrid, materials: dict):
     utype = t.plain("type", kind=str)
     if utype not in UNIT_TYPES:
@@ -276,45 +319,7 @@ def _unit(name: str, t: _Table, grid: SizeGrid, materials: dict):
         t.finish("type, solids_tph, psd, material")
         return Feed(name, solids, psd)
     if utype == "mill":
-        mat_name = t.plain("material", None, kind=str)
-        mat = {}
-        if mat_name is not None:
-            if mat_name not in materials:
-                raise InputError(f"units.{name}.material = {mat_name!r}: unknown material; defined: "
-                                 f"{', '.join(materials) or 'none (add a [materials.NAME] table)'}")
-            mat = materials[mat_name]
-        rate = _rate(t.sub("rate")) if "rate" in t.data else mat.get("rate")
-        brk = _breakage(t.sub("breakage")) if "breakage" in t.data else mat.get("breakage")
-        if rate is None or brk is None:
-            missing = "rate" if rate is None else "breakage"
-            raise InputError(f"units.{name}: missing parameter {missing!r} (give it in the mill or in its material)")
-        tr = t.sub("transport", None)
-        model, tparams = "perfect_mixing", {}
-        if tr is not None:
-            model = tr.plain("model", kind=str)
-            if model not in TRANSPORTS:
-                raise InputError(f"{tr.where}.model = {model!r}: unknown transport model; valid: "
-                                 f"{', '.join(sorted(TRANSPORTS))}")
-            for k in list(inspect.signature(TRANSPORTS[model]).parameters)[1:]:
-                tparams[k] = tr.plain(k, kind=float)
-                if tparams[k] <= 0:
-                    raise InputError(f"{tr.where}.{k} = {tparams[k]!r}: expected > 0")
-            tr.finish(", ".join(["model"] + list(tparams)))
-        tau = t.quantity("tau", "time", None)
-        holdup = t.quantity("holdup", "mass", None)
-        if tau is None and holdup is None:
-            raise InputError(f"units.{name}: missing parameter tau_<unit> (time: {_suffixes('time')}) "
-                             f"or holdup_<unit> (mass: {_suffixes('mass')})")
-        power = t.quantity("power", "power", None, allow_zero=True)
-        cls = None
-        if "classification" in t.data:
-            ct = t.sub("classification")
-            curve = ct.plain("curve", kind=str)
-            cls = {"curve": curve, **_curve_params(ct, curve)}
-        t.finish("type, material, rate, breakage, transport, tau_min, holdup_t, power_kW, classification")
-        unit = _wrap(f"units.{name}", Mill, name, rate, brk, model, tparams, tau, holdup, cls, power)
-        _wrap(f"units.{name}", TRANSPORTS[model], tau or 1.0, **tparams)
-        return unit
+        return _mill(name, t, materials)
     if utype in ("hydrocyclone", "screen", "air_separator", "dynamic_classifier"):
         kind = "air_separator" if utype == "dynamic_classifier" else utype
         default = {"hydrocyclone": None, "screen": "screen", "air_separator": "tromp"}[kind]

@@ -106,8 +106,8 @@ def plot_flowsheet(sol, ax):
         if back and (x0, y0) == (x1, y1):
             x1, y1 = x1 + 0.01, y1 - 0.01
         ax.annotate("", xy=(x1, y1), xytext=(x0, y0),
-                    arrowprops=dict(arrowstyle="-|>", color="#a03030" if back else "#303030", shrinkA=22,
-                                    shrinkB=22, connectionstyle=f"arc3,rad={rad}"))
+                    arrowprops=dict(arrowstyle="-|>", color="#a03030" if back else "#303030", shrinkA=30,
+                                    shrinkB=30, connectionstyle=f"arc3,rad={rad}"))
         mx, my = (x0 + x1) / 2, (y0 + y1) / 2 + (0.9 if back else 0.25)
         ax.text(mx, my, f"{n}\n{tot[n]:.4g} t/h", ha="center", va="center", fontsize=7, color="#202020")
     xs = [p[0] for p in pos.values()]

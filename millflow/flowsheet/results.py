@@ -6,8 +6,8 @@ mass fractions and cumulative passing on the grid, P80, P50 and % passing named 
 (monotone PCHIP interpolation in log size, :mod:`millflow.psd`). Per unit: method,
 error estimate, run time and mass balance error |out - in| / in. Circulating load of a
 unit with several outlets inside a recycle loop (classifier or splitter): the flow of
-its outlets that return into the loop divided by the flow of those that leave it
-(U/O for a closed-circuit hydrocyclone). Specific energy of a mill [kWh/t] = power [kW] /
+its outlets that return into the loop divided by the flow of those that leave it; for a
+classifier whose coarse stream returns, coarse / fine (U/O of a closed-circuit cyclone). Specific energy of a mill [kWh/t] = power [kW] /
 mill throughput [t/h]; of the circuit = total mill power / total product rate.
 
 :func:`to_dataset` keeps SI units (attributes ``units`` and ``long_name`` on every
@@ -62,7 +62,11 @@ def stream_properties(sol) -> dict:
 
 
 def circulating_loads(sol) -> dict:
-    """Circulating load [-] of each multi-outlet unit in a recycle loop: returning / leaving flow."""
+    """Circulating load [-] of each multi-outlet unit in a recycle loop: returning / leaving flow.
+
+    For a classifier whose coarse outlet returns into its loop: coarse / fine (U/O), whatever
+    happens to the fine stream downstream.
+    """
     fs = sol.flowsheet
     lab = dict(zip(fs.units, fs.components()))
     tot = {n: math.fsum(sol.flows[k]) for k, n in enumerate(fs.stream_names)}
@@ -72,6 +76,8 @@ def circulating_loads(sol) -> dict:
         if len(outs) < 2:
             continue
         back = [s for s in outs if lab[fs.streams[s].target] == lab[uname]]
+        if unit.type == "classifier" and fs.outlet(uname, unit.ports[0]) in back:
+            back = [fs.outlet(uname, unit.ports[0])]  # classic U/O: coarse returns, fine is the product side
         if not back or len(back) == len(outs):
             continue
         leave = math.fsum(tot[s] for s in outs if s not in back)

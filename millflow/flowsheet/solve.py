@@ -12,9 +12,11 @@ diagonal block G_k per size class k: the gains of that size around the flowsheet
 
 Material of size k can never leave when I - G_k is singular (a recycle loop whose gain
 for that size is 1: e.g. a classifier returning all of a size the mill does not break).
-The solver checks the smallest singular value of every I - G_k before solving and names
-the streams and units of the loop (the support of the null vector) in a
-:class:`~millflow.errors.SolverError` instead of returning huge numbers.
+With natural ordering and no off-diagonal pivoting, the pivots of the sparse LU are
+those of the blocks I - G_k; a pivot below 1e-10 (or an exactly zero one) flags such a
+size, and the smallest singular value of each I - G_k then names the streams and units
+of the loop (the support of the null vector) in a :class:`~millflow.errors.SolverError`
+instead of returning huge numbers.
 
 Nonlinear units (a mill given by its hold-up, tau = holdup / throughput) are torn on
 their throughput: the linear system is solved for given throughputs, and the
@@ -154,23 +156,34 @@ def check_exits(fs, blocks) -> None:
 
 def _linear_solve(fs, blocks):
     t0 = time.perf_counter()
-    check_exits(fs, blocks)
     A, rhs = assemble(fs, blocks)
+    S, N = len(fs.streams), fs.grid.n
     try:
-        lu = spla.splu(A)
-    except RuntimeError as exc:  # exactly singular despite the check
+        # size-major order makes A block lower triangular with M-matrix diagonal blocks
+        # I - G_k: natural ordering without off-diagonal pivoting keeps the factors inside
+        # that pattern (no fill), is stable for M-matrices, and its pivots are those of
+        # the blocks, so a (nearly) zero pivot flags a size that cannot leave its loop
+        lu = spla.splu(A, permc_spec="NATURAL", diag_pivot_thresh=0.0)
+    except RuntimeError as exc:  # an exactly zero pivot
+        check_exits(fs, blocks)
         raise SolverError(f"flowsheet system is singular ({exc}); a recycle loop has no exit") from exc
+    pivots = np.abs(lu.U.diagonal())
+    if pivots.min() < SINGULAR_TOL:
+        check_exits(fs, blocks)  # names the loop; falls through only if the block check disagrees
+        k = int(np.argmin(pivots)) // S
+        raise SolverError(f"flowsheet system is singular at {fs.grid.label(k)} (pivot {pivots.min():.3g}); "
+                          "a recycle loop has no exit for this size")
     x = lu.solve(rhs)
     r = rhs - A @ x
     x = x + lu.solve(r)  # one step of iterative refinement
     resid = float(np.max(np.abs(rhs - A @ x)) / max(np.max(np.abs(rhs)), 1e-300))
     if not np.all(np.isfinite(x)):
         raise SolverError("flowsheet solution is not finite; check the recycle loops for an exit")
-    S, N = len(fs.streams), fs.grid.n
     flows = x.reshape(N, S).T.copy()
-    info = {"method": "sparse LU (scipy splu), size-major block lower-triangular system, 1 refinement step",
+    info = {"method": "sparse LU (scipy splu, natural size-major order: block forward substitution), "
+                      "1 refinement step",
             "n_unknowns": int(N * S), "nnz": int(A.nnz), "relative_residual": resid,
-            "runtime_s": time.perf_counter() - t0}
+            "min_pivot": float(pivots.min()), "runtime_s": time.perf_counter() - t0}
     return flows, info
 
 

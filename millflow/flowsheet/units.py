@@ -24,7 +24,6 @@ import numpy as np
 
 from millflow.classifiers import efficiency, mill_discharge_rates
 from millflow.errors import InputError, SolverError
-from millflow.linalg import solve_well_mixed
 
 __all__ = [
     "Feed", "Mill", "Classifier", "Mixer", "Splitter", "Product", "UNIT_TYPES", "TRANSPORTS",
@@ -49,32 +48,11 @@ TRANSPORTS = _transport_registry()
 
 
 # ------------------------------------------------------------------ mill transfer
-def _fallback_transfer_matrix(S, b, transport, d=None) -> np.ndarray:
-    """Transfer matrix of n equal well-mixed cells in series (eq. 3 per cell, d* in the last).
-
-    Used only while :func:`millflow.mill.transfer_matrix` is unavailable.
-    """
-    import rtd
-
-    if isinstance(transport, rtd.PerfectMixing):
-        n = 1
-    elif isinstance(transport, rtd.TanksInSeries) and float(transport.n).is_integer():
-        n = int(transport.n)
-    else:
-        raise InputError(f"transport {transport!r} needs millflow.mill.transfer_matrix, which is not available")
-    P = np.eye(len(S))
-    for k in range(n):
-        P = solve_well_mixed(S, b, P, transport.mean / n, d if k == n - 1 else None)
-    return P
-
-
 def mill_transfer_matrix(S, b, transport, d=None) -> tuple[np.ndarray, str]:
-    """P with product = P @ feed, from :func:`millflow.mill.transfer_matrix` (or the fallback)."""
-    try:
-        from millflow.mill import transfer_matrix
-    except ImportError:
-        return _fallback_transfer_matrix(S, b, transport, d), "well-mixed cells in series (flowsheet fallback)"
-    return transfer_matrix(S, b, transport, d), "millflow.mill.transfer_matrix"
+    """P with product = P @ feed (:func:`millflow.mill.transfer_matrix`) and the method used."""
+    from millflow.mill import transfer_matrix
+
+    return transfer_matrix(S, b, transport, d), f"millflow.mill.transfer_matrix({transport!r})"
 
 
 # ------------------------------------------------------------------------- units
@@ -185,7 +163,7 @@ class Mill:
             d = np.maximum(d, 1e-12)  # c = 1 in floating point: retained, leaves only as breakage products
         P, how = mill_transfer_matrix(S, b, TRANSPORTS[self.transport](tau, **self.transport_params), d)
         err = float(np.max(np.abs(P.sum(axis=0) - 1.0)))
-        info = {"method": f"transfer matrix, {self.transport} ({how})", "error_estimate": err,
+        info = {"method": how + ("" if d is None else ", discharge classification d*"), "error_estimate": err,
                 "runtime_s": time.perf_counter() - t0, "tau_s": tau}
         return {"out": P}, info
 

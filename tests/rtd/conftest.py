@@ -1,37 +1,36 @@
-"""Shared helpers for the rtd tests: adaptive quadrature of a density times a weight."""
+"""Shared helpers for the rtd tests: quadrature of a density times a weight.
+
+Composite Gauss-Legendre (20 nodes per panel) on panels that are uniform over the body
+of the distribution (0 to mean + 12 sd, 250 panels: >= 3 per standard deviation even for
+Pe = 1e4), geometric towards t = 0 (boundary layers of small Pe) and geometric beyond
+the body out to mean + 80 sd + 50 mean (tails of heavy-tailed models). All nodes go to
+the model in one vectorised call. Checked against scipy's adaptive quad to ~1e-14.
+"""
 import math
 
 import numpy as np
-import pytest
-from scipy import integrate
+
+_X, _W = np.polynomial.legendre.leggauss(20)
 
 
-def integrate_density(model, weight=lambda t: 1.0, complex_weight=False):
-    """int_0^inf E(t) weight(t) dt plus the atom at t = 0, split around the peak.
-
-    quad on [0, inf) misses narrow peaks (Pe = 1e4: width 1.4 % of tau), so the range is
-    cut at mean -/+ 12 sd and at a far point where the tail is resolved separately.
-    """
+def _nodes(model, breaks=()):
     mean, sd = model.mean, math.sqrt(model.variance)
-    edges = sorted({0.0, max(mean - 12 * sd, 0.0), mean - 3 * sd if mean > 3 * sd else 0.0,
-                    mean, mean + 3 * sd, mean + 12 * sd})
-    edges = [e for e in edges if e >= 0]
-
-    def part(fun):
-        total = 0.0
-        for a, b in zip(edges[:-1], edges[1:]):
-            total += integrate.quad(fun, a, b, epsabs=1e-14, epsrel=1e-13, limit=400)[0]
-        total += integrate.quad(fun, edges[-1], np.inf, epsabs=1e-15, epsrel=1e-13, limit=400)[0]
-        return total
-
-    atom = model.atom_at_zero * weight(0.0)
-    if complex_weight:
-        re = part(lambda t: float(model.pdf(t)) * np.real(weight(t)))
-        im = part(lambda t: float(model.pdf(t)) * np.imag(weight(t)))
-        return re + 1j * im + atom
-    return part(lambda t: float(model.pdf(t)) * weight(t)) + atom
+    body = mean + 12 * sd
+    far = mean + 80 * sd + 50 * mean
+    edges = np.unique(np.concatenate([
+        [0.0], np.geomspace(body * 1e-8, body, 60), np.linspace(0, body, 251),
+        np.geomspace(body, far, 120), np.asarray(breaks, float)]))
+    a, b = edges[:-1, None], edges[1:, None]
+    t = 0.5 * (a + b) + 0.5 * (b - a) * _X[None, :]
+    w = 0.5 * (b - a) * _W[None, :]
+    return t.ravel(), w.ravel()
 
 
-@pytest.fixture
-def quad_density():
-    return integrate_density
+def integrate_density(model, weight=lambda t: np.ones_like(t), complex_weight=False, breaks=()):
+    """int_0^inf E(t) weight(t) dt plus the atom at t = 0 times weight(0)."""
+    if hasattr(model, "parts"):  # plug-flow delays in compositions are kinks of E
+        breaks = tuple(breaks) + (sum(getattr(p, "tau", 0.0) for p in model.parts
+                                      if type(p).__name__ == "PlugFlow"),)
+    t, w = _nodes(model, breaks)
+    total = np.sum(w * model.pdf(t) * weight(t)) + model.atom_at_zero * weight(np.zeros(1))[0]
+    return complex(total) if complex_weight else float(np.real(total))

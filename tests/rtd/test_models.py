@@ -12,7 +12,7 @@ import pytest
 from scipy import integrate
 
 import rtd
-from conftest import integrate_density
+from .conftest import integrate_density
 
 PES = [0.01, 0.1, 1.0, 10.0, 16.0, 30.0, 100.0, 1e3, 1e4]
 
@@ -47,7 +47,7 @@ def test_mean_and_variance_match_closed_forms(model):
 @pytest.mark.parametrize("model", CASES, ids=IDS)
 def test_laplace_matches_quadrature(model):
     for s in (0.3 / model.mean, 2.0 / model.mean):
-        ref = integrate_density(model, lambda t: math.exp(-s * t))
+        ref = integrate_density(model, lambda t: np.exp(-s * t))
         assert abs(model.laplace(s) - ref) < 1e-10
     s = (0.5 + 1.0j) / model.mean
     ref = integrate_density(model, lambda t: np.exp(-s * t), complex_weight=True)

@@ -1,0 +1,124 @@
+"""``millflow bench SUITE [--json] [--quick] [--make-references]``: run a benchmark suite.
+
+Suites are the modules of :mod:`millflow.bench` (found by listing the package, so a
+new suite is a new module); each exposes ``DESCRIPTION`` and
+``run(quick=False) -> list[dict]`` and optionally ``format_table(rows)`` and
+``make_references()`` (docs/CONTRACTS.md, "Benchmarks"; docs/benchmarks.md).
+
+Timings are single-threaded BLAS. The thread count of OpenBLAS/MKL/OpenMP is read from
+the environment once, when numpy is first imported, and ``millflow`` imports numpy
+before any sub-command runs; setting the variables here would change nothing. So when
+``OPENBLAS_NUM_THREADS``, ``OMP_NUM_THREADS`` and ``MKL_NUM_THREADS`` are not all 1,
+``millflow bench`` started from the command line re-runs itself once in a child
+process (``python -m millflow bench ...``) with them set to 1 and returns the child's
+exit code. Called in-process (``millflow.cli.main([...])``, e.g. from a test) it
+cannot do that: it runs anyway, says so on stderr and marks every row
+``"blas_threads": "default"``. Set the variables before starting Python to avoid both.
+"""
+from __future__ import annotations
+
+import importlib
+import json
+import math
+import os
+import pkgutil
+import subprocess
+import sys
+
+from millflow.errors import InputError
+
+THREAD_VARS = ("OPENBLAS_NUM_THREADS", "OMP_NUM_THREADS", "MKL_NUM_THREADS")
+_NO_REEXEC = "MILLFLOW_BENCH_REEXEC"
+
+
+def suite_names() -> list[str]:
+    """Names of the benchmark suites: the modules of millflow.bench."""
+    import millflow.bench as bench
+
+    return sorted(m.name for m in pkgutil.iter_modules(bench.__path__) if not m.name.startswith("_"))
+
+
+def load_suite(name: str):
+    """Import suite ``name``; an unknown name raises InputError listing the valid ones."""
+    names = suite_names()
+    if name not in names:
+        raise InputError(f"benchmark suite {name!r} is unknown; expected one of: {', '.join(names)}")
+    return importlib.import_module(f"millflow.bench.{name}")
+
+
+def add_parser(subparsers) -> None:
+    p = subparsers.add_parser(
+        "bench",
+        help="run a benchmark suite (work-precision tables, timings)",
+        description="Run a benchmark suite of millflow.bench and print its table "
+                    f"(suites: {', '.join(suite_names())}). Timings use single-threaded BLAS.",
+    )
+    p.add_argument("suite", help="suite name, e.g. core")
+    p.add_argument("--json", action="store_true", help="print the rows as a JSON array instead of a table")
+    p.add_argument("--quick", action="store_true", help="fewer sizes and repeats (a few seconds)")
+    p.add_argument("--make-references", action="store_true",
+                   help="(re)make the suite's cached high-precision references first (slow)")
+    p.set_defaults(func=run_command)
+
+
+def _single_threaded() -> bool:
+    return all(os.environ.get(v) == "1" for v in THREAD_VARS)
+
+
+def _rerun_single_threaded() -> int | None:
+    """Re-run this command line in a child with single-threaded BLAS; None if not possible."""
+    if os.environ.get(_NO_REEXEC) == "0" or sys.argv[1:2] != ["bench"]:
+        return None  # not our own command line (in-process call), or already the child
+    env = dict(os.environ, **{v: "1" for v in THREAD_VARS}, **{_NO_REEXEC: "0"})
+    sys.stdout.flush()
+    return subprocess.run([sys.executable, "-m", "millflow", *sys.argv[1:]], env=env).returncode
+
+
+def _jsonable(value):
+    """Plain JSON values: numpy scalars and arrays unwrapped, non-finite floats as null."""
+    if isinstance(value, dict):
+        return {str(k): _jsonable(v) for k, v in value.items()}
+    if isinstance(value, (list, tuple)):
+        return [_jsonable(v) for v in value]
+    if hasattr(value, "tolist"):  # numpy scalar or array
+        return _jsonable(value.tolist())
+    if isinstance(value, float) and not math.isfinite(value):
+        return None
+    return value
+
+
+def _generic_table(rows: list[dict]) -> str:
+    keys = ["case", "method", "runtime_s", "max_abs_error", "mass_balance_error", "ratio_vs_baseline"]
+    out = ["  ".join(f"{k:>18}" for k in keys)]
+    for r in rows:
+        cells = [r.get(k) for k in keys]
+        out.append("  ".join(f"{c:>18.6g}" if isinstance(c, float) else f"{str(c):>18}" for c in cells))
+    return "\n".join(out)
+
+
+def run_command(args) -> int:
+    suite = load_suite(args.suite)
+    threads = "1"
+    if not _single_threaded():
+        code = _rerun_single_threaded()
+        if code is not None:
+            return code
+        threads = "default"
+        print("millflow bench: BLAS threads not limited (set OPENBLAS_NUM_THREADS=1 OMP_NUM_THREADS=1 "
+              "MKL_NUM_THREADS=1 before starting Python); timings may differ", file=sys.stderr)
+    if args.make_references:
+        maker = getattr(suite, "make_references", None)
+        if maker is None:
+            raise InputError(f"benchmark suite {args.suite!r} has no references to make")
+        maker()
+    rows = suite.run(quick=args.quick)
+    for row in rows:
+        row.setdefault("suite", args.suite)
+        row["blas_threads"] = threads
+    if args.json:
+        print(json.dumps(_jsonable(rows), indent=1, allow_nan=False))
+    else:
+        fmt = getattr(suite, "format_table", _generic_table)
+        print(f"millflow bench {args.suite}: {suite.DESCRIPTION}" + (" (quick)" if args.quick else ""))
+        print(fmt(rows))
+    return 0

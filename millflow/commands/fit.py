@@ -1,0 +1,69 @@
+"""``millflow fit CONFIG.toml [--json]``: estimate breakage parameters from PSD data.
+
+Reads the TOML config (:mod:`millflow.fitting.config`), runs the global fit, ranks
+candidate forms if any, predicts held-out conditions, writes the parameter table,
+summary and plots into the output folder, and prints a summary (or, with --json, one
+JSON object). Progress goes to stderr.
+"""
+from __future__ import annotations
+
+import json
+import sys
+
+
+def add_parser(subparsers) -> None:
+    p = subparsers.add_parser("fit", help="fit breakage (and classification) parameters to PSD data",
+                              description=__doc__.splitlines()[0])
+    p.add_argument("config", help="TOML configuration (see docs/fitting.md)")
+    p.add_argument("--json", action="store_true", help="print one JSON object instead of the text summary")
+    p.add_argument("--data-dir", default=None, help="SPRITE data folder (overrides data.sprite_folder)")
+    p.add_argument("--no-plots", action="store_true", help="do not write plots")
+    p.add_argument("--quiet", action="store_true", help="no progress messages")
+    p.set_defaults(func=run)
+
+
+def run(args) -> int:
+    from millflow.fitting.config import load_config
+    from millflow.fitting.estimate import compare_models, fit
+    from millflow.fitting.models import ForwardModel
+    from millflow.fitting.report import write_report
+    from millflow.fitting.validate import leave_out
+
+    say = (lambda msg: None) if args.quiet else (lambda msg: print(f"[fit] {msg}", file=sys.stderr, flush=True))
+    cfg = load_config(args.config, data_dir=args.data_dir)
+    model = ForwardModel(cfg.spec, cfg.data, cfg.grid)
+    say(f"{model}")
+    result = fit(model, cfg.params, progress=say, **cfg.optimizer)
+    out = result.to_dict()
+    if cfg.candidates:
+        models = {cfg.label: model}
+        params = {cfg.label: cfg.params}
+        for label, spec, par in cfg.candidates:
+            models[label] = ForwardModel(spec, cfg.data, model.grid)
+            params[label] = par
+        say(f"ranking {len(models)} candidate models")
+        cmp = compare_models(models, params, **cfg.optimizer)
+        out["discrimination"] = {"table": cmp["table"], "f_tests": cmp["f_tests"]}
+    prediction = None
+    if cfg.hold_out:
+        say("predictive validation")
+        prediction = leave_out(model, cfg.params, cfg.hold_out, progress=say, **cfg.optimizer)
+        out["prediction"] = {c: {"rmse": v} for c, v in prediction["rmse"].items()}
+        out["prediction_mean_rmse"] = prediction["mean_rmse"]
+    files = write_report(result, cfg.out_dir, prediction, plots=cfg.plots and not args.no_plots)
+    out["files"] = files
+    if args.json:
+        print(json.dumps(out, default=float))
+    else:
+        print(result.summary())
+        if "discrimination" in out:
+            print("model ranking (AIC):")
+            for row in out["discrimination"]["table"]:
+                print(f"  {row['model']:<50} SSR {row['ssr']:.5g}  p {row['n_params']}  AIC {row['aic']:.2f}  "
+                      f"BIC {row['bic']:.2f}  dAIC {row['delta_aic']:.2f}")
+            for t in out["discrimination"]["f_tests"]:
+                print(f"  F test {t['small']} -> {t['big']}: F {t['F']:.3g}, p {t['p_value']:.3g}")
+        if prediction:
+            print(f"prediction mean RMSE {prediction['mean_rmse']:.4f} over {len(prediction['rmse'])} held-out conditions")
+        print("wrote " + ", ".join(files))
+    return 0

@@ -1,0 +1,87 @@
+"""`millflow run FILE.toml [--out DIR] [--json] [--no-plots]`: solve a flowsheet file.
+
+Prints a compact table (stream, t/h, P80, P50, % passing the named sizes), the
+circulating loads, mass balance, specific energy and run time, and writes results.nc,
+CSV tables, summary.json and PNG plots to the output folder (default
+``<file stem>-results/`` in the current directory). With ``--json`` one JSON object
+(the summary) is printed instead of the table.
+"""
+from __future__ import annotations
+
+import json
+import math
+from pathlib import Path
+
+
+def add_parser(subparsers) -> None:
+    p = subparsers.add_parser("run", help="solve a flowsheet file (TOML) and write its results",
+                              description=__doc__.split("\n\n")[1] if __doc__ else None)
+    p.add_argument("file", help="flowsheet file (TOML), e.g. flowsheets/closed_circuit_ball_mill.toml")
+    p.add_argument("--out", default=None, help="output folder (default: <file stem>-results)")
+    p.add_argument("--json", action="store_true", help="print one JSON object instead of the table")
+    p.add_argument("--no-plots", action="store_true", help="do not write the PNG plots")
+    p.add_argument("--method", default="wegstein", help="tear method for nonlinear units (wegstein, newton, "
+                                                        "substitution)")
+    p.set_defaults(func=run)
+
+
+def _f(v, fmt="{:.4g}") -> str:
+    return "-" if v is None or (isinstance(v, float) and not math.isfinite(v)) else fmt.format(v)
+
+
+def format_summary(s: dict, out_dir: str | None) -> str:
+    """The terminal summary as text."""
+    streams = s["streams"]
+    sizes = list(next(iter(streams.values()))["passing_pct"]) if streams else []
+    head = ["stream", "from -> to", "t/h", "P80 um", "P50 um"] + [f"%-{x}um" for x in sizes]
+    rows = []
+    for name, st in streams.items():
+        rows.append([name, f"{st['from']} -> {st['to']}", _f(st["solids_tph"], "{:.1f}"), _f(st["p80_um"], "{:.0f}"),
+                     _f(st["p50_um"], "{:.0f}")] + [_f(st["passing_pct"][x], "{:.1f}") for x in sizes])
+    width = [max(len(str(r[k])) for r in [head] + rows) for k in range(len(head))]
+    lines = [s["title"] or s["source_file"], ""]
+    for r in [head] + rows:
+        lines.append("  ".join(str(c).ljust(w) if k < 2 else str(c).rjust(w) for k, (c, w) in enumerate(zip(r, width))))
+        if r is head:
+            lines.append("  ".join("-" * w for w in width))
+    lines.append("")
+    cl = s["circulating_load"]
+    if cl:
+        lines.append("circulating load: " + ", ".join(f"{u} {100 * v:.1f} %" for u, v in cl.items()))
+    for u, r in s["units"].items():
+        if r.get("specific_energy_kWh_per_t") is not None:
+            lines.append(f"{u}: {r['power_kW']:.4g} kW, {r['specific_energy_kWh_per_t']:.3g} kWh/t of mill feed")
+    if s["specific_energy_kWh_per_t"] is not None:
+        lines.append(f"circuit specific energy: {s['specific_energy_kWh_per_t']:.3g} kWh/t of product")
+    worst = max(s["unit_mass_balance_error"].values())
+    lines.append(f"mass balance error: overall {_f(s['mass_balance_error'], '{:.1e}')}, worst unit {worst:.1e}")
+    tear = s["solver"].get("tear")
+    how = s["solver"]["structure"]
+    if tear:
+        how += f" ({tear['method']}, {tear['iterations']} iterations, last change {tear['residual_history'][-1]:.1e})"
+    lines.append(f"solved in {1e3 * s['runtime_s']:.1f} ms: {how}")
+    if out_dir:
+        lines.append(f"results written to {out_dir}/ (results.nc, streams.csv, units.csv, psd.csv, summary.json, "
+                     "psd.png, classifiers.png, flowsheet.png)")
+    return "\n".join(lines)
+
+
+def run(args) -> int:
+    from millflow.flowsheet import load, save, solve, summary
+
+    path = Path(args.file)
+    fs = load(path)
+    sol = solve(fs, method=args.method)
+    out = Path(args.out) if args.out else Path.cwd() / f"{path.stem}-results"
+    save(sol, out, plots=not args.no_plots)
+    s = summary(sol)
+    s["output_dir"] = str(out)
+    if args.json:
+        print(json.dumps(s))
+    else:
+        try:
+            shown = str(out.relative_to(Path.cwd()))
+        except ValueError:
+            shown = str(out)
+        print(format_summary(s, shown))
+    return 0

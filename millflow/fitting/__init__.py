@@ -1,0 +1,1 @@
+"""Parameter estimation for population-balance models of milling (issue 6)."""

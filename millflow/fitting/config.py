@@ -1,0 +1,124 @@
+"""TOML configuration of ``millflow fit`` (see docs/fitting.md for a full example).
+
+Tables and keys (paths relative to the config file)::
+
+    [data]        psd = "psd.csv", process = "process.csv"   # long tables
+                  sprite_folder = "..."                      # or the SPRITE knife-mill folder
+    [grid]        ratio = 1.0905, top_mm = 32, bottom_mm = 0.05   # optional (auto otherwise)
+    [model]       mode, rate, breakage, classification, rate_process = [...],
+                  screen_column, tau_column, x0_mm, objective
+    [params.NAME] value, min, max, vary
+    [optimizer]   global = true, starts = 20, popsize = 15, maxiter = 200, seed = 0
+    [validation]  hold_out = "each" | ["cond", ...] | [["a", "b"], ...]
+    [output]      dir = "fit_output", plots = true
+    [[candidates]] label = "...", plus any [model] keys: extra forms to rank (AIC/BIC, F)
+"""
+from __future__ import annotations
+
+import math
+import os
+import tomllib
+from dataclasses import dataclass, field
+
+from millflow.errors import InputError
+from millflow.fitting.data import PSDData, read_psd_table, read_sprite_folder
+from millflow.fitting.models import ModelSpec, default_parameters
+from millflow.grid import SizeGrid
+
+__all__ = ["FitConfig", "load_config"]
+
+_TABLES = {"data", "grid", "model", "params", "optimizer", "validation", "output", "candidates"}
+_MODEL_KEYS = {"mode", "rate", "breakage", "classification", "rate_process", "screen_column", "tau_column",
+               "x0_mm", "objective", "label"}
+_OPT_KEYS = {"global", "starts", "popsize", "maxiter", "seed"}
+
+
+@dataclass
+class FitConfig:
+    path: str
+    data: PSDData
+    spec: ModelSpec
+    params: dict
+    grid: SizeGrid | None
+    optimizer: dict
+    hold_out: object = None
+    out_dir: str = "fit_output"
+    plots: bool = True
+    candidates: list = field(default_factory=list)   # [(label, ModelSpec, params)]
+    label: str = "model"
+
+
+def _spec(table: dict, where: str) -> tuple[str, ModelSpec]:
+    unknown = set(table) - _MODEL_KEYS
+    if unknown:
+        raise InputError(f"{where}: unknown keys {sorted(unknown)}; expected some of {sorted(_MODEL_KEYS)}")
+    kw = {k: table[k] for k in ("mode", "rate", "breakage", "screen_column", "tau_column", "objective") if k in table}
+    if "classification" in table:
+        c = table["classification"]
+        kw["classification"] = None if c in ("none", "", None) else c
+    if "rate_process" in table:
+        kw["rate_process"] = tuple(table["rate_process"])
+    if "x0_mm" in table:
+        kw["x0_m"] = float(table["x0_mm"]) * 1e-3
+    try:
+        spec = ModelSpec(**kw)
+    except TypeError as exc:
+        raise InputError(f"{where}: {exc}") from exc
+    return str(table.get("label", spec.label())), spec
+
+
+def load_config(path, data_dir: str | None = None) -> FitConfig:
+    """Read and check a fit configuration; ``data_dir`` overrides ``data.sprite_folder``."""
+    path = os.fspath(path)
+    if not os.path.isfile(path):
+        raise InputError(f"{path}: config file not found")
+    try:
+        with open(path, "rb") as fh:
+            cfg = tomllib.load(fh)
+    except tomllib.TOMLDecodeError as exc:
+        raise InputError(f"{path}: not valid TOML ({exc})") from exc
+    unknown = set(cfg) - _TABLES
+    if unknown:
+        raise InputError(f"{path}: unknown tables {sorted(unknown)}; expected some of {sorted(_TABLES)}")
+    base = os.path.dirname(os.path.abspath(path))
+    rel = lambda p: p if os.path.isabs(p) else os.path.normpath(os.path.join(base, p))  # noqa: E731
+    d = cfg.get("data", {})
+    if data_dir is not None:
+        data = read_sprite_folder(data_dir)
+    elif "sprite_folder" in d:
+        data = read_sprite_folder(rel(d["sprite_folder"]))
+    elif "psd" in d:
+        data = read_psd_table(rel(d["psd"]), rel(d["process"]) if "process" in d else None)
+    else:
+        raise InputError(f"{path}: [data] needs 'psd' (and 'process') or 'sprite_folder'")
+    label, spec = _spec(cfg.get("model", {}), f"{path} [model]")
+    params = default_parameters(spec, cfg.get("params", {}))
+    g = cfg.get("grid", {})
+    grid = None
+    if g:
+        ratio = float(g.get("ratio", 2 ** 0.25))
+        sizes = data.table.size_m[data.table.size_m > 0]
+        top = float(g["top_mm"]) * 1e-3 if "top_mm" in g else float(sizes.max()) * 1.0001
+        bottom = float(g["bottom_mm"]) * 1e-3 if "bottom_mm" in g else float(sizes.min()) / 2
+        grid = SizeGrid.between(top, bottom, ratio)
+    opt = dict(cfg.get("optimizer", {}))
+    unknown = set(opt) - _OPT_KEYS
+    if unknown:
+        raise InputError(f"{path} [optimizer]: unknown keys {sorted(unknown)}; expected some of {sorted(_OPT_KEYS)}")
+    opt = {"global_search": bool(opt.get("global", True)), "starts": int(opt.get("starts", 20)),
+           "popsize": int(opt.get("popsize", 15)), "maxiter": int(opt.get("maxiter", 200)),
+           "seed": int(opt.get("seed", 0))}
+    val = cfg.get("validation", {})
+    out = cfg.get("output", {})
+    cands = []
+    for k, c in enumerate(cfg.get("candidates", [])):
+        c = dict(c)
+        cp = c.pop("params", {})
+        lab, sp = _spec(c, f"{path} [[candidates]] #{k + 1}")
+        cands.append((lab, sp, default_parameters(sp, cp)))
+    return FitConfig(path, data, spec, params, grid, opt, val.get("hold_out"),
+                     rel(out.get("dir", "fit_output")), bool(out.get("plots", True)), cands, label)
+
+
+def is_finite_number(v) -> bool:
+    return isinstance(v, (int, float)) and math.isfinite(v)

@@ -1,0 +1,355 @@
+"""Global least-squares estimation (Principle V): checks, global search, multi-start, polish.
+
+:func:`fit` minimises SSR = sum w (model - data)^2 over the varying parameters:
+
+1. *Checks before any optimisation*: more data than varying parameters, data not
+   all zero, and a finite model at the lower and upper bounds, the box centre and
+   up to 64 corners of the box (:class:`~millflow.errors.InputError` otherwise).
+2. *Global search*: scipy's ``differential_evolution`` with the whole population
+   evaluated in one vectorised model call (``vectorized=True``).
+3. *Multi-start local least squares*: scipy's ``least_squares`` (trust-region
+   reflective, bounds) from the DE optimum and from scrambled-Sobol space-filling
+   starts; Jacobians by central differences, all perturbations in one model call.
+4. *Polish* the best solution with tight tolerances.
+
+The best solutions of the different starts are kept: ``spread`` is the largest
+relative difference, over parameters, between the best solution and any other start
+that reaches the same SSR (within 1 %). A large spread at equal SSR means the data
+do not determine the parameters (non-uniqueness); starts stuck at higher SSR are
+local minima, shown in ``solutions``. Statistics follow eq. 9 (:mod:`.statistics`),
+and the SSR is re-evaluated on a grid refined once more (Principle IV).
+"""
+from __future__ import annotations
+
+import itertools
+import math
+import time
+import warnings
+from dataclasses import dataclass, field
+
+import numpy as np
+from scipy.optimize import differential_evolution, least_squares
+from scipy.stats import qmc
+
+from millflow.errors import InputError, MillflowError
+from millflow.fitting.models import ForwardModel, Parameter, default_parameters
+from millflow.fitting.statistics import information_criteria, jacobian, parameter_statistics
+
+__all__ = ["FitResult", "fit", "compare_models", "SAME_SSR_RTOL"]
+
+#: Starts whose SSR is within this relative tolerance of the best count as equally good.
+SAME_SSR_RTOL = 1e-2
+
+
+@dataclass
+class FitResult:
+    """Outcome of :func:`fit`, lmfit-like: parameters with statistics and diagnostics."""
+
+    model: ForwardModel
+    params: dict            # name -> Parameter at the estimate (fixed ones included)
+    stats: dict             # eq. 9 statistics of the varying parameters
+    ssr: float
+    n_data: int
+    n_params: int
+    starts: int
+    spread: float
+    solutions: list         # [(ssr, {name: value}), ...] best first, one per start
+    nfev: int
+    runtime_s: float
+    grid_check: dict = field(default_factory=dict)
+    message: str = ""
+
+    @property
+    def ser(self) -> float:
+        return self.stats["ser"]
+
+    @property
+    def theta(self) -> np.ndarray:
+        return np.array([self.params[n].value for n in self.model.param_names])
+
+    @property
+    def criteria(self) -> dict:
+        return information_criteria(self.ssr, self.n_data, self.n_params)
+
+    def predicted(self) -> np.ndarray:
+        return self.model.predict(self.theta)
+
+    def rmse_by_condition(self, model: ForwardModel | None = None) -> dict:
+        """RMSE of cumulative passing per condition at every measured row (unweighted)."""
+        m = model or self.model
+        r = m.predict_cum(self.theta) - m.y_cum
+        return {c: float(np.sqrt(np.mean(r[m.condition_of_value == c] ** 2))) for c in m.conditions}
+
+    def to_dict(self) -> dict:
+        out = {"model": self.model.spec.label(), "params": {}, "fixed": {}}
+        for name, par in self.params.items():
+            if name in self.stats["params"]:
+                s = self.stats["params"][name]
+                out["params"][name] = {k: _jsonable(s[k]) for k in
+                                       ("value", "se", "t", "p_value", "ci95", "significant", "reasons")}
+            else:
+                out["fixed"][name] = par.value
+        out.update({
+            "ssr": self.ssr, "ser": _jsonable(self.ser), "n_data": self.n_data, "n_params": self.n_params,
+            "starts": self.starts, "spread": _jsonable(self.spread),
+            "condition_number": _jsonable(self.stats["condition_number"]),
+            "correlated_pairs": [list(p) for p in self.stats["correlated_pairs"]],
+            "correlation": {"names": list(self.stats["params"]),
+                            "matrix": _jsonable(np.round(self.stats["correlation"], 4).tolist())},
+            "criteria": {k: _jsonable(v) for k, v in self.criteria.items()},
+            "grid_check": {k: _jsonable(v) for k, v in self.grid_check.items()},
+            "solutions": [{"ssr": s, "params": p} for s, p in self.solutions[:10]],
+            "rmse_by_condition": self.rmse_by_condition(),
+            "nfev": self.nfev, "runtime_s": self.runtime_s,
+        })
+        return out
+
+    def summary(self) -> str:
+        lines = [f"model: {self.model.spec.label()}",
+                 f"n_data {self.n_data}, n_params {self.n_params}, SSR {self.ssr:.6g}, SER {self.ser:.4g}, "
+                 f"starts {self.starts}, spread {self.spread:.3g}, condition number {self.stats['condition_number']:.3g}",
+                 f"{'parameter':<16}{'value':>12}{'SEP':>11}{'p':>10}   95% interval          flags"]
+        for name, s in self.stats["params"].items():
+            lo, hi = s["ci95"]
+            flag = "; ".join(s["reasons"]) if s["reasons"] else "ok"
+            lines.append(f"{name:<16}{s['value']:>12.5g}{s['se']:>11.3g}{s['p_value']:>10.2g}   "
+                         f"[{lo:.4g}, {hi:.4g}]  {flag}")
+        for name, par in self.params.items():
+            if name not in self.stats["params"]:
+                lines.append(f"{name:<16}{par.value:>12.5g}   (fixed)")
+        for a, b, c in self.stats["correlated_pairs"]:
+            lines.append(f"correlation {a} / {b} = {c:+.3f} (> 0.95: not separately identifiable)")
+        if self.grid_check:
+            g = self.grid_check
+            if "skipped" in g:
+                lines.append(f"grid check skipped: {g['skipped']}")
+            else:
+                lines.append(f"grid check: SSR {g['ssr']:.6g} on {g['n']} classes; on {g['n_refined']} classes "
+                             f"{g['ssr_refined']:.6g} at the same parameters (change {g['relative_change']:.2e}), "
+                             f"{g['ssr_refit']:.6g} re-fitted (change {g['relative_change_refit']:.2e}, largest "
+                             f"parameter shift {g['max_param_shift_in_se']:.2g} SEP)")
+        return "\n".join(lines)
+
+
+def _jsonable(v):
+    if isinstance(v, (list, tuple)):
+        return [_jsonable(x) for x in v]
+    if isinstance(v, (float, np.floating)):
+        v = float(v)
+        return v if math.isfinite(v) else None
+    if isinstance(v, np.integer):
+        return int(v)
+    return v
+
+
+class _Problem:
+    """The varying parameters of a model as one vector, with vectorised residuals."""
+
+    def __init__(self, model: ForwardModel, params: dict):
+        self.model = model
+        names = model.param_names
+        missing = [n for n in names if n not in params]
+        if missing:
+            raise InputError(f"parameters {missing} have no value; expected all of {list(names)}")
+        self.full = np.array([params[n].value for n in names], float)
+        self.idx = np.array([k for k, n in enumerate(names) if params[n].vary], dtype=int)
+        self.names = [names[k] for k in self.idx]
+        self.lower = np.array([params[n].min for n in self.names], float)
+        self.upper = np.array([params[n].max for n in self.names], float)
+        self.sw = np.sqrt(model.weights)
+        self.nfev = 0
+
+    def expand(self, z):
+        z = np.atleast_2d(z)
+        th = np.tile(self.full, (z.shape[0], 1))
+        th[:, self.idx] = z
+        return th
+
+    def resid_pop(self, z):
+        self.nfev += np.atleast_2d(z).shape[0]
+        return (self.model.predict(self.expand(z)) - self.model.y) * self.sw
+
+    def resid(self, z):
+        return self.resid_pop(z)[0]
+
+    def ssr_pop(self, zT):  # differential_evolution's vectorised call: (p, S) -> (S,)
+        r = self.resid_pop(np.asarray(zT).T)
+        out = np.einsum("ij,ij->i", r, r)
+        return np.where(np.isfinite(out), out, 1e300)
+
+    def jac(self, z):
+        return jacobian(self.resid_pop, z, self.lower, self.upper)
+
+
+def check_problem(model: ForwardModel, params: dict) -> _Problem:
+    """The checks made before any optimisation (see module docstring)."""
+    prob = _Problem(model, params)
+    p, n = prob.idx.size, model.n_data
+    if p == 0:
+        raise InputError("no parameter varies; set vary = true for at least one")
+    if p >= n:
+        raise InputError(f"{p} varying parameters but only {n} measured values: need more data than parameters")
+    if np.all(model.y == 0):
+        raise InputError(f"{model.data.source}: every measured value is zero; there is nothing to fit")
+    if not np.any(model.weights > 0):
+        raise InputError("every weight is zero; there is nothing to fit")
+    lo, hi = prob.lower, prob.upper
+    pts = [lo, hi, 0.5 * (lo + hi)]
+    corners = list(itertools.product([0, 1], repeat=p)) if p <= 6 else \
+        np.random.default_rng(0).integers(0, 2, size=(64, p)).tolist()
+    for c in corners:
+        pts.append(np.where(np.array(c) == 1, hi, lo))
+    pts = np.array(pts)
+    try:
+        R = prob.resid_pop(pts)
+        bad = ~np.isfinite(R).all(axis=1)
+    except MillflowError as exc:
+        raise InputError(f"the model cannot be evaluated inside the bounds: {exc}") from exc
+    except (FloatingPointError, ValueError, np.linalg.LinAlgError) as exc:
+        raise InputError(f"the model cannot be evaluated inside the bounds: {exc}") from exc
+    if bad.any():
+        k = int(np.flatnonzero(bad)[0])
+        where = ", ".join(f"{nm}={v:.4g}" for nm, v in zip(prob.names, pts[k]))
+        raise InputError(f"the model gives non-finite values at a corner of the bounds ({where}); "
+                         "narrow the bounds of these parameters")
+    prob.nfev = 0
+    return prob
+
+
+def _local(prob: _Problem, z0, tight: bool = False):
+    tol = 1e-12 if tight else 1e-8
+    z0 = np.clip(z0, prob.lower, prob.upper)
+    r = least_squares(prob.resid, z0, jac=prob.jac, bounds=(prob.lower, prob.upper), method="trf",
+                      x_scale="jac", ftol=tol, xtol=tol, gtol=tol, max_nfev=200 if tight else 60)
+    return r.x, float(2 * r.cost)
+
+
+def fit(model: ForwardModel, params: dict | None = None, *, global_search: bool = True, starts: int = 20,
+        popsize: int = 15, maxiter: int = 200, seed: int = 0, de_tol: float = 1e-3, grid_check: bool = True,
+        progress=None) -> FitResult:
+    """Fit a :class:`ForwardModel`; see the module docstring for the steps.
+
+    Parameters
+    ----------
+    model : the compiled forward model (data, conditions and grid are in it).
+    params : name -> :class:`Parameter` (start values, bounds, vary); default
+        :func:`default_parameters` of the model's spec.
+    global_search : run differential evolution first (``False``: local starts only).
+    starts : number of local least-squares starts: the DE optimum (if any) and
+        ``starts - 1`` scrambled-Sobol points (or the given values and Sobol points
+        without global search). ``starts=1, global_search=False`` is one local fit
+        from the given values.
+    popsize, maxiter, seed, de_tol : differential-evolution settings.
+    grid_check : re-evaluate the SSR on ``model.grid.refine(2)``.
+    progress : callable taking a message string, or None.
+    """
+    say = progress or (lambda msg: None)
+    t0 = time.perf_counter()
+    params = params or default_parameters(model.spec)
+    prob = check_problem(model, params)
+    lo, hi = prob.lower, prob.upper
+    p = prob.idx.size
+    candidates = []
+    if global_search:
+        say(f"differential evolution over {p} parameters (population {popsize * p})")
+        de = differential_evolution(prob.ssr_pop, list(zip(lo, hi)), popsize=popsize, maxiter=maxiter, tol=de_tol,
+                                    seed=seed, polish=False, vectorized=True, updating="deferred",
+                                    init="sobol")
+        say(f"  DE: SSR {de.fun:.6g} after {de.nit} generations")
+        candidates.append(de.x)
+    else:
+        candidates.append(prob.full[prob.idx])
+    n_sobol = max(starts - 1, 0)
+    if n_sobol:
+        with warnings.catch_warnings():  # balance needs 2^m points; any count is fine here
+            warnings.simplefilter("ignore", UserWarning)
+            sob = qmc.Sobol(p, scramble=True, seed=seed).random(n_sobol)
+        candidates += list(qmc.scale(sob, lo, hi)) if np.all(hi > lo) else []
+    sols = []
+    for k, z0 in enumerate(candidates):
+        z, s = _local(prob, z0)
+        sols.append((s, z))
+        if progress and (k % 5 == 4 or k == len(candidates) - 1):
+            say(f"  local starts {k + 1}/{len(candidates)}: best SSR {min(x[0] for x in sols):.6g}")
+    sols.sort(key=lambda t: t[0])
+    zb, sb = _local(prob, sols[0][1], tight=True)
+    if sb > sols[0][0]:
+        zb, sb = sols[0][1], sols[0][0]
+    spread = _spread(sols, zb, sb, lo, hi)
+    theta = prob.expand(zb)[0]
+    J = prob.jac(zb)
+    st = parameter_statistics(prob.names, zb, J, sb, model.n_data, lo, hi)
+    fitted = {n: Parameter(n, float(v), params[n].min, params[n].max, params[n].vary)
+              for n, v in zip(model.param_names, theta)}
+    gc = _grid_check(model, params, theta, zb, sb, st) if grid_check else {}
+    names = prob.names
+    solutions = [(float(s), {n: float(v) for n, v in zip(names, z)}) for s, z in sols]
+    say(f"done: SSR {sb:.6g}, spread {spread:.3g}, {time.perf_counter() - t0:.1f} s")
+    return FitResult(model, fitted, st, sb, model.n_data, p, len(candidates), spread, solutions, prob.nfev,
+                     time.perf_counter() - t0, gc)
+
+
+def _grid_check(model, params, theta, zb, sb, st) -> dict:
+    """Principle IV: SSR on ``grid.refine(2)`` at the estimate, and after a local re-fit
+    there, with the largest parameter change in units of its SEP."""
+    try:
+        fine = model.with_grid(model.grid.refine(2))
+    except InputError as exc:
+        return {"skipped": str(exc)}
+    prob = _Problem(fine, params)
+    r = prob.resid(zb)
+    s_same = float(r @ r)
+    z2, s2 = _local(prob, zb)
+    se = np.array([st["params"][n]["se"] for n in prob.names])
+    with np.errstate(divide="ignore", invalid="ignore"):
+        shift = float(np.nanmax(np.abs(z2 - zb) / se)) if np.all(se > 0) else math.nan
+    return {"n": model.n, "n_refined": fine.n, "ssr": sb, "ssr_refined": s_same,
+            "relative_change": abs(s_same - sb) / max(sb, 1e-300), "ssr_refit": s2,
+            "relative_change_refit": abs(s2 - sb) / max(sb, 1e-300), "max_param_shift_in_se": shift}
+
+
+def _spread(sols, zb, sb, lo, hi) -> float:
+    """Largest relative parameter difference between the best and equally good starts."""
+    scale = np.maximum(np.abs(zb), 1e-3 * (hi - lo))
+    worst = 0.0
+    for s, z in sols:
+        if s <= sb * (1 + SAME_SSR_RTOL) + 1e-300:
+            worst = max(worst, float(np.max(np.abs(z - zb) / scale)))
+    return worst
+
+
+def compare_models(models: dict, params: dict | None = None, **fit_kwargs) -> dict:
+    """Fit several candidate models to the same data and rank them.
+
+    Parameters
+    ----------
+    models : label -> :class:`ForwardModel` (same data and conditions).
+    params : label -> parameter dict (optional, defaults per model).
+
+    Returns
+    -------
+    dict with ``fits`` (label -> FitResult), ``table`` (rows sorted by AIC with ssr,
+    n_params, aic, bic, delta_aic) and ``f_tests`` (for every pair whose parameter
+    names are nested: the F statistic and p value of the bigger model).
+    """
+    from millflow.fitting.statistics import f_test
+
+    ys = {label: m.y.tobytes() for label, m in models.items()}
+    if len(set(ys.values())) > 1:
+        raise InputError("compare_models: the candidate models must be fitted to the same data values")
+    fits = {label: fit(m, (params or {}).get(label), **fit_kwargs) for label, m in models.items()}
+    rows = []
+    for label, r in fits.items():
+        c = r.criteria
+        rows.append({"model": label, "ssr": r.ssr, "n_params": r.n_params, "aic": c["aic"], "bic": c["bic"]})
+    rows.sort(key=lambda d: d["aic"])
+    for d in rows:
+        d["delta_aic"] = d["aic"] - rows[0]["aic"]
+    tests = []
+    for a, b in itertools.permutations(fits, 2):
+        na, nb = set(fits[a].stats["params"]), set(fits[b].stats["params"])
+        if na < nb:
+            n = fits[a].n_data
+            res = f_test(fits[a].ssr, fits[a].n_params, fits[b].ssr, fits[b].n_params, n)
+            tests.append({"small": a, "big": b, **res})
+    return {"fits": fits, "table": rows, "f_tests": tests}

@@ -1,0 +1,500 @@
+"""Forward models for fitting: breakage forms shared across conditions (eqs. 3-10).
+
+A :class:`ModelSpec` says *what* is fitted (rate form, breakage form, transport,
+classification, which process parameters enter the eq. 10 power law); a
+:class:`ForwardModel` compiles it against a :class:`~millflow.fitting.data.PSDData`
+set and a fine numerical grid (Principle IV) and evaluates the predicted measured
+values for a whole *population* of parameter vectors at once (shape (P, n_params) ->
+(P, n_data)), which is what differential evolution and finite-difference Jacobians
+need.
+
+Parameters (positive ones in logs, named ``ln_...``):
+
+- rate ``power`` (eq. 5): ``ln_A0``, ``alpha``;  ``austin`` (eq. 7 without ball size):
+  ``ln_A0``, ``alpha``, ``ln_mu`` (ln of mu0/x0), ``Lambda``. With process parameters
+  (eq. 10) A = exp(ln_A0) prod_k (p_k/p_ref_k)^a_k, one exponent ``a_<column>`` each,
+  p_ref the geometric mean over the conditions (it decorrelates ln_A0 from the a_k).
+- breakage ``normalized`` (eq. 6): ``phi``, ``gamma``, ``beta``; ``single``: B = r^gamma
+  (eq. 6 with phi = 1): ``gamma``; ``fixed``: a given b matrix, nothing fitted (the
+  hybrid, semi-back-calculation method; fixing phi, gamma, beta with ``vary=False``
+  does the same for eq. 6).
+- classification ``screen``: d_i* = 1 / (1 + (x_i / (c50 * screen))^n), parameters
+  ``ln_c50`` and ``ln_sharp`` (n): material finer than the screen opening leaves at
+  the mean rate, coarser material is held back until it breaks.
+  ``screen_power``: d_i* = (x_i/x0 * screen_ref/screen)^-n_screen (screen_ref the
+  geometric mean over the conditions), parameter ``n_screen``: the
+  limit of ``screen`` when c50 is far below the measured sizes (then only
+  A / c50^n is identifiable from product samples: the fit reports correlation 1).
+- mode ``batch`` (eq. 4, times from the table), ``plug_flow`` (eq. 4 at t = tau),
+  ``well_mixed`` (eq. 3). For continuous modes tau comes from a process column
+  (``tau_column``) or is 1, in which case A is the dimensionless tau*A.
+  Location ``holdup`` of a well-mixed mill predicts the mill content, proportional
+  to p_i / d_i*: sampling product and hold-up separates breakage from classification.
+
+The model curve (cumulative passing at the grid edges, 0 at size 0, 1 above the grid)
+is interpolated linearly in size at each measured sieve: one sparse-in-effect matrix
+product per evaluation.
+"""
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field, replace
+
+import numpy as np
+
+from millflow.errors import InputError, SolverError
+from millflow.fitting.data import PSDData
+from millflow.grid import SizeGrid
+from millflow.psd import from_sieves
+
+__all__ = ["Parameter", "ModelSpec", "ForwardModel", "RATE_FORMS", "BREAKAGE_FORMS", "MODES",
+           "CLASSIFICATIONS", "default_parameters"]
+
+RATE_FORMS = {"power": ("ln_A0", "alpha"), "austin": ("ln_A0", "alpha", "ln_mu", "Lambda")}
+BREAKAGE_FORMS = {"normalized": ("phi", "gamma", "beta"), "single": ("gamma",), "fixed": ()}
+MODES = ("batch", "plug_flow", "well_mixed")
+CLASSIFICATIONS = {None: (), "screen": ("ln_c50", "ln_sharp"), "screen_power": ("n_screen",)}
+
+_DEFAULTS = {  # value, min, max
+    "ln_A0": (0.0, -12.0, 12.0), "alpha": (1.0, -2.0, 4.0), "ln_mu": (1.0, -5.0, 8.0), "Lambda": (3.0, 0.5, 8.0),
+    "phi": (0.5, 0.0, 1.0), "gamma": (1.0, 0.05, 4.0), "beta": (4.0, 1.0, 10.0),
+    "ln_c50": (0.0, -4.0, 1.5), "ln_sharp": (1.0, -1.0, 3.5), "n_screen": (2.0, 0.0, 12.0),
+}
+
+
+@dataclass(frozen=True)
+class Parameter:
+    """One model parameter, lmfit-style: starting value, bounds, and whether it varies."""
+
+    name: str
+    value: float
+    min: float = -math.inf
+    max: float = math.inf
+    vary: bool = True
+
+    def __post_init__(self):
+        if not (self.min <= self.value <= self.max):
+            raise InputError(f"parameter {self.name}: value {self.value!r} outside [{self.min!r}, {self.max!r}]")
+        if self.vary and not (math.isfinite(self.min) and math.isfinite(self.max)):
+            raise InputError(f"parameter {self.name}: a varying parameter needs finite bounds (global search)")
+
+
+@dataclass(frozen=True)
+class ModelSpec:
+    """What is fitted; see the module docstring for the forms and their parameters.
+
+    Attributes
+    ----------
+    mode : "batch", "plug_flow" or "well_mixed".
+    rate, breakage, classification : form names (classification None or "screen").
+    rate_process : process-table columns entering A by eq. 10.
+    screen_column : process column holding the screen opening [mm] for "screen".
+    tau_column : process column holding tau [s] for continuous modes (None: tau = 1).
+    x0_m : reference size of eq. 5 [m].
+    b_matrix : (N, N) fractional b on the numerical grid for breakage "fixed".
+    objective : "cumulative" (residuals of cumulative passing) or "fractional"
+        (residuals of the mass fraction between neighbouring sieves).
+    """
+
+    mode: str = "batch"
+    rate: str = "power"
+    breakage: str = "normalized"
+    classification: str | None = None
+    rate_process: tuple = ()
+    param_process: tuple = ()
+    screen_column: str = "screen_mm"
+    tau_column: str | None = None
+    x0_m: float = 1e-3
+    b_matrix: np.ndarray | None = field(default=None, compare=False)
+    objective: str = "cumulative"
+
+    def __post_init__(self):
+        for key, val, ok in (("mode", self.mode, MODES), ("rate", self.rate, RATE_FORMS),
+                             ("breakage", self.breakage, BREAKAGE_FORMS),
+                             ("classification", self.classification, CLASSIFICATIONS),
+                             ("objective", self.objective, ("cumulative", "fractional"))):
+            if val not in ok:
+                raise InputError(f"model.{key} = {val!r}: expected one of {[k for k in ok]}")
+        if self.breakage == "fixed" and self.b_matrix is None:
+            raise InputError("model.breakage = 'fixed' needs b_matrix (the fractional b on the numerical grid)")
+        object.__setattr__(self, "rate_process", tuple(self.rate_process))
+        pp = tuple((str(a), str(b)) for a, b in self.param_process)
+        object.__setattr__(self, "param_process", pp)
+        allowed = ("alpha", "gamma", "n_screen")
+        for name, _ in pp:
+            if name not in allowed or name not in self.base_names:
+                raise InputError(f"model.param_process: {name!r} cannot depend on process parameters here; "
+                                 f"expected one of {[a for a in allowed if a in self.base_names]}")
+
+    @property
+    def base_names(self) -> tuple:
+        return (RATE_FORMS[self.rate] + BREAKAGE_FORMS[self.breakage] + CLASSIFICATIONS[self.classification])
+
+    @property
+    def param_names(self) -> tuple:
+        names = list(RATE_FORMS[self.rate][:1]) + [f"a_{p}" for p in self.rate_process]
+        for name in self.base_names[1:]:
+            names.append(name)
+            names += [f"{name}_{col}" for par, col in self.param_process if par == name]
+        return tuple(names)
+
+    def label(self) -> str:
+        parts = [self.mode, f"rate={self.rate}", f"B={self.breakage}"]
+        if self.classification:
+            parts.append(f"class={self.classification}")
+        if self.rate_process:
+            parts.append("A~" + "*".join(self.rate_process))
+        for par, col in self.param_process:
+            parts.append(f"{par}~{col}")
+        return " ".join(parts)
+
+
+def default_parameters(spec: ModelSpec, overrides: dict | None = None) -> dict:
+    """Parameters of a spec with default values and bounds, updated by ``overrides``
+    (name -> dict with any of value, min, max, vary)."""
+    overrides = dict(overrides or {})
+    out = {}
+    for name in spec.param_names:
+        v, lo, hi = _DEFAULTS.get(name, (0.0, -5.0, 5.0))
+        o = overrides.pop(name, {})
+        unknown = set(o) - {"value", "min", "max", "vary"}
+        if unknown:
+            raise InputError(f"params.{name}: unknown keys {sorted(unknown)}; expected value, min, max, vary")
+        lo, hi = float(o.get("min", lo)), float(o.get("max", hi))
+        v = float(o.get("value", min(max(v, lo), hi)))
+        out[name] = Parameter(name, v, lo, hi, bool(o.get("vary", True)))
+    if overrides:
+        raise InputError(f"params: {sorted(overrides)} are not parameters of this model; expected {list(spec.param_names)}")
+    return out
+
+
+def auto_grid(data: PSDData, ratio: float = 2 ** 0.25, conditions=None) -> SizeGrid:
+    """Geometric grid from just above the coarsest feed or sample size down to half the
+    finest positive sieve."""
+    t = data.table
+    sizes = t.size_m.to_numpy()
+    pos = sizes[sizes > 0]
+    if pos.size == 0:
+        raise InputError(f"{data.source}: no positive sieve sizes")
+    top = float(pos.max()) * 1.0001
+    return SizeGrid.between(top, float(pos.min()) / 2.0, ratio)
+
+
+class ForwardModel:
+    """A :class:`ModelSpec` compiled on a grid for a set of conditions of a data set.
+
+    ``predict(theta)`` takes the full parameter vector(s) in ``spec.param_names`` order,
+    shape (n_params,) or (P, n_params), and returns the predicted measured values,
+    shape (n_data,) or (P, n_data), in the order of ``self.y``.
+    """
+
+    def __init__(self, spec: ModelSpec, data: PSDData, grid: SizeGrid | None = None, conditions=None):
+        self.spec, self.data = spec, data
+        self.grid = grid if grid is not None else auto_grid(data)
+        self.conditions = list(conditions) if conditions is not None else data.conditions
+        unknown = [c for c in self.conditions if c not in data.conditions]
+        if unknown:
+            raise InputError(f"{data.source}: conditions {unknown} have no measurements")
+        x = self.grid.x
+        self.x, self.n = x, x.size
+        self._feeds = np.array([self._feed(c) for c in self.conditions])  # (C, N)
+        self._proc = self._process_matrix()
+        samples = data.samples(self.conditions)
+        self._build_groups(samples)
+        # eq. 6 ratio r = x_{i-1}/x_j on the strict lower triangle
+        i, j = np.tril_indices(self.n, -1)
+        self._ti, self._tj = i, j
+        self._logr = np.log(x[i - 1] / x[j])
+        self._strict_lower = np.tril(np.ones((self.n, self.n)), -1)
+        self._logx = np.log(x / spec.x0_m)
+
+    # ----------------------------------------------------------------- compilation
+    def _feed(self, cond):
+        size, P = self.data.feed(cond)
+        keep = size > 0
+        size, P = size[keep], P[keep]
+        if size[0] > self.grid.x[0] * (1 + 1e-9):
+            raise InputError(f"feed of {cond!r}: top size {size[0]:.4g} m is above the grid top {self.grid.x[0]:.4g} m")
+        return from_sieves(size, P, self.grid, oversize="lump" if P[0] < 1 else "error")
+
+    def _process_matrix(self):
+        spec, proc = self.spec, self.data.process
+        cols = list(spec.rate_process) + [col for _, col in spec.param_process]
+        if spec.classification in ("screen", "screen_power"):
+            cols.append(spec.screen_column)
+        if spec.tau_column:
+            cols.append(spec.tau_column)
+        out = {}
+        for col in dict.fromkeys(cols):
+            if col not in proc.columns:
+                raise InputError(f"{self.data.source}: process table has no column {col!r} (needed by the model); "
+                                 f"columns are {list(proc.columns)}")
+            v = proc.loc[self.conditions, col].to_numpy(dtype=float)
+            if np.any(v <= 0):
+                raise InputError(f"process column {col!r}: values must be > 0 for power laws, got {v.min()!r}")
+            out[col] = v
+        # references: geometric mean over all conditions of the data (not just these)
+        self._ref = {c: float(np.exp(np.log(proc[c].to_numpy(dtype=float)).mean()))
+                     for c in list(spec.rate_process) + [col for _, col in spec.param_process]}
+        return out
+
+    def _build_groups(self, samples):
+        groups, rows, ys, ws, sizes, conds = [], [], [], [], [], []
+        cond_index = {c: k for k, c in enumerate(self.conditions)}
+        for (cond, loc, t), grp in samples.groupby(["condition", "location", "time_s"], sort=False):
+            if self.spec.mode != "batch" and loc not in ("product", "holdup"):
+                raise InputError(f"location {loc!r} of condition {cond!r}: a {self.spec.mode} mill predicts "
+                                 "'product' and (well_mixed) 'holdup' samples")
+            if self.spec.mode == "plug_flow" and loc == "holdup":
+                raise InputError("location 'holdup' needs mode well_mixed")
+            groups.append((cond_index[cond], loc, float(t)))
+            ys.append(grp.passing.to_numpy())
+            ws.append(grp.weight.to_numpy())
+            sizes.append(grp.size_m.to_numpy())
+            conds.append(np.full(len(grp), cond))
+        self.groups = groups
+        self.sizes = sizes
+        self.group_slices = np.cumsum([0] + [len(y) for y in ys])
+        self.condition_of_value = np.concatenate(conds)
+        y_cum = np.concatenate(ys)
+        self.y_cum = y_cum
+        # linear interpolation in size of the curve (0, 0), (x_N, P_N), ..., (x_1, P_1), 1 above
+        N, G = self.n, len(groups)
+        xc = np.concatenate([[0.0], self.x[::-1]])
+        W = np.zeros((y_cum.size, G * N))
+        const = np.zeros(y_cum.size)
+        r = 0
+        for g, s in enumerate(sizes):
+            for sz in s:
+                if sz >= xc[-1]:
+                    const[r] = 1.0
+                else:
+                    k = int(np.searchsorted(xc, sz, side="right")) - 1  # xc[k] <= sz < xc[k+1]
+                    u = (sz - xc[k]) / (xc[k + 1] - xc[k])
+                    # curve point m >= 1 of xc is grid edge N - m (0-based)
+                    if k >= 1:
+                        W[r, g * N + (N - k)] += 1.0 - u
+                    W[r, g * N + (N - k - 1)] += u
+                r += 1
+        self._W, self._const = W, const
+        if self.spec.objective == "fractional":
+            D = np.zeros((y_cum.size, y_cum.size))
+            for g in range(G):
+                a, b = self.group_slices[g], self.group_slices[g + 1]
+                for k in range(a, b):
+                    D[k, k] = -1.0
+                    if k > a:
+                        D[k, k - 1] = 1.0
+            self._D = D
+            # value of a sample's first row: 1 - P(top sieve) (retained on it)
+            self.y = self._apply_D(y_cum[None])[0]
+        else:
+            self._D = None
+            self.y = y_cum
+        self.weights = np.concatenate(ws)
+        self.times = np.array(sorted({t for _, _, t in groups}))
+
+    def _apply_D(self, Y):
+        out = Y @ self._D.T
+        starts = self.group_slices[:-1]
+        out[:, starts] += 1.0
+        return out
+
+    # ------------------------------------------------------------------- evaluation
+    @property
+    def param_names(self):
+        return self.spec.param_names
+
+    @property
+    def n_data(self) -> int:
+        return int(self.y.size)
+
+    def _unpack(self, theta):
+        return {name: theta[:, k] for k, name in enumerate(self.param_names)}
+
+    def cond_param(self, p, name):
+        """Parameter ``name`` per condition (P, C): value * prod (p_k/p_ref_k)^e_k (eq. 10)."""
+        v = np.repeat(p[name][:, None], len(self.conditions), axis=1)
+        for par, col in self.spec.param_process:
+            if par == name:
+                v = v * np.exp(p[f"{name}_{col}"][:, None] * np.log(self._proc[col] / self._ref[col])[None, :])
+        return v
+
+    def _depends(self, name) -> bool:
+        return any(par == name for par, _ in self.spec.param_process)
+
+    def rates(self, p):
+        """S (P, C, N) [1/s] (or tau*S if no tau column)."""
+        lnA = p["ln_A0"][:, None].copy()
+        for col in self.spec.rate_process:
+            lnA = lnA + p[f"a_{col}"][:, None] * np.log(self._proc[col] / self._ref[col])[None, :]
+        logS = lnA[:, :, None] + self.cond_param(p, "alpha")[:, :, None] * self._logx[None, None, :]
+        S = np.exp(np.minimum(logS, 600.0))
+        if self.spec.rate == "austin":
+            mu_rel = self._logx[None, :] - p["ln_mu"][:, None]
+            S = S / (1.0 + np.exp(np.minimum(p["Lambda"][:, None] * mu_rel, 600.0)))[:, None, :]
+        S[..., -1] = 0.0
+        return S
+
+    def frac_b(self, p, n_pop):
+        """Fractional b, (P, N, N), or (P, C, N, N) when gamma depends on the process."""
+        N = self.n
+        if self.spec.breakage == "fixed":
+            return np.broadcast_to(np.asarray(self.spec.b_matrix, float), (n_pop, N, N))
+        lead = (n_pop,)
+        gamma = p["gamma"][:, None]
+        if self._depends("gamma"):
+            lead = (n_pop, len(self.conditions))
+            gamma = self.cond_param(p, "gamma")[:, :, None]
+        if self.spec.breakage == "single":
+            vals = np.exp(gamma * self._logr)
+        else:
+            phi, beta = p["phi"], p["beta"]
+            if len(lead) == 2:
+                phi, beta = phi[:, None], beta[:, None]
+            phi, beta = phi[..., None], beta[..., None]
+            vals = phi * np.exp(gamma * self._logr) + (1 - phi) * np.exp(beta * self._logr)
+        # outside the physical domain of eq. 6 (0 <= phi <= 1, exponents > 0) B is not a
+        # distribution: return NaN so that the bounds check names the offending corner
+        bad = ~(gamma > 0)
+        if self.spec.breakage == "normalized":
+            bad = bad | ~((phi >= 0) & (phi <= 1) & (beta > 0))
+        vals = np.where(bad, np.nan, vals)
+        B = np.zeros(lead + (N, N))
+        B[..., self._ti, self._tj] = vals
+        k = np.arange(N - 1)
+        B[..., k + 1, k] = 1.0
+        b = B.copy()
+        b[..., :-1, :] -= B[..., 1:, :]
+        return b * self._strict_lower
+
+    def discharge(self, p, n_pop):
+        """Normalised discharge d* (P, C, N), ones without classification."""
+        C = len(self.conditions)
+        if self.spec.classification is None:
+            return np.ones((n_pop, C, self.n))
+        screen = self._proc[self.spec.screen_column] * 1e-3
+        if self.spec.classification == "screen_power":
+            # normalised so that d* = 1 at x = x0 for the geometric-mean screen: ln_A0 is
+            # then the rate at x0 for a typical screen, which decorrelates it from n_screen
+            ref = float(np.exp(np.log(self.data.process[self.spec.screen_column].to_numpy(float)).mean())) * 1e-3
+            z = self.cond_param(p, "n_screen")[:, :, None] * (self._logx[None, None, :] + np.log(ref / screen)[None, :, None])
+            return np.exp(-np.clip(z, -600.0, 600.0))
+        d50 = np.exp(p["ln_c50"])[:, None] * screen[None, :]
+        sharp = np.exp(p["ln_sharp"])[:, None, None]
+        z = sharp * (np.log(self.x)[None, None, :] - np.log(d50)[:, :, None])
+        return 1.0 / (1.0 + np.exp(np.minimum(z, 600.0)))
+
+    def predict_grid(self, theta):
+        """Mass fractions (P, G, N) on the grid for every sample group."""
+        theta = np.atleast_2d(np.asarray(theta, dtype=float))
+        n_pop = theta.shape[0]
+        p = self._unpack(theta)
+        S = self.rates(p)
+        b = self.frac_b(p, n_pop)
+        mode = self.spec.mode
+        tau = self._proc[self.spec.tau_column] if self.spec.tau_column else np.ones(len(self.conditions))
+        out = np.empty((n_pop, len(self.groups), self.n))
+        if mode == "well_mixed":
+            d = self.discharge(p, n_pop)
+            prod = _well_mixed(S * tau[None, :, None] / d, b, self._feeds)
+            for g, (c, loc, _) in enumerate(self.groups):
+                if loc == "holdup":
+                    m = prod[:, c] / d[:, c]
+                    out[:, g] = m / m.sum(axis=1, keepdims=True)
+                else:
+                    out[:, g] = prod[:, c]
+        else:
+            for c in range(len(self.conditions)):
+                gsel = [g for g, grp in enumerate(self.groups) if grp[0] == c]
+                t = np.array([self.groups[g][2] for g in gsel]) if mode == "batch" else np.full(len(gsel), tau[c])
+                out[:, gsel] = _batch(S[:, c], b[:, c] if b.ndim == 4 else b, self._feeds[c], t)
+        return out
+
+    def predict(self, theta):
+        theta = np.asarray(theta, dtype=float)
+        single = theta.ndim == 1
+        M = self.predict_grid(theta)
+        P = np.cumsum(M[..., ::-1], axis=-1)[..., ::-1]
+        Y = P.reshape(P.shape[0], -1) @ self._W.T + self._const
+        if self._D is not None:
+            Y = self._apply_D(Y)
+        return Y[0] if single else Y
+
+    def predict_cum(self, theta):
+        """Cumulative passing at every measured row (the README metric's model values)."""
+        M = self.predict_grid(np.atleast_2d(theta))
+        P = np.cumsum(M[..., ::-1], axis=-1)[..., ::-1]
+        return (P.reshape(P.shape[0], -1) @ self._W.T + self._const)[0]
+
+    def with_grid(self, grid: SizeGrid) -> "ForwardModel":
+        spec = self.spec
+        if spec.breakage == "fixed":
+            raise InputError("a fixed b matrix belongs to one grid; give it on the refined grid to refine")
+        return ForwardModel(spec, self.data, grid, self.conditions)
+
+    def for_conditions(self, conditions) -> "ForwardModel":
+        return ForwardModel(self.spec, self.data, self.grid, conditions)
+
+    def __repr__(self):
+        return (f"ForwardModel({self.spec.label()}, {len(self.conditions)} conditions, {self.n_data} values, "
+                f"grid {self.n} classes)")
+
+
+def _well_mixed(s, b, feeds):
+    """Eq. 3 for a population: (I - K(s)) p = f with K = (b - I) diag(s), s = tau S / d*.
+
+    s (P, C, N), b (P, N, N) or (P, C, N, N), feeds (C, N) -> products (P, C, N). Forward substitution
+    vectorised over population and conditions: p_i = (f_i + sum_j b_ij s_j p_j)/(1 + s_i);
+    every term is non-negative, so nothing cancels.
+    """
+    n_pop, C, N = s.shape
+    q = np.zeros((n_pop, C, N))
+    p = np.empty((n_pop, C, N))
+    for i in range(N):
+        if i == 0:
+            acc = np.broadcast_to(feeds[None, :, 0], (n_pop, C))
+        elif b.ndim == 4:
+            acc = feeds[None, :, i] + np.einsum("pcj,pcj->pc", b[:, :, i, :i], q[:, :, :i])
+        else:
+            acc = feeds[None, :, i] + np.einsum("pj,pcj->pc", b[:, i, :i], q[:, :, :i])
+        p[:, :, i] = acc / (1.0 + s[:, :, i])
+        q[:, :, i] = s[:, :, i] * p[:, :, i]
+    return p
+
+
+_CANCEL_TOL = 1e-9
+
+
+def _batch(S, b, feed, t):
+    """exp(K t) feed for a population: S (P, N), b (P, N, N), feed (N,), t (T,) -> (P, T, N).
+
+    Eigenvectors of A = -K for distinct rates by the stable row recurrence of
+    :mod:`millflow.linalg`, vectorised over the population; members whose rounding
+    estimate eps |X| |X^-1 f| exceeds 1e-9 (close rates) are recomputed one by one by
+    the exact clustered method (:func:`millflow.batch.batch_grind`).
+    """
+    n_pop, N = S.shape
+    A = -b * S[:, None, :]
+    X = np.broadcast_to(np.eye(N), (n_pop, N, N)).copy()
+    with np.errstate(divide="ignore", invalid="ignore", over="ignore"):
+        for i in range(1, N):
+            r = np.matmul(A[:, i:i + 1, :i], X[:, :i, :i])[:, 0]
+            X[:, i, :i] = r / (S[:, :i] - S[:, i:i + 1])
+        w = np.linalg.solve(X, np.broadcast_to(feed, (n_pop, N))[:, :, None])[:, :, 0]
+        E = np.exp(-S[:, None, :] * t[None, :, None]) * w[:, None, :]
+        M = np.matmul(E, X.transpose(0, 2, 1))
+        bad = ~np.isfinite(M).all(axis=(1, 2))
+        cancel = np.finfo(float).eps * np.matmul(np.abs(X), np.abs(w)[:, :, None])[:, :, 0].max(axis=1)
+    bad |= ~(cancel <= _CANCEL_TOL)
+    invalid = ~(np.isfinite(b).all(axis=(1, 2)) & np.isfinite(S).all(axis=1))
+    M[invalid] = np.nan  # parameters outside the model's domain: reported, not solved
+    bad &= ~invalid
+    if bad.any():
+        from millflow.batch import batch_grind
+        for k in np.flatnonzero(bad):
+            try:
+                M[k] = batch_grind(S[k], b[k], feed, t)
+            except Exception as exc:  # noqa: BLE001 - reported as a solver failure
+                raise SolverError(f"batch solve failed for a parameter vector: {exc}") from exc
+    return M

@@ -1,0 +1,501 @@
+"""Continuous mills: transport from :mod:`rtd`, breakage from the core, classification d*.
+
+A mill is a feed PSD f and solids rate, breakage rates S [1/s] and distribution b
+(any form of :mod:`millflow.breakage`), a transport model from :mod:`rtd` (tau in s)
+and optionally the normalised discharge rates d_i* = tau d_i (classification, eq. 1).
+The mill assembles only the terms its definition declares and runs the cheapest
+method that is exact for them (``METHODS``):
+
+- ``well_mixed``: ``rtd.PerfectMixing``, eq. (3) by one triangular solve;
+- ``cells``: tanks in series (integer n), ``rtd.RecirculatingCells`` or any
+  ``rtd.CompartmentNetwork``: every cell well mixed, classification at the discharge
+  or at every cell outlet, one exact block solve (:mod:`millflow.mill_cells`);
+- ``plug_flow``: ``rtd.PlugFlow``, the batch solution at contact time tau (eq. 4),
+  classification along the axis = class i travelling at d_i* u (rates S/d*);
+- ``segregated``: any other ``rtd`` model without classification, product
+  E_hat(-K) f (exact for first-order breakage, :mod:`millflow.mill_segregated`);
+- ``axial_fv``: ``rtd.AxialDispersion`` (closed) with size-dependent axial velocity
+  or dispersion, finite volumes with Richardson extrapolation (:mod:`millflow.mill_axial`).
+
+Hold-up is reported per unit solids feed rate [s] (mass in the mill / feed mass rate;
+it sums to the mean residence time of the solids) and as mass fractions. For a
+well-mixed cell with classification M_i H / F = tau p_i / d_i*; the fractions sum to 1
+by construction, the hold-up per feed rate equals tau only when d* is consistent with
+tau (sum tau p_i / d_i* = tau).
+
+Results are xarray Datasets: dimension ``size`` (coordinate ``x`` [m] when given),
+``cell``, ``position``, ``location``; attributes ``method``, ``error_estimate``,
+``runtime_s``, ``mass_balance_error``.
+"""
+from __future__ import annotations
+
+import time
+from dataclasses import dataclass, field
+
+import numpy as np
+import xarray as xr
+
+import rtd
+from millflow.breakage import validate_b, validate_rates
+from millflow.errors import InputError
+from millflow.linalg import solve_well_mixed
+from millflow.mill_axial import solve_axial
+from millflow.mill_cells import network_of, solve_cells
+from millflow.mill_segregated import plug_flow, segregated
+
+__all__ = ["METHODS", "Mill", "steady_mill", "transfer_matrix", "choose_method", "WHERE"]
+
+#: Steady-state methods by name (see the module docstring).
+METHODS = ("well_mixed", "cells", "plug_flow", "segregated", "axial_fv")
+#: Where classification acts: at the discharge (exit flows), at every cell outlet
+#: (every flow of a cell network), along the axis (axial velocity of class i = d_i* u).
+WHERE = ("discharge", "cells", "axis")
+
+
+# ----------------------------------------------------------------------- checking
+def _kind(transport) -> str:
+    if isinstance(transport, rtd.PerfectMixing):
+        return "perfect_mixing"
+    if isinstance(transport, rtd.PlugFlow):
+        return "plug"
+    if isinstance(transport, rtd.AxialDispersion):
+        return "axial" if transport.bc == "closed" else "rtd"
+    if network_of(transport) is not None:
+        return "network"
+    if hasattr(transport, "laplace") and hasattr(transport, "mean"):
+        return "rtd"
+    raise InputError(
+        f"transport is {transport!r}; expected an rtd model (rtd.PerfectMixing, rtd.PlugFlow, "
+        "rtd.TanksInSeries, rtd.RecirculatingCells, rtd.AxialDispersion, rtd.Series, ...)")
+
+
+_WHERE_OK = {
+    "perfect_mixing": ("discharge", "cells"),
+    "network": ("discharge", "cells"),
+    "plug": ("axis",),
+    "axial": ("axis",),
+    "rtd": (),
+}
+_WHERE_DEFAULT = {"perfect_mixing": "discharge", "network": "discharge", "plug": "axis", "axial": "axis"}
+
+
+def _check_breakage(S, b):
+    S = validate_rates(S, name="S")
+    n = S.size
+    b = np.asarray(b, dtype=float)
+    if b.shape != (n, n):
+        raise InputError(f"b has shape {b.shape}; expected ({n}, {n}) to match S of length {n}")
+    return S, validate_b(b)
+
+
+def _check_vector(v, n: int, name: str, what: str, positive: bool) -> np.ndarray:
+    arr = np.asarray(v, dtype=float)
+    if arr.shape != (n,):
+        raise InputError(f"{name} has shape {arr.shape}; expected ({n},) to match S of length {n}")
+    bad = np.flatnonzero(~np.isfinite(arr) | ((arr <= 0) if positive else (arr < 0)))
+    if bad.size:
+        i = int(bad[0])
+        op = "> 0" if positive else ">= 0"
+        raise InputError(f"{name}: class {i + 1} is {arr[i]!r}; expected a finite {what} {op}")
+    return arr
+
+
+def _check_feed(feed, n: int) -> np.ndarray:
+    feed = np.asarray(feed, dtype=float)
+    if feed.ndim == 2 and feed.shape[0] == n:
+        if not np.all(np.isfinite(feed)) or np.any(feed < 0):
+            raise InputError("feed: expected finite flows >= 0 in every column")
+        return feed
+    return _check_vector(feed, n, "feed", "feed flow", positive=False)
+
+
+@dataclass(frozen=True)
+class _Scene:
+    """A validated mill definition: what the solvers need and nothing more."""
+
+    S: np.ndarray
+    b: np.ndarray
+    transport: object
+    kind: str
+    d: np.ndarray | None
+    where: str | None
+    dispersion: np.ndarray | None
+    method: str
+    network: object = None
+
+
+def _scene(S, b, transport, d=None, where=None, dispersion=None, method=None) -> _Scene:
+    S, b = _check_breakage(S, b)
+    n = S.size
+    kind = _kind(transport)
+    if d is not None:
+        d = _check_vector(d, n, "d", "normalised discharge rate d_i*", positive=True)
+    if dispersion is not None:
+        if kind != "axial":
+            raise InputError(f"dispersion is given but transport {transport!r} has no axial "
+                             "dispersion; expected rtd.AxialDispersion(bc='closed')")
+        dispersion = _check_vector(dispersion, n, "dispersion", "relative dispersion", positive=True)
+    if d is not None:
+        allowed = _WHERE_OK[kind]
+        if not allowed:
+            raise InputError(
+                f"transport {transport!r} cannot carry classification d (it has no cells or axis "
+                "to place it on); expected rtd.PerfectMixing, rtd.TanksInSeries (integer n), "
+                "rtd.RecirculatingCells, a CompartmentNetwork, rtd.PlugFlow or "
+                "rtd.AxialDispersion(bc='closed'), or d=None")
+        where = _WHERE_DEFAULT[kind] if where is None else where
+        if kind == "network" and not isinstance(where, str):
+            where = _cell_list(where, network_of(transport).n)
+        elif where not in allowed:
+            raise InputError(f"where = {where!r} is not possible for {type(transport).__name__}; "
+                             f"expected one of {', '.join(map(repr, allowed))}")
+    elif where is not None and isinstance(where, str) and where not in WHERE:
+        raise InputError(f"where = {where!r}; expected one of {', '.join(map(repr, WHERE))}")
+    chosen = choose_method(kind, d is not None or dispersion is not None)
+    if method is None:
+        method = chosen
+    elif method not in METHODS:
+        raise InputError(f"method = {method!r} is unknown; expected one of {', '.join(METHODS)}")
+    elif method != chosen and not _method_applies(method, kind, d, dispersion):
+        raise InputError(f"method = {method!r} does not apply to {transport!r}"
+                         f"{' with classification' if d is not None else ''}; the exact method is {chosen!r}")
+    net = network_of(transport) if method == "cells" else None
+    return _Scene(S, b, transport, kind, d, where, dispersion, method, net)
+
+
+def _cell_list(where, n: int) -> tuple:
+    try:
+        cells = tuple(int(k) for k in where)
+    except (TypeError, ValueError):
+        raise InputError(f"where = {where!r}; expected 'discharge', 'cells' or 1-based cell numbers") from None
+    bad = [k for k in cells if not 1 <= k <= n]
+    if bad or not cells:
+        raise InputError(f"where = {where!r}: cell {bad[0] if bad else '(none)'} is not in 1..{n}; "
+                         "expected 1-based cell numbers of the network")
+    return cells
+
+
+def choose_method(kind: str, classified: bool) -> str:
+    """The cheapest exact method for a transport kind (see the module docstring)."""
+    if kind == "perfect_mixing":
+        return "well_mixed"
+    if kind == "network":
+        return "cells"
+    if kind == "plug":
+        return "plug_flow"
+    if kind == "axial":
+        return "axial_fv" if classified else "segregated"
+    return "segregated"
+
+
+def _method_applies(method, kind, d, dispersion) -> bool:
+    if method == "segregated":
+        return d is None and dispersion is None
+    if method == "cells":
+        return kind in ("perfect_mixing", "network")
+    if method == "axial_fv":
+        return kind == "axial"
+    return False
+
+
+def _tau(transport) -> float:
+    tau = float(transport.mean)
+    if not np.isfinite(tau) or tau <= 0:
+        raise InputError(f"transport mean residence time is {tau!r}; expected tau > 0 [s]")
+    return tau
+
+
+# ------------------------------------------------------------------------ solving
+def _solve(sc: _Scene, feed, *, tol: float, holdup: bool = True, cache: dict | None = None):
+    """Dispatch to the method. Returns dict with product, holdup, error, extras.
+
+    ``cache`` (a Mill's) keeps the spectral decomposition of the breakage matrix
+    between calls of the plug-flow and segregated paths."""
+    blocks = None if cache is None else cache.get("blocks")
+    S, b, d, T = sc.S, sc.b, sc.d, sc.transport
+    out = {"extras": {}}
+    if sc.method == "well_mixed":
+        tau = _tau(T)
+        p = solve_well_mixed(S, b, feed, tau, d)
+        dd = 1.0 if d is None else (d if np.ndim(feed) == 1 else d[:, None])
+        out.update(product=p, holdup=tau * p / dd, error=_triangular_error(p))
+        out["cell_holdup"] = (tau * p / dd)[np.newaxis]
+    elif sc.method == "cells":
+        sol = solve_cells(S, b, feed, sc.network, d, sc.where)
+        out.update(product=sol.product, holdup=sol.holdup.sum(axis=0), error=_triangular_error(sol.product))
+        out["cell_holdup"] = sol.holdup
+        out["extras"]["solver"] = sol.method
+    elif sc.method == "plug_flow":
+        rates = S if d is None else S / d
+        p, h, err, info = plug_flow(rates, b, feed, _tau(T), holdup=holdup, blocks=blocks)
+        if d is not None and h is not None:
+            h = h / (d if np.ndim(feed) == 1 else d[:, None])
+        out.update(product=p, holdup=h, error=err)
+        out["extras"].update(info)
+    elif sc.method == "segregated":
+        p, h, err, info = segregated(S, b, feed, T, holdup=holdup, blocks=blocks)
+        out.update(product=p, holdup=h, error=err)
+        out["extras"].update(info)
+    if "blocks" in out["extras"]:
+        blocks = out["extras"].pop("blocks")
+        if cache is not None:
+            cache["blocks"] = blocks
+    if sc.method == "axial_fv":
+        sol = solve_axial(S, b, feed, T.tau, T.pe, v=d, w=sc.dispersion, tol=tol)
+        out.update(product=sol.product, holdup=sol.holdup, error=sol.error_estimate)
+        out["axial"] = sol
+        out["extras"].update(order=sol.order, control_volumes=int(sol.z.size - 1))
+    return out
+
+
+def _triangular_error(p) -> float:
+    # forward substitution with an M-matrix: every entry has relative error ~ N eps
+    return float(np.abs(p).max() * p.shape[0] * np.finfo(float).eps) if np.size(p) else 0.0
+
+
+def transfer_matrix(S, b, transport, d=None, *, where=None, dispersion=None, method=None,
+                    tol: float = 1e-8) -> np.ndarray:
+    """Transfer matrix P (N, N) of a linear mill: product = P @ feed.
+
+    Columns sum to 1 (mass conserving). Perfect mixing and tanks in series are
+    triangular solves with the identity as right-hand side (fast enough to build
+    whole circuits from); segregated flow applies E_hat(-K) to the identity; axial
+    dispersion with classification solves the discretised PDE for N right-hand sides
+    (O(N^3 M), the slow one).
+
+    Parameters
+    ----------
+    S : (N,) specific breakage rates [1/s], S_N = 0.
+    b : (N, N) fractional breakage distribution.
+    transport : rtd model, tau in s.
+    d : (N,) normalised discharge rates d_i* > 0, or None (no classification).
+    where, dispersion, method, tol : as :func:`steady_mill`.
+
+    Examples
+    --------
+    >>> import numpy as np, rtd
+    >>> P = transfer_matrix([1.0, 0.0], [[0, 0], [1, 0]], rtd.PerfectMixing(2.0))
+    >>> P.round(6).tolist()
+    [[0.333333, 0.0], [0.666667, 1.0]]
+    """
+    sc = _scene(S, b, transport, d, where, dispersion, method)
+    return _solve(sc, np.eye(sc.S.size), tol=tol, holdup=False)["product"]
+
+
+# ------------------------------------------------------------------------ results
+def _size_coords(n: int, x) -> dict:
+    coords = {"size": ("size", np.arange(1, n + 1), {"long_name": "size class (1 = coarsest)"})}
+    if x is not None:
+        xs = np.asarray(x, dtype=float) if not hasattr(x, "upper_m") else x.upper_m
+        if xs.shape != (n,):
+            raise InputError(f"x has shape {xs.shape}; expected ({n},) upper class sizes [m]")
+        coords["x"] = ("size", xs, {"units": "m", "long_name": "upper size of the class"})
+    return coords
+
+
+def _fractions(a: np.ndarray, axis: int = -1) -> np.ndarray:
+    total = a.sum(axis=axis, keepdims=True)
+    with np.errstate(invalid="ignore", divide="ignore"):
+        return np.where(total > 0, a / np.where(total > 0, total, 1.0), 0.0)
+
+
+def _profile(sc: _Scene, feed, solved, positions):
+    """Hold-up density tau c_i(z) [s] at fractional positions, or None."""
+    if positions is None:
+        return None
+    pos = np.atleast_1d(np.asarray(positions, dtype=float))
+    if pos.ndim != 1 or np.any(~np.isfinite(pos)) or np.any((pos < 0) | (pos > 1)):
+        raise InputError(f"positions = {positions!r}; expected fractions of the mill length in [0, 1]")
+    if sc.kind == "plug":
+        from millflow.batch import batch_grind
+        tau = _tau(sc.transport)
+        rates = sc.S if sc.d is None else sc.S / sc.d
+        flux = batch_grind(rates, sc.b, feed, tau * pos)
+        return pos, tau * flux / (1.0 if sc.d is None else sc.d)
+    if sc.kind == "axial":
+        sol = solved.get("axial")
+        if sol is None:  # segregated product; the profile needs the PDE
+            sol = solve_axial(sc.S, sc.b, feed, sc.transport.tau, sc.transport.pe, tol=1e-7)
+        dens = np.stack([np.interp(pos, sol.z, sol.density[:, i]) for i in range(sc.S.size)], axis=1)
+        return pos, dens
+    raise InputError(f"positions are given but transport {sc.transport!r} has no axis; expected "
+                     "rtd.PlugFlow or rtd.AxialDispersion (use locations 'cell:K' for cells)")
+
+
+def _samples(ds: xr.Dataset, locations) -> xr.DataArray:
+    """Mass fractions at named sampling locations: 'discharge', 'feed', 'holdup',
+    'cell:K' (1-based), 'z:0.5' (needs ``positions`` containing 0.5)."""
+    if isinstance(locations, dict):
+        names, specs = list(locations), list(locations.values())
+    else:
+        names = specs = [str(s) for s in locations]
+    rows = []
+    for name, spec in zip(names, specs):
+        if spec == "discharge":
+            rows.append(ds["product_fraction"].values)
+        elif spec == "feed":
+            rows.append(_fractions(ds["feed"].values))
+        elif spec == "holdup":
+            rows.append(ds["holdup_fraction"].values)
+        elif spec.startswith("cell:") and "cell_holdup" in ds:
+            k = int(spec[5:])
+            if not 1 <= k <= ds.sizes["cell"]:
+                raise InputError(f"location {name!r}: cell {k} does not exist; expected 1..{ds.sizes['cell']}")
+            rows.append(_fractions(ds["cell_holdup"].values[k - 1]))
+        elif spec.startswith("z:") and "profile" in ds:
+            z = float(spec[2:])
+            hit = np.flatnonzero(np.isclose(ds["position"].values, z, atol=1e-12))
+            if not hit.size:
+                raise InputError(f"location {name!r}: z = {z} is not among positions")
+            rows.append(_fractions(ds["profile"].values[hit[0]]))
+        else:
+            raise InputError(f"location {name!r} = {spec!r}; expected 'discharge', 'feed', 'holdup', "
+                             "'cell:K' (cell transports) or 'z:Y' (axial transports with positions)")
+    return xr.DataArray(np.array(rows), dims=("location", "size"), coords={"location": names},
+                        attrs={"units": "1", "long_name": "mass fraction at the sampling location"})
+
+
+def steady_mill(S, b, feed, transport, d=None, *, where=None, dispersion=None, method=None,
+                x=None, positions=None, locations=None, tol: float = 1e-8) -> xr.Dataset:
+    """Steady state of a continuous mill (eqs. 1-3 with any rtd transport).
+
+    Parameters
+    ----------
+    S : (N,) specific breakage rates [1/s], coarse -> fine, S_N = 0 (sink).
+    b : (N, N) fractional breakage distribution b_ij (strictly lower triangular).
+    feed : (N,) solids feed flows per class (any mass-rate unit, e.g. fractions of a
+        unit feed rate); the product has the same unit.
+    transport : an rtd model with tau in s (PerfectMixing, PlugFlow, TanksInSeries,
+        RecirculatingCells, CompartmentNetwork, AxialDispersion, Series, Parallel, ...).
+    d : (N,) normalised discharge rates d_i* = tau d_i > 0, or None.
+    where : where classification acts: "discharge" (default for cells: exit flows),
+        "cells" (every cell outlet), a sequence of 1-based cell numbers (the outlets of
+        those cells), "axis" (plug flow and axial dispersion: axial velocity of class i
+        is d_i* u).
+    dispersion : (N,) relative axial dispersion of each class (AxialDispersion only).
+    method : one of :data:`METHODS` to force a method (e.g. for cross-checks); None
+        picks the cheapest exact one.
+    x : (N,) upper class sizes [m] or a SizeGrid, for the ``x`` coordinate.
+    positions : fractional axial positions in [0, 1] for profiles (plug, axial).
+    locations : sampling locations ('discharge', 'feed', 'holdup', 'cell:K', 'z:Y'),
+        a list or a dict name -> spec; gives variable ``sample`` (location, size).
+    tol : error target of the discretised axial path (max abs error of the product).
+
+    Returns
+    -------
+    xarray.Dataset with ``product`` and ``product_fraction`` (size), ``feed``,
+    ``holdup`` [s] (hold-up per unit feed rate) and ``holdup_fraction``; for cells
+    ``cell_holdup`` (cell, size) [s]; with positions ``profile`` (position, size) [s]
+    (hold-up density per unit fractional length) and ``profile_fraction``; with
+    locations ``sample``. Attributes ``method``, ``error_estimate``, ``runtime_s``,
+    ``mass_balance_error``, ``transport``, ``classification``.
+
+    Examples
+    --------
+    >>> import rtd
+    >>> ds = steady_mill([1.0, 0.0], [[0, 0], [1, 0]], [1.0, 0.0], rtd.PerfectMixing(2.0))
+    >>> ds.attrs["method"], round(float(ds["product"][0]), 6)
+    ('well_mixed', 0.333333)
+    """
+    start = time.perf_counter()
+    sc = _scene(S, b, transport, d, where, dispersion, method)
+    feed = _check_feed(feed, sc.S.size)
+    if feed.ndim != 1:
+        raise InputError(f"feed has shape {feed.shape}; expected ({sc.S.size},) (use transfer_matrix for many feeds)")
+    solved = _solve(sc, feed, tol=tol)
+    prof = _profile(sc, feed, solved, positions)
+    runtime = time.perf_counter() - start
+    product, holdup = solved["product"], solved["holdup"]
+    data = {
+        "feed": ("size", feed, {"units": "feed units", "long_name": "feed flow"}),
+        "product": ("size", product, {"units": "feed units", "long_name": "product (discharge) flow"}),
+        "product_fraction": ("size", _fractions(product), {"units": "1", "long_name": "product mass fraction"}),
+        "holdup": ("size", holdup, {"units": "s", "long_name": "hold-up per unit feed rate"}),
+        "holdup_fraction": ("size", _fractions(holdup), {"units": "1", "long_name": "hold-up mass fraction"}),
+    }
+    coords = _size_coords(sc.S.size, x)
+    if "cell_holdup" in solved:
+        data["cell_holdup"] = (("cell", "size"), solved["cell_holdup"],
+                               {"units": "s", "long_name": "hold-up of each cell per unit feed rate"})
+        coords["cell"] = ("cell", np.arange(1, solved["cell_holdup"].shape[0] + 1), {"long_name": "cell (1 = feed end)"})
+    if prof is not None:
+        coords["position"] = ("position", prof[0], {"units": "1", "long_name": "y / L"})
+        data["profile"] = (("position", "size"), prof[1],
+                           {"units": "s", "long_name": "hold-up density per unit feed rate and fractional length"})
+        data["profile_fraction"] = (("position", "size"), _fractions(prof[1]),
+                                    {"units": "1", "long_name": "local hold-up mass fraction"})
+    ds = xr.Dataset(data, coords=coords)
+    ds.attrs.update(
+        method=sc.method,
+        error_estimate=float(solved["error"]),
+        runtime_s=float(runtime),
+        mass_balance_error=float(abs(product.sum() - feed.sum())),
+        transport=repr(transport),
+        classification="none" if sc.d is None else f"d* at {sc.where}",
+        tau_s=_tau(transport),
+    )
+    for key, value in solved["extras"].items():
+        ds.attrs[key] = value if not isinstance(value, list) else str(value)
+    if locations is not None:
+        ds["sample"] = _samples(ds, locations)
+    return ds
+
+
+@dataclass(frozen=True, eq=False)
+class Mill:
+    """A continuous mill: breakage, transport and classification, composed.
+
+    ``Mill(S, b, transport=rtd.TanksInSeries(600.0, 3), d=None)``: what is absent is
+    None; the repr shows the composition. Methods delegate to :func:`steady_mill`,
+    :func:`transfer_matrix` and :func:`millflow.mill_transient.transient_mill`.
+    """
+
+    S: np.ndarray = field(repr=False)
+    b: np.ndarray = field(repr=False)
+    transport: object
+    d: np.ndarray | None = field(default=None, repr=False)
+    where: str | None = None
+    dispersion: np.ndarray | None = field(default=None, repr=False)
+    x: np.ndarray | None = field(default=None, repr=False)
+
+    def __post_init__(self):
+        sc = _scene(self.S, self.b, self.transport, self.d, self.where, self.dispersion)
+        object.__setattr__(self, "S", sc.S)
+        object.__setattr__(self, "b", sc.b)
+        object.__setattr__(self, "d", sc.d)
+        object.__setattr__(self, "where", sc.where)
+        object.__setattr__(self, "_scene", sc)
+        object.__setattr__(self, "_cache", {})
+
+    def __repr__(self):
+        cls = "None" if self.d is None else f"d* at {self.where}"
+        return (f"Mill(N={self.S.size}, transport={self.transport!r}, classification={cls}, "
+                f"method={self.method!r})")
+
+    @property
+    def method(self) -> str:
+        """The method :meth:`steady` runs."""
+        return self._scene.method
+
+    def product(self, feed, tol: float = 1e-8) -> np.ndarray:
+        """Product flows (N,) or (N, m) for feed (N,) or (N, m): the fast path (inputs
+        validated once at construction, no Dataset, the spectral decomposition of the
+        plug-flow and segregated paths kept after the first call)."""
+        feed = _check_feed(feed, self.S.size)
+        return _solve(self._scene, feed, tol=tol, holdup=False, cache=self._cache)["product"]
+
+    def steady(self, feed, **kwargs) -> xr.Dataset:
+        """:func:`steady_mill` for this mill."""
+        return steady_mill(self.S, self.b, feed, self.transport, self.d, where=self.where,
+                           dispersion=self.dispersion, x=self.x, **kwargs)
+
+    def transfer_matrix(self, **kwargs) -> np.ndarray:
+        """:func:`transfer_matrix` for this mill."""
+        return transfer_matrix(self.S, self.b, self.transport, self.d, where=self.where,
+                               dispersion=self.dispersion, **kwargs)
+
+    def transient(self, t, **kwargs) -> xr.Dataset:
+        """:func:`millflow.mill_transient.transient_mill` for this mill."""
+        from millflow.mill_transient import transient_mill
+        return transient_mill(self.S, self.b, self.transport, t, d=self.d, where=self.where,
+                              x=self.x, **kwargs)

@@ -1,0 +1,29 @@
+"""The flowsheet benchmark suite runs and its target case agrees with the substitution baseline."""
+import tomllib
+from pathlib import Path
+
+from millflow.bench import flowsheet as bench
+
+FLOWSHEETS = Path(__file__).resolve().parents[2] / "flowsheets"
+
+
+def test_bench_case_matches_example_file():
+    # the embedded benchmark circuit is the example file with another grid and 10 cells
+    a = tomllib.loads(bench.CLOSED_CIRCUIT_TOML)
+    b = tomllib.loads((FLOWSHEETS / "closed_circuit_ball_mill.toml").read_text())
+    b["units"]["ball_mill"]["transport"]["n"] = 10
+    assert a["units"] == b["units"] and a["streams"] == b["streams"] and a["materials"] == b["materials"]
+
+
+def test_bench_rows():
+    rows = bench.run(quick=True)
+    target = rows[0]
+    assert target["case"] == "closed_circuit_N100_cells10"
+    assert {"case", "method", "runtime_s", "max_abs_error", "mass_balance_error", "ratio_vs_baseline"} <= set(target)
+    assert target["n_unknowns"] == 500
+    assert target["mass_balance_error"] < 1e-12
+    # substitution stops at a relative change of 1e-13 per sweep; the loop gain < 1 bounds
+    # its remaining error to ~1e-11 of the flows (up to ~100 kg/s)
+    assert target["max_abs_error"] < 1e-9
+    assert len(rows) >= 2 + 5
+    assert "target" in bench.format_table(rows)
