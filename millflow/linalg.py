@@ -325,20 +325,23 @@ def _block_expm(block: np.ndarray, t: np.ndarray) -> np.ndarray:
     return total
 
 
-def contour_funm(fun, block: np.ndarray, n_points: int = 64, *, analytic_left: float = 0.0) -> np.ndarray:
+def contour_funm(fun, block: np.ndarray, n_points: int = 64, *, analytic_left: float = 0.0,
+                 radius_factor: float = 0.9, v: np.ndarray | None = None) -> np.ndarray:
     """fun(block) for a small lower-triangular block with clustered eigenvalues.
 
-    Taylor series about the mean mu of the diagonal, f(B) = sum_k c_k ((B - mu I)/r)^k,
-    summed by Horner on the block; the scaled Taylor coefficients
-    c_k = f^(k)(mu) r^k / k! come from the Cauchy integral on the circle |z - mu| = r,
+    Taylor series about the centre c of the diagonal's range, f(B) = sum_k c_k
+    ((B - c I)/r)^k, summed by Horner on the block; the scaled Taylor coefficients
+    c_k = f^(k)(c) r^k / k! come from the Cauchy integral on the circle |z - c| = r,
     evaluated by the trapezoidal rule (one FFT of fun on the circle). The radius is
-    r = 0.9 rho, rho = mu - analytic_left the distance to the half plane where fun may
-    be singular (0 for any Laplace transform of a density, which is analytic for
-    Re s > 0), so the coefficients are accurate to eps * max|f| / 0.9^k and aliasing
-    (0.9^n_points) is negligible with >= 512 points. Unlike a resolvent integral on a
-    small circle, this does not amplify rounding by (|N| / r)^k for the nilpotent
-    part N of the block (breakage makes |N| ~ mu): for a completely monotone transform
-    and breakage (N <= 0) every term is >= 0, so nothing cancels.
+    r = radius_factor * rho, rho = c - analytic_left the distance to the half plane
+    where fun may be singular (0 for any Laplace transform of a density: analytic and
+    |E_hat(z)| <= 1 for Re z > 0), so the coefficients are accurate to
+    eps * max|f| / radius_factor^k and aliasing (radius_factor^n_points) is negligible
+    with >= 512 points. Unlike a resolvent integral on a small circle, this does not
+    amplify rounding by (|N| / r)^k for the nilpotent part N of the block (breakage
+    makes |N| ~ c): for a completely monotone transform and breakage (N <= 0) the terms
+    do not cancel. The half-range of the diagonal must stay below 0.75 r (else
+    SolverError: the cluster is too wide for one Taylor series).
 
     Parameters
     ----------
@@ -346,37 +349,48 @@ def contour_funm(fun, block: np.ndarray, n_points: int = 64, *, analytic_left: f
     block : (p, p) lower-triangular block.
     n_points : minimum number of points on the circle (raised to >= 512 if needed).
     analytic_left : fun is analytic for Re z > analytic_left (-inf for entire fun).
+    radius_factor : r / rho, in (0, 1); two factors give two independent evaluations
+        whose difference estimates the rounding error.
+    v : (p,) or (p, m), optional: return f(block) v, Horner on the vectors (p^2 per
+        term instead of p^3). fun must be real on the real axis (coefficients real).
     """
     block = np.asarray(block, dtype=float)
     p = block.shape[0]
     ev = np.diag(block).copy()
     if not np.tril(block, -1).any():
-        return np.diag(np.real(np.asarray(fun(ev.astype(complex)), dtype=complex)))
-    mu = float(ev.mean())
-    G = block - mu * np.eye(p)
-    spread = float(np.abs(ev - mu).max())
-    scale = float(np.abs(G).sum(axis=0).max())
+        diag = np.real(np.asarray(fun(ev.astype(complex)), dtype=complex))
+        if v is None:
+            return np.diag(diag)
+        v = np.asarray(v, dtype=float)
+        return (diag if v.ndim == 1 else diag[:, np.newaxis]) * v
+    centre = 0.5 * float(ev.max() + ev.min())
+    half = 0.5 * float(ev.max() - ev.min())
+    G = block - centre * np.eye(p)
     if np.isfinite(analytic_left):
-        rho = mu - float(analytic_left)
-        if rho <= spread:
-            raise SolverError(
-                f"contour_funm: eigenvalues {ev.min():.3g}..{ev.max():.3g} reach the singular "
-                f"region Re z <= {analytic_left:.3g} of the function")
-        r = 0.9 * rho
+        r = radius_factor * (centre - float(analytic_left))
     else:  # entire function: a circle wide enough for the block's norm
-        r = max(2.0 * scale, abs(mu), 1e-300)
-    if spread >= r:
-        raise SolverError(f"contour_funm: cluster spread {spread:.3g} exceeds the radius {r:.3g}")
+        r = max(2.0 * float(np.abs(G).sum(axis=0).max()), abs(centre), 1e-300)
+    if r <= 0 or half > 0.75 * r:
+        raise SolverError(
+            f"contour_funm: eigenvalues {ev.min():.3g}..{ev.max():.3g} are too spread for a Taylor "
+            f"series inside the analytic region Re z > {analytic_left:.3g}")
     eps = np.finfo(float).eps
-    extra = int(np.ceil(np.log(eps) / np.log(spread / r))) if spread > 0 else 0
+    extra = int(np.ceil(np.log(eps) / np.log(half / r))) if half > 0 else 0
     terms = p + min(extra, 400)
     n = max(int(n_points), 512)
     while n < 4 * terms:
         n *= 2
     theta = 2.0 * np.pi * np.arange(n) / n
-    values = np.asarray(fun(mu + r * np.exp(1j * theta)), dtype=complex)
+    values = np.asarray(fun(centre + r * np.exp(1j * theta)), dtype=complex)
     coeffs = np.fft.fft(values)[: terms + 1] / n
     Gs = G / r
+    if v is not None:  # f real on the real axis: Taylor coefficients about c are real
+        v = np.asarray(v, dtype=float)
+        c = coeffs.real
+        out = c[terms] * v
+        for k in range(terms - 1, -1, -1):
+            out = Gs @ out + c[k] * v
+        return out
     result = coeffs[terms] * np.eye(p, dtype=complex)
     for k in range(terms - 1, -1, -1):
         result = result @ Gs

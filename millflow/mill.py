@@ -15,7 +15,13 @@ method that is exact for them (``METHODS``):
 - ``segregated``: any other ``rtd`` model without classification, product
   E_hat(-K) f (exact for first-order breakage, :mod:`millflow.mill_segregated`);
 - ``axial_fv``: ``rtd.AxialDispersion`` (closed) with size-dependent axial velocity
-  or dispersion, finite volumes with Richardson extrapolation (:mod:`millflow.mill_axial`).
+  or dispersion, finite volumes with Richardson extrapolation (:mod:`millflow.mill_axial`);
+  also the fallback of axial dispersion when the eigenbasis of segregated flow cancels;
+- ``quadrature`` (on request only): segregated flow as int E(t) exp(K t) f dt by adaptive
+  quadrature, for rates whose eigenbasis cancels (slow: seconds);
+- ``composed``: ``rtd.Series`` (each part grinds the previous part's product: the
+  transform of a series is the product of the parts') and ``rtd.Parallel`` (feed split
+  by the weights), every part by its own method.
 
 Hold-up is reported per unit solids feed rate [s] (mass in the mill / feed mass rate;
 it sums to the mean residence time of the solids) and as mass fractions. For a
@@ -29,6 +35,7 @@ Results are xarray Datasets: dimension ``size`` (coordinate ``x`` [m] when given
 """
 from __future__ import annotations
 
+import dataclasses
 import time
 from dataclasses import dataclass, field
 
@@ -37,16 +44,16 @@ import xarray as xr
 
 import rtd
 from millflow.breakage import validate_b, validate_rates
-from millflow.errors import InputError
+from millflow.errors import InputError, SolverError
 from millflow.linalg import solve_well_mixed
 from millflow.mill_axial import solve_axial
 from millflow.mill_cells import network_of, solve_cells
-from millflow.mill_segregated import plug_flow, segregated
+from millflow.mill_segregated import plug_flow, segregated, segregated_quadrature
 
 __all__ = ["METHODS", "Mill", "steady_mill", "transfer_matrix", "choose_method", "WHERE"]
 
 #: Steady-state methods by name (see the module docstring).
-METHODS = ("well_mixed", "cells", "plug_flow", "segregated", "axial_fv")
+METHODS = ("well_mixed", "cells", "plug_flow", "segregated", "axial_fv", "composed", "quadrature")
 #: Where classification acts: at the discharge (exit flows), at every cell outlet
 #: (every flow of a cell network), along the axis (axial velocity of class i = d_i* u).
 WHERE = ("discharge", "cells", "axis")
@@ -60,6 +67,10 @@ def _kind(transport) -> str:
         return "plug"
     if isinstance(transport, rtd.AxialDispersion):
         return "axial" if transport.bc == "closed" else "rtd"
+    if isinstance(transport, rtd.Series):
+        return "series"
+    if isinstance(transport, rtd.Parallel):
+        return "parallel"
     if network_of(transport) is not None:
         return "network"
     if hasattr(transport, "laplace") and hasattr(transport, "mean"):
@@ -75,6 +86,8 @@ _WHERE_OK = {
     "plug": ("axis",),
     "axial": ("axis",),
     "rtd": (),
+    "series": (),
+    "parallel": (),
 }
 _WHERE_DEFAULT = {"perfect_mixing": "discharge", "network": "discharge", "plug": "axis", "axial": "axis"}
 
@@ -122,6 +135,7 @@ class _Scene:
     dispersion: np.ndarray | None
     method: str
     network: object = None
+    forced: bool = False
 
 
 def _scene(S, b, transport, d=None, where=None, dispersion=None, method=None) -> _Scene:
@@ -160,7 +174,7 @@ def _scene(S, b, transport, d=None, where=None, dispersion=None, method=None) ->
         raise InputError(f"method = {method!r} does not apply to {transport!r}"
                          f"{' with classification' if d is not None else ''}; the exact method is {chosen!r}")
     net = network_of(transport) if method == "cells" else None
-    return _Scene(S, b, transport, kind, d, where, dispersion, method, net)
+    return _Scene(S, b, transport, kind, d, where, dispersion, method, net, method != chosen)
 
 
 def _cell_list(where, n: int) -> tuple:
@@ -185,17 +199,51 @@ def choose_method(kind: str, classified: bool) -> str:
         return "plug_flow"
     if kind == "axial":
         return "axial_fv" if classified else "segregated"
+    if kind in ("series", "parallel"):
+        return "composed"
     return "segregated"
 
 
 def _method_applies(method, kind, d, dispersion) -> bool:
-    if method == "segregated":
-        return d is None and dispersion is None
+    if method in ("segregated", "quadrature"):
+        return d is None and dispersion is None and kind != "plug"
     if method == "cells":
         return kind in ("perfect_mixing", "network")
     if method == "axial_fv":
         return kind == "axial"
     return False
+
+
+def _part_scene(sc: _Scene, part) -> _Scene:
+    """Scene of one part of a Series or Parallel (breakage already validated)."""
+    kind = _kind(part)
+    method = choose_method(kind, False)
+    net = network_of(part) if method == "cells" else None
+    return _Scene(sc.S, sc.b, part, kind, None, None, None, method, net, False)
+
+
+def _solve_composed(sc: _Scene, feed, *, tol: float, holdup: bool, cache: dict | None = None):
+    """Series: each part grinds the previous part's product (first-order breakage:
+    E_hat of a series is the product of the parts' E_hat, applied in turn); Parallel:
+    the feed split by the weights. Hold-ups add."""
+    parts = sc.transport.parts
+    weights = getattr(sc.transport, "weights", None)
+    product, hold, error, methods = 0.0, 0.0, 0.0, []
+    stream = feed
+    for k, part in enumerate(parts):
+        sub = _part_scene(sc, part)
+        inflow = stream if weights is None else weights[k] * feed
+        r = _solve(sub, inflow, tol=tol, holdup=holdup, cache=cache)
+        methods.append(r["method"])
+        error += r["error"]
+        if holdup:
+            hold = hold + r["holdup"]
+        if weights is None:
+            stream = r["product"]
+        else:
+            product = product + r["product"]
+    product = stream if weights is None else product
+    return product, (hold if holdup else None), error, methods
 
 
 def _tau(transport) -> float:
@@ -211,7 +259,8 @@ def _solve(sc: _Scene, feed, *, tol: float, holdup: bool = True, cache: dict | N
 
     ``cache`` (a Mill's) keeps the spectral decomposition of the breakage matrix
     between calls of the plug-flow and segregated paths."""
-    blocks = None if cache is None else cache.get("blocks")
+    key = "plug" if sc.method == "plug_flow" else "segregated"  # the two choose gaps differently
+    blocks = None if cache is None else cache.get(key)
     S, b, d, T = sc.S, sc.b, sc.d, sc.transport
     out = {"extras": {}}
     if sc.method == "well_mixed":
@@ -233,18 +282,43 @@ def _solve(sc: _Scene, feed, *, tol: float, holdup: bool = True, cache: dict | N
         out.update(product=p, holdup=h, error=err)
         out["extras"].update(info)
     elif sc.method == "segregated":
-        p, h, err, info = segregated(S, b, feed, T, holdup=holdup, blocks=blocks)
-        out.update(product=p, holdup=h, error=err)
+        try:
+            p, h, err, info = segregated(S, b, feed, T, holdup=holdup, blocks=blocks)
+        except SolverError as exc:
+            if sc.forced or sc.kind != "axial":
+                raise
+            p, err, info = None, np.inf, {"fallback_reason": str(exc)}
+        scale = float(np.abs(feed).sum(axis=0).max()) if np.size(feed) else 0.0
+        if not sc.forced and sc.kind != "axial" and err > max(tol, 1e-10) * max(scale, 1.0):
+            info["advice"] = ("the eigenbasis cancels for these rates; method='quadrature' integrates "
+                              "E(t) exp(K t) f over t instead (slower, exact to its tolerance)")
+        if sc.kind == "axial" and not sc.forced and err > max(tol, 1e-10) * max(scale, 1.0):
+            # rates so close over many classes that the eigenbasis cancels: the
+            # finite volumes never divide by rate differences
+            info.pop("blocks", None)
+            sc = dataclasses.replace(sc, method="axial_fv")
+            out["extras"]["fallback"] = f"segregated error estimate {err:.1e} > tol; axial_fv"
+        else:
+            out.update(product=p, holdup=h, error=err)
         out["extras"].update(info)
     if "blocks" in out["extras"]:
         blocks = out["extras"].pop("blocks")
         if cache is not None:
-            cache["blocks"] = blocks
+            cache[key] = blocks
+    if sc.method == "quadrature":
+        p, h, err, info = segregated_quadrature(S, b, feed, T, holdup=holdup, tol=min(tol, 1e-10))
+        out.update(product=p, holdup=h, error=err)
+        out["extras"].update(info)
+    if sc.method == "composed":
+        p, h, err, methods = _solve_composed(sc, feed, tol=tol, holdup=holdup, cache=cache)
+        out.update(product=p, holdup=h, error=err)
+        out["extras"]["parts"] = ", ".join(methods)
     if sc.method == "axial_fv":
         sol = solve_axial(S, b, feed, T.tau, T.pe, v=d, w=sc.dispersion, tol=tol)
         out.update(product=sol.product, holdup=sol.holdup, error=sol.error_estimate)
         out["axial"] = sol
         out["extras"].update(order=sol.order, control_volumes=int(sol.z.size - 1))
+    out["method"] = sc.method
     return out
 
 
@@ -417,7 +491,8 @@ def steady_mill(S, b, feed, transport, d=None, *, where=None, dispersion=None, m
     if "cell_holdup" in solved:
         data["cell_holdup"] = (("cell", "size"), solved["cell_holdup"],
                                {"units": "s", "long_name": "hold-up of each cell per unit feed rate"})
-        coords["cell"] = ("cell", np.arange(1, solved["cell_holdup"].shape[0] + 1), {"long_name": "cell (1 = feed end)"})
+        n_cells = solved["cell_holdup"].shape[0]
+        coords["cell"] = ("cell", np.arange(1, n_cells + 1), {"long_name": "cell (1 = feed end)"})
     if prof is not None:
         coords["position"] = ("position", prof[0], {"units": "1", "long_name": "y / L"})
         data["profile"] = (("position", "size"), prof[1],
@@ -426,7 +501,7 @@ def steady_mill(S, b, feed, transport, d=None, *, where=None, dispersion=None, m
                                     {"units": "1", "long_name": "local hold-up mass fraction"})
     ds = xr.Dataset(data, coords=coords)
     ds.attrs.update(
-        method=sc.method,
+        method=solved["method"],
         error_estimate=float(solved["error"]),
         runtime_s=float(runtime),
         mass_balance_error=float(abs(product.sum() - feed.sum())),

@@ -165,7 +165,9 @@ def solve_axial(S, b, feed, tau: float, pe: float, v=None, w=None, *, tol: float
         z, c, p = solve_axial_grid(S, b, feed, tau, pe, m_cells, v, w)
         return AxialSolution(p, z, tau * c, _holdup(z, tau * c), float("nan"), float("nan"), [])
     n_cls = np.asarray(S).size
-    ratio = (np.ones(n_cls) if v is None else np.asarray(v, float)) / (np.ones(n_cls) if w is None else np.asarray(w, float))
+    v_arr = np.ones(n_cls) if v is None else np.asarray(v, float)
+    w_arr = np.ones(n_cls) if w is None else np.asarray(w, float)
+    ratio = v_arr / w_arr
     cell_pe = float(ratio.max()) * pe  # divided by M: cell Peclet number of the grid
     M = int(m_start)
     grids = [solve_axial_grid(S, b, feed, tau, pe, M * k, v, w) for k in (1, 2)]

@@ -17,51 +17,74 @@ rates are exact too.
 """
 from __future__ import annotations
 
-import math
-
 import numpy as np
 
 from millflow.errors import SolverError
-from millflow.linalg import DEFAULT_CLUSTER_GAP, SpectralBlocks, contour_funm
+from millflow.linalg import SpectralBlocks, contour_funm
 
 __all__ = ["decompose", "apply_function", "survival_transform", "segregated", "plug_flow"]
 
 _TARGET = 1e-13
 
 
-def decompose(S, b, feed=None) -> SpectralBlocks:
-    """Block eigen-decomposition with the narrowest cluster gap that is accurate.
+#: Cluster gaps tried for segregated flow, narrowest first (see :func:`decompose`).
+SEGREGATED_GAPS = (1e-3, 0.05, 0.2)
 
-    Gaps 0.05 then 0.2 (never one cluster for everything: a Taylor series about the
-    mean rate converges only for clusters narrower than the distance to the
-    singularities of E_hat); the one with the smaller cancellation estimate wins.
+
+def _feasible(blocks: SpectralBlocks) -> bool:
+    """Every cluster narrow enough for one Taylor series (half-range <= 0.5 centre)."""
+    for idx in blocks.clusters:
+        s = blocks.S[idx]
+        if s.max() - s.min() > 0.5 * (s.max() + s.min()):
+            return False
+    return True
+
+
+def decompose(S, b, feed=None) -> SpectralBlocks:
+    """Block eigen-decomposition for segregated flow.
+
+    Gaps of :data:`SEGREGATED_GAPS` in turn; the first whose cancellation estimate is
+    below 1e-13 and whose clusters are narrow enough for :func:`contour_funm` wins,
+    else the feasible one with the smallest estimate (never one cluster for all
+    rates: a Taylor series about one rate cannot span decades).
     """
     best = None
-    for gap in (DEFAULT_CLUSTER_GAP, 0.2):
+    for gap in SEGREGATED_GAPS:
         blocks = SpectralBlocks.from_rates(S, b, gap=gap)
+        if not _feasible(blocks):
+            continue
         est = blocks.cancellation(feed)
         if best is None or est < best[1]:
             best = (blocks, est)
         if est <= _TARGET:
             break
+    if best is None:
+        raise SolverError("segregated flow: clusters of close rates are too wide for every cluster gap")
     return best[0]
 
 
 def apply_function(blocks: SpectralBlocks, fun, V, analytic_left: float = 0.0,
-                   block_fun=None) -> np.ndarray:
+                   block_fun=None, errors: list | None = None) -> np.ndarray:
     """fun(A) V for V (N,) or (N, m) (SpectralBlocks.apply for several columns).
 
-    Inside clusters ``block_fun(block)`` if given, else :func:`contour_funm`."""
+    Inside clusters ``block_fun(block)`` if given, else :func:`contour_funm` at two
+    radii (0.9 and 0.7 of the distance to the singular half plane); their difference,
+    mapped back through X, is appended to ``errors`` (a rounding estimate).
+    """
     V = np.asarray(V, dtype=float)
     w = blocks.coordinates(V)
     vals = np.real(np.asarray(fun(blocks.S), dtype=complex))
     coeff = (vals if V.ndim == 1 else vals[:, np.newaxis]) * w
+    delta = np.zeros_like(coeff)
     for idx, block in zip(blocks.clusters, blocks.blocks):
         if block_fun is not None:
-            fb = block_fun(block)
+            coeff[idx] = block_fun(block) @ w[idx]
         else:
-            fb = contour_funm(fun, block, analytic_left=analytic_left)
-        coeff[idx] = fb @ w[idx]
+            coeff[idx] = contour_funm(fun, block, analytic_left=analytic_left, radius_factor=0.9, v=w[idx])
+            other = contour_funm(fun, block, analytic_left=analytic_left, radius_factor=0.7, v=w[idx])
+            delta[idx] = np.abs(coeff[idx] - other)
+    if errors is not None:
+        errors.append(float((np.abs(blocks.X) @ delta).max()) if delta.size else 0.0)
     return blocks.X @ coeff
 
 
@@ -81,16 +104,6 @@ def survival_transform(model):
     return G
 
 
-def analytic_left_of(model) -> float:
-    """Left edge of the half plane where the model's transform is analytic (<= 0)."""
-    value = getattr(model, "analytic_for_re_s_greater_than", 0.0)
-    try:
-        value = float(value)
-    except (TypeError, ValueError):
-        return 0.0
-    return min(value, 0.0) if not math.isnan(value) else 0.0
-
-
 def segregated(S, b, feed, model, *, holdup: bool = True, blocks: SpectralBlocks | None = None):
     """Product, hold-up per unit feed rate [s] and error estimate by segregated flow.
 
@@ -106,17 +119,15 @@ def segregated(S, b, feed, model, *, holdup: bool = True, blocks: SpectralBlocks
     # |E_hat(s)| <= E_hat(Re s) <= 1 for every RTD, so the Cauchy integral cannot pick
     # up the huge values near a high-order pole (tanks in series: (1 + s tau/n)^-n)
     left = 0.0
-    try:
-        product = apply_function(blocks, model.laplace, feed, left)
-        hold = apply_function(blocks, survival_transform(model), feed, left) if holdup else None
-    except SolverError:
-        # clusters too wide for the Taylor series: rebuild with the narrowest gap
-        blocks = SpectralBlocks.from_rates(S, b, gap=DEFAULT_CLUSTER_GAP)
-        product = apply_function(blocks, model.laplace, feed, left)
-        hold = apply_function(blocks, survival_transform(model), feed, left) if holdup else None
+    errors = []
+    product = apply_function(blocks, model.laplace, feed, left, errors=errors)
+    hold = None
+    if holdup:
+        hold = apply_function(blocks, survival_transform(model), feed, left, errors=errors)
+        errors[-1] /= max(float(model.mean), 1e-300)  # hold-up error in units of tau
     scale = float(np.abs(feed).sum(axis=0).max()) if feed.size else 0.0
     cancel = blocks.cancellation(feed if feed.ndim == 1 else None)
-    error = 4.0 * cancel * max(scale, 1.0) + 8 * np.finfo(float).eps * scale
+    error = 4.0 * cancel * max(scale, 1.0) + 8 * np.finfo(float).eps * scale + max(errors, default=0.0)
     info = {"cluster_gap": float(blocks.gap), "cluster_sizes": [int(c.size) for c in blocks.clusters],
             "blocks": blocks}
     return _clip(product, error), _clip(hold, error * max(float(model.mean), 1e-300)), float(error), info
@@ -141,8 +152,8 @@ def plug_flow(S, b, feed, tau: float, *, holdup: bool = True, blocks: SpectralBl
 
     S = np.asarray(S, dtype=float)
     feed = np.asarray(feed, dtype=float)
-    if blocks is None:
-        blocks = decompose(S, b, feed if feed.ndim == 1 else None)
+    if blocks is None:  # exp and its integral are exact on any cluster: the core's choice
+        blocks = SpectralBlocks.from_rates(S, b, feed=feed if feed.ndim == 1 else None)
 
     def expm_block(B):
         return _block_expm(B, np.array([tau]))[0]
@@ -169,3 +180,45 @@ def plug_flow(S, b, feed, tau: float, *, holdup: bool = True, blocks: SpectralBl
     info = {"cluster_gap": float(blocks.gap), "cluster_sizes": [int(c.size) for c in blocks.clusters],
             "blocks": blocks}
     return _clip(product, error), _clip(hold, error * tau), float(error), info
+
+
+def segregated_quadrature(S, b, feed, model, *, holdup: bool = True, tol: float = 1e-10):
+    """Segregated flow by adaptive quadrature over the residence time:
+
+        product = a f + int_0^inf E(t) exp(K t) f dt,   hold-up = int_0^inf (1 - F(t)) exp(K t) f dt,
+
+    a the bypass atom of E at t = 0. exp(K t) f by :meth:`SpectralBlocks.expm_apply`,
+    exact on clusters of any width (no division by rate differences), so this is the
+    fallback where the eigenbasis of :func:`segregated` cancels. ``scipy.integrate.
+    quad_vec`` (max norm) gives the error estimate. feed must be (N,).
+    Returns like :func:`segregated`.
+    """
+    from scipy.integrate import quad_vec
+
+    S = np.asarray(S, dtype=float)
+    feed = np.asarray(feed, dtype=float)
+    blocks = SpectralBlocks.from_rates(S, b, feed=feed)
+    scale = max(float(np.abs(feed).sum()), 1e-300)
+
+    def integrand(t):
+        m = blocks.expm_apply(feed, np.array([t]))[0]
+        e = float(np.asarray(model.pdf(t)))
+        if not holdup:
+            return e * m
+        return np.concatenate([e * m, (1.0 - float(np.asarray(model.cdf(t)))) * m])
+
+    mean = float(model.mean)
+    total = 0.0
+    error = 0.0
+    # split at multiples of the mean: the density and exp(K t) f vary on those scales
+    edges = [0.0, 0.5 * mean, 2.0 * mean, 8.0 * mean, np.inf]
+    for lo, hi in zip(edges[:-1], edges[1:]):
+        part, err = quad_vec(integrand, lo, hi, epsabs=tol * scale, epsrel=0.0, norm="max", limit=400)
+        total = total + part
+        error += float(err)
+    n = S.size
+    product = total[:n] + float(getattr(model, "atom_at_zero", 0.0)) * feed
+    hold = total[n:] if holdup else None
+    error += 4.0 * blocks.cancellation(feed) * scale
+    info = {"cluster_gap": float(blocks.gap), "cluster_sizes": [int(c.size) for c in blocks.clusters]}
+    return _clip(product, error), _clip(hold, error * mean), float(error), info

@@ -248,7 +248,7 @@ class AxialDispersion(RTDModel):
                 out = np.exp(0.5 * self.pe * (1 - a)) / a
         else:
             out = closed_transform(p, self.pe)
-        return out.real if real else out
+        return (out.real if real else out)[()]  # 0-d array -> numpy scalar
 
     @property
     def mean(self) -> float:

@@ -184,7 +184,7 @@ class CompartmentNetwork:
         m = flat[:, None, None] * np.eye(self.n)[None] - a[None]
         x = np.linalg.solve(m, np.broadcast_to(self.inlet, (flat.size, self.n))[..., None])[..., 0]
         out = (self.bypass + (1 - self.bypass) * (x @ self._w())).reshape(s.shape)
-        return out.real if real else out
+        return (out.real if real else out)[()]  # 0-d array -> numpy scalar
 
     def _moment(self, k: int) -> float:
         """k-th raw moment k! w^T (-A)^-(k+1) u times (1 - b)."""

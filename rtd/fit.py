@@ -110,7 +110,11 @@ class FitResult:
         """Readable table of estimates, standard errors and fit statistics."""
         lines = [f"{self.model!r}  ({self.kind} data, {self.n_data} points)"]
         for k, (v, s) in self.params.items():
-            lines.append(f"  {k:<7s} = {v:.6g}" + (f" +/- {s:.3g} (se)" if s is not None else " (fixed)"))
+            if s is None:
+                tail = " (fixed)"
+            else:
+                tail = f" +/- {s:.3g} (se)" if math.isfinite(s) else " (se not available)"
+            lines.append(f"  {k:<7s} = {v:.6g}{tail}")
         lines.append(f"  SSR {self.ssr:.4g}  SER {self.ser:.4g}  R^2 {self.r2:.6f}  "
                      f"AIC {self.aic:.2f}  BIC {self.bic:.2f}")
         lines += [f"  note: {n}" for n in self.notes]

@@ -55,8 +55,9 @@ def make_batch_problem(n_times: int = 8, n_sieves: int = 30, n_grid: int = 60, n
     clean = model.predict(theta)
     rng = np.random.default_rng(seed)
     noisy = clean + noise * rng.standard_normal(clean.size)
-    model.y = noisy
-    model.y_cum = noisy
+    rows = [feed] + [r.assign(passing=noisy[k * n_sieves:(k + 1) * n_sieves]) for k, r in enumerate(rows)]
+    data = psd_data_from_frames(pd.concat(rows, ignore_index=True), strict=False)
+    model = ForwardModel(spec, data, grid)
     bounds = {**BOUNDS, **(bounds or {})}
     params = {n: Parameter(n, truth[n], *bounds[n]) for n in model.param_names}
     return model, params, truth

@@ -6,6 +6,7 @@ Tables and keys (paths relative to the config file)::
                   sprite_folder = "..."                      # or the SPRITE knife-mill folder
     [grid]        ratio = 1.0905, top_mm = 32, bottom_mm = 0.05   # optional (auto otherwise)
     [model]       mode, rate, breakage, classification, rate_process = [...],
+                  param_process = [["alpha", "moisture"], ...]   # eq. 10 on other parameters
                   screen_column, tau_column, x0_mm, objective
     [params.NAME] value, min, max, vary
     [optimizer]   global = true, starts = 20, popsize = 15, maxiter = 200, seed = 0
@@ -15,7 +16,6 @@ Tables and keys (paths relative to the config file)::
 """
 from __future__ import annotations
 
-import math
 import os
 import tomllib
 from dataclasses import dataclass, field
@@ -28,7 +28,8 @@ from millflow.grid import SizeGrid
 __all__ = ["FitConfig", "load_config"]
 
 _TABLES = {"data", "grid", "model", "params", "optimizer", "validation", "output", "candidates"}
-_MODEL_KEYS = {"mode", "rate", "breakage", "classification", "rate_process", "screen_column", "tau_column",
+_MODEL_KEYS = {"mode", "rate", "breakage", "classification", "rate_process", "param_process", "screen_column",
+               "tau_column",
                "x0_mm", "objective", "label"}
 _OPT_KEYS = {"global", "starts", "popsize", "maxiter", "seed"}
 
@@ -58,6 +59,11 @@ def _spec(table: dict, where: str) -> tuple[str, ModelSpec]:
         kw["classification"] = None if c in ("none", "", None) else c
     if "rate_process" in table:
         kw["rate_process"] = tuple(table["rate_process"])
+    if "param_process" in table:
+        pp = table["param_process"]
+        if not all(isinstance(x, list) and len(x) == 2 for x in pp):
+            raise InputError(f"{where}: param_process must be a list of [parameter, process column] pairs")
+        kw["param_process"] = tuple(tuple(x) for x in pp)
     if "x0_mm" in table:
         kw["x0_m"] = float(table["x0_mm"]) * 1e-3
     try:
@@ -119,6 +125,3 @@ def load_config(path, data_dir: str | None = None) -> FitConfig:
     return FitConfig(path, data, spec, params, grid, opt, val.get("hold_out"),
                      rel(out.get("dir", "fit_output")), bool(out.get("plots", True)), cands, label)
 
-
-def is_finite_number(v) -> bool:
-    return isinstance(v, (int, float)) and math.isfinite(v)

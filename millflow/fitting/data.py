@@ -115,8 +115,11 @@ def _numeric(df: pd.DataFrame, col: str, source: str) -> np.ndarray:
 
 
 def psd_data_from_frames(psd: pd.DataFrame, process: pd.DataFrame | None = None, source: str = "<memory>",
-                         process_source: str = "<memory>") -> PSDData:
-    """Validate a long PSD table (and a process table) given as DataFrames; see module doc."""
+                         process_source: str = "<memory>", *, strict: bool = True) -> PSDData:
+    """Validate a long PSD table (and a process table) given as DataFrames; see module doc.
+
+    ``strict=False`` skips the range [0, 1] and monotonicity checks of the values: for
+    synthetic data with added noise only (measured data must pass them)."""
     df = psd.copy()
     df.columns = [str(c).strip() for c in df.columns]
     for col in ("condition", "location"):
@@ -136,7 +139,7 @@ def psd_data_from_frames(psd: pd.DataFrame, process: pd.DataFrame | None = None,
         raise InputError(f"{source}: expected exactly one of the columns 'passing' or 'retained'")
     vcol = "passing" if has_p else "retained"
     val = _numeric(df, vcol, source)
-    if np.any(val > 1 + 1e-9) or np.any(val < -1e-9):
+    if strict and (np.any(val > 1 + 1e-9) or np.any(val < -1e-9)):
         k = int(np.flatnonzero((val > 1 + 1e-9) | (val < -1e-9))[0])
         hint = " (give fractions, not percent)" if val[k] > 1 else ""
         raise InputError(f"{source}: column {vcol!r}, row {k + 2}: {val[k]!r} outside [0, 1]{hint}")
@@ -159,7 +162,7 @@ def psd_data_from_frames(psd: pd.DataFrame, process: pd.DataFrame | None = None,
         else:
             grp = grp.assign(passing=grp.value)
         rise = np.diff(grp.passing.to_numpy())
-        if np.any(rise > _TOL):
+        if strict and np.any(rise > _TOL):
             k = int(np.flatnonzero(rise > _TOL)[0]) + 1
             raise InputError(
                 f"{source}: sample {key}: cumulative passing rises from coarse to fine at size "

@@ -120,11 +120,12 @@ class ModelSpec:
         object.__setattr__(self, "rate_process", tuple(self.rate_process))
         pp = tuple((str(a), str(b)) for a, b in self.param_process)
         object.__setattr__(self, "param_process", pp)
-        allowed = ("alpha", "gamma", "n_screen")
+        allowed = [n for n in ("alpha", "gamma", "n_screen") if n in self.base_names]
+        allowed += [f"a_{col}" for col in self.rate_process]
         for name, _ in pp:
-            if name not in allowed or name not in self.base_names:
+            if name not in allowed:
                 raise InputError(f"model.param_process: {name!r} cannot depend on process parameters here; "
-                                 f"expected one of {[a for a in allowed if a in self.base_names]}")
+                                 f"expected one of {allowed}")
 
     @property
     def base_names(self) -> tuple:
@@ -132,8 +133,8 @@ class ModelSpec:
 
     @property
     def param_names(self) -> tuple:
-        names = list(RATE_FORMS[self.rate][:1]) + [f"a_{p}" for p in self.rate_process]
-        for name in self.base_names[1:]:
+        names = list(RATE_FORMS[self.rate][:1])
+        for name in [f"a_{p}" for p in self.rate_process] + list(self.base_names[1:]):
             names.append(name)
             names += [f"{name}_{col}" for par, col in self.param_process if par == name]
         return tuple(names)
@@ -327,7 +328,7 @@ class ForwardModel:
         """S (P, C, N) [1/s] (or tau*S if no tau column)."""
         lnA = p["ln_A0"][:, None].copy()
         for col in self.spec.rate_process:
-            lnA = lnA + p[f"a_{col}"][:, None] * np.log(self._proc[col] / self._ref[col])[None, :]
+            lnA = lnA + self.cond_param(p, f"a_{col}") * np.log(self._proc[col] / self._ref[col])[None, :]
         logS = lnA[:, :, None] + self.cond_param(p, "alpha")[:, :, None] * self._logx[None, None, :]
         S = np.exp(np.minimum(logS, 600.0))
         if self.spec.rate == "austin":
@@ -463,7 +464,7 @@ def _well_mixed(s, b, feeds):
     return p
 
 
-_CANCEL_TOL = 1e-9
+_CANCEL_TOL = 1e-8
 
 
 def _batch(S, b, feed, t):
@@ -471,7 +472,7 @@ def _batch(S, b, feed, t):
 
     Eigenvectors of A = -K for distinct rates by the stable row recurrence of
     :mod:`millflow.linalg`, vectorised over the population; members whose rounding
-    estimate eps |X| |X^-1 f| exceeds 1e-9 (close rates) are recomputed one by one by
+    estimate eps |X| |X^-1 f| exceeds 1e-8 (close rates) are recomputed one by one by
     the exact clustered method (:func:`millflow.batch.batch_grind`).
     """
     n_pop, N = S.shape

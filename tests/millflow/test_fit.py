@@ -136,7 +136,9 @@ def test_unknown_parameter_and_form_names():
 def test_local_start_from_poor_guess_lands_wrong_global_finds_truth():
     bounds = {"ln_A0": (-9.0, 6.0)}
     model, params, truth = make_batch_problem(n_sieves=25, n_grid=49, seed=3, bounds=bounds)
-    poor = dict(ln_A0=5.0, alpha=0.3, phi=0.5, gamma=1.0, beta=4.0)  # rates far too fast
+    # rates far too fast: every sample is ground into the sink, the residuals do not change
+    # with the parameters there, and the local search stops on that plateau (SSR ~ 100)
+    poor = dict(ln_A0=5.5, alpha=0.25, phi=0.5, gamma=1.0, beta=4.0)
     guess = {n: Parameter(n, poor[n], *{**BOUNDS, **bounds}[n]) for n in params}
     local = fit(model, guess, global_search=False, starts=1, grid_check=False)
     glob = fit(model, guess, starts=8, popsize=10, grid_check=False)
@@ -182,7 +184,6 @@ def test_information_criteria_and_f_test():
 def test_compare_models_ranks_true_form_and_f_test():
     model, params, truth = make_batch_problem(n_times=4, n_sieves=15, n_grid=29, seed=4)
     single = ForwardModel(ModelSpec(mode="batch", breakage="single"), model.data, model.grid)
-    single.y = single.y_cum = model.y
     out = compare_models({"normalized": model, "single": single},
                          {"normalized": params, "single": default_parameters(single.spec)},
                          starts=3, popsize=8, maxiter=60, grid_check=False)
@@ -198,7 +199,8 @@ def test_interval_coverage_100_seeds():
     this checks the intervals, not the search."""
     hits = {n: 0 for n in TRUTH}
     for seed in range(100):
-        model, params, truth = make_batch_problem(n_times=8, n_sieves=25, n_grid=49, seed=seed)
+        # numerical grid = the sieves (the model is exact here; the test is about intervals)
+        model, params, truth = make_batch_problem(n_times=8, n_sieves=25, n_grid=25, seed=seed)
         res = fit(model, params, global_search=False, starts=1, grid_check=False)
         for n in truth:
             lo, hi = res.stats["params"][n]["ci95"]

@@ -89,14 +89,67 @@ def test_contour_clusters_against_independent_paths(plateau):
     divide by rate differences: a chained cell network and the axial finite volumes."""
     _, S, b, f = kernel(n=24, plateau=plateau)
     series = rtd.Series(rtd.PerfectMixing(200.0), rtd.PerfectMixing(400.0), rtd.PerfectMixing(50.0))
-    seg = steady_mill(S, b, f, series)
-    assert seg.attrs["method"] == "segregated"
+    seg = steady_mill(S, b, f, series, method="segregated")
+    assert steady_mill(S, b, f, series).attrs["method"] == "composed"
     net = rtd.compose.chain_networks(series.parts)
     np.testing.assert_allclose(seg["product"], steady_mill(S, b, f, net)["product"], atol=1e-12)
+    np.testing.assert_allclose(steady_mill(S, b, f, series)["product"], seg["product"], atol=1e-12)
     model = rtd.AxialDispersion(TAU, 3.0)
     ax = solve_axial(S, b, f, TAU, 3.0, tol=1e-9)
     diff = float(np.abs(steady_mill(S, b, f, model)["product"] - ax.product).max())
     assert diff < 1e-9 and diff <= ax.error_estimate
+
+
+def _slow_rates(alpha, n=60):
+    grid = SizeGrid.geometric(1e-2, 2**0.25, n)
+    S = power_law_rates(grid.x, 1.0 / 60, alpha, 1e-3)
+    S[-1] = 0.0
+    b = b_from_B(normalized_B(grid.x, 0.4, 0.8, 3.0))
+    return S, b, np.eye(n)[0]
+
+
+def test_one_wide_cluster_is_exact():
+    """alpha = 0.05: consecutive rates 0.9 % apart, one cluster of 59 classes."""
+    S, b, f = _slow_rates(0.05)
+    model = rtd.TanksInSeries(TAU, 3)
+    seg = steady_mill(S, b, f, model, method="segregated")
+    assert max(eval(seg.attrs["cluster_sizes"])) > 50
+    np.testing.assert_allclose(seg["product"], steady_mill(S, b, f, model)["product"], atol=1e-13)
+
+
+def test_cancelling_eigenbasis_falls_back_or_says_so():
+    """alpha = 0.1, N = 100: rates 1.7 % apart over a factor 5.6 (too wide for one Taylor series,
+    too close for the eigenbasis). Axial dispersion falls back to finite volumes; a
+    forced segregated solve reports its large error estimate."""
+    S, b, f = _slow_rates(0.1, n=100)
+    ds = steady_mill(S, b, f, rtd.AxialDispersion(TAU, 5.0))
+    assert ds.attrs["method"] == "axial_fv" and "fallback" in ds.attrs
+    assert "advice" in steady_mill(S, b, f, rtd.AxialDispersion(TAU, 5.0, bc="open")).attrs
+    forced = steady_mill(S, b, f, rtd.TanksInSeries(TAU, 3), method="segregated")
+    exact = steady_mill(S, b, f, rtd.TanksInSeries(TAU, 3))
+    assert float(np.abs(forced["product"] - exact["product"]).max()) <= forced.attrs["error_estimate"]
+
+
+def test_parallel_and_series_composition_equal_segregated():
+    _, S, b, f = kernel()
+    for model in (rtd.Parallel(rtd.TanksInSeries(TAU, 3), rtd.AxialDispersion(400.0, 8.0), weights=(0.3, 0.7)),
+                  rtd.Series(rtd.TanksInSeries(300.0, 2.5), rtd.AxialDispersion(200.0, 4.0, bc="open"))):
+        comp = steady_mill(S, b, f, model)
+        seg = steady_mill(S, b, f, model, method="segregated")
+        assert comp.attrs["method"] == "composed"
+        np.testing.assert_allclose(comp["product"], seg["product"], atol=1e-13)
+        np.testing.assert_allclose(comp["holdup"], seg["holdup"], atol=1e-11)
+        assert abs(float(comp["holdup"].sum()) - model.mean) < 1e-9 * model.mean
+
+
+def test_open_vessel_segregated_equals_time_quadrature():
+    _, S, b, f = kernel()
+    model = rtd.AxialDispersion(TAU, 5.0, bc="open")
+    seg = steady_mill(S, b, f, model)
+    quad = steady_mill(S, b, f, model, method="quadrature")
+    np.testing.assert_allclose(seg["product"], quad["product"], atol=1e-12)
+    np.testing.assert_allclose(seg["holdup"], quad["holdup"], atol=1e-9 * TAU)
+    assert abs(float(seg["holdup"].sum()) - model.mean) < 1e-9 * model.mean
 
 
 def test_recirculating_cells_segregated_and_reduction():
@@ -219,8 +272,9 @@ def test_extreme_classification(model):
 
 
 @pytest.mark.parametrize("pe", [1e-2, 1e4])
-def test_extreme_axial_classification(pe):
-    grid, S, b, _ = kernel(n=8, a=1e3 / TAU, ratio=2.0)
+@pytest.mark.parametrize("a", [1e3 / TAU, 1e8 / TAU])
+def test_extreme_axial_classification(pe, a):
+    grid, S, b, _ = kernel(n=8, a=a, ratio=2.0)
     d = np.geomspace(1e-3, 1e3, 8)
     for feed in (np.eye(8)[0], np.eye(8)[-1]):
         _sane(steady_mill(S, b, feed, rtd.AxialDispersion(TAU, pe), d, tol=1e-6), feed)

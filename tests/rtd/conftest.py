@@ -9,6 +9,7 @@ the model in one vectorised call. Checked against scipy's adaptive quad to ~1e-1
 import math
 
 import numpy as np
+import pytest
 
 _X, _W = np.polynomial.legendre.leggauss(20)
 
@@ -26,7 +27,7 @@ def _nodes(model, breaks=()):
     return t.ravel(), w.ravel()
 
 
-def integrate_density(model, weight=lambda t: np.ones_like(t), complex_weight=False, breaks=()):
+def _integrate_density(model, weight=lambda t: np.ones_like(t), complex_weight=False, breaks=()):
     """int_0^inf E(t) weight(t) dt plus the atom at t = 0 times weight(0)."""
     if hasattr(model, "parts"):  # plug-flow delays in compositions are kinks of E
         breaks = tuple(breaks) + (sum(getattr(p, "tau", 0.0) for p in model.parts
@@ -34,3 +35,9 @@ def integrate_density(model, weight=lambda t: np.ones_like(t), complex_weight=Fa
     t, w = _nodes(model, breaks)
     total = np.sum(w * model.pdf(t) * weight(t)) + model.atom_at_zero * weight(np.zeros(1))[0]
     return complex(total) if complex_weight else float(np.real(total))
+
+
+@pytest.fixture(name="integrate_density")
+def integrate_density_fixture():
+    """The quadrature function (a fixture, so tests need no import of conftest)."""
+    return _integrate_density

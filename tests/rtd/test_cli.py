@@ -48,3 +48,25 @@ def test_bad_file_exits_2_naming_file_and_column(tmp_path, capsys):
     err = capsys.readouterr().err
     assert "bad.csv" in err and "time_s" in err and "row 3" in err
     assert main(["fit-rtd", str(tmp_path / "missing.csv")]) == 2
+
+
+def test_fit_rtd_with_inlet_column_and_step_file(tmp_path, capsys):
+    import numpy as np
+
+    import rtd
+    t = np.linspace(0, 30, 151)
+    inlet = rtd.TanksInSeries(1.0, 2).pdf(t)
+    out = 2.0 * rtd.convolve_inlet(rtd.TanksInSeries(6.0, 2.5).cdf, t, inlet)
+    pulse = tmp_path / "inlet.csv"
+    pulse.write_text("time_s,concentration,inlet\n"
+                     + "".join(f"{a},{b},{c}\n" for a, b, c in zip(t, out, inlet)))
+    assert main(["fit-rtd", str(pulse), "--json", "--no-plot"]) == 0
+    params = json.loads(capsys.readouterr().out)["params"]
+    assert params["tau"]["value"] == pytest.approx(6.0, rel=1e-5)
+    assert params["n"]["value"] == pytest.approx(2.5, rel=1e-5)
+    step = tmp_path / "step.csv"
+    f = rtd.AxialDispersion(4.0, 12.0).cdf(t)
+    step.write_text("time_min,F\n" + "".join(f"{a},{b}\n" for a, b in zip(t, f)))
+    assert main(["fit-rtd", str(step), "--model", "ad-closed", "--json", "--no-plot"]) == 0
+    params = json.loads(capsys.readouterr().out)["params"]
+    assert params["pe"]["value"] == pytest.approx(12.0, rel=1e-5)

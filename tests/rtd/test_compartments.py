@@ -5,7 +5,6 @@ from scipy import linalg
 
 import rtd
 from rtd.compartments import expm_batch
-from .conftest import integrate_density
 
 
 def test_system_matrix_convention():
@@ -68,7 +67,7 @@ def test_many_cells_with_backmixing_approach_closed_axial_dispersion():
     assert errors[1] < 0.01 and errors[1] < errors[0] / 2
 
 
-def test_dead_volume_and_bypass():
+def test_dead_volume_and_bypass(integrate_density):
     m = rtd.RecirculatingCells(4.0, 3, r=0.5, dead=0.25, bypass=0.2)
     assert m.mean == pytest.approx(3.0) and m.network().mean == pytest.approx(3.0, rel=1e-12)
     assert float(m.cdf(0.0)) == pytest.approx(0.2)

@@ -59,3 +59,15 @@ def test_parallel_is_weighted_sum():
     assert par.laplace(1 + 1j) == pytest.approx(0.25 * a.laplace(1 + 1j) + 0.75 * b.laplace(1 + 1j))
     with pytest.raises(rtd.ParameterError, match="weights"):
         rtd.Parallel(a, b, weights=(0.5, 0.6))
+
+
+@pytest.mark.parametrize("pe, bc", [(50.0, "closed"), (1e3, "closed"), (1e4, "open")])
+def test_fourier_route_for_sharp_axial_dispersion_in_series(pe, bc):
+    ad, pm = rtd.AxialDispersion(1.0, pe, bc), rtd.PerfectMixing(0.5)
+    series = rtd.Series(ad, pm)
+    for x in (0.5, 1.0, 1.2, 2.0, 5.0):
+        ref = integrate.quad(lambda u: float(ad.pdf(u) * pm.pdf(x - u)), 0, x,
+                             points=[ad.mean] if x > ad.mean else None, epsabs=1e-14, limit=400)[0]
+        assert series.pdf(x) == pytest.approx(ref, abs=1e-12)
+    # F(t) = P(age_ad + age_pm <= t): for a sharp front, ~ 1 - exp(-(t - mean_ad)/0.5)
+    assert series.cdf(3.0) == pytest.approx(1 - np.exp(-(3.0 - ad.mean) / 0.5), abs=0.02)

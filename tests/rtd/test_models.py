@@ -12,7 +12,6 @@ import pytest
 from scipy import integrate
 
 import rtd
-from .conftest import integrate_density
 
 PES = [0.01, 0.1, 1.0, 10.0, 16.0, 30.0, 100.0, 1e3, 1e4]
 
@@ -32,12 +31,12 @@ IDS = [repr(m)[:60] for m in CASES]
 
 
 @pytest.mark.parametrize("model", CASES, ids=IDS)
-def test_density_integrates_to_one(model):
+def test_density_integrates_to_one(model, integrate_density):
     assert integrate_density(model) == pytest.approx(1.0, abs=1e-8)
 
 
 @pytest.mark.parametrize("model", CASES, ids=IDS)
-def test_mean_and_variance_match_closed_forms(model):
+def test_mean_and_variance_match_closed_forms(model, integrate_density):
     m1 = integrate_density(model, lambda t: t)
     m2 = integrate_density(model, lambda t: t * t)
     assert m1 == pytest.approx(model.mean, rel=1e-8)
@@ -45,7 +44,7 @@ def test_mean_and_variance_match_closed_forms(model):
 
 
 @pytest.mark.parametrize("model", CASES, ids=IDS)
-def test_laplace_matches_quadrature(model):
+def test_laplace_matches_quadrature(model, integrate_density):
     for s in (0.3 / model.mean, 2.0 / model.mean):
         ref = integrate_density(model, lambda t: np.exp(-s * t))
         assert abs(model.laplace(s) - ref) < 1e-10
