@@ -71,6 +71,7 @@ def main(argv=None) -> int:
     ap.add_argument("--config", default=os.path.join(HERE, "knife_mill.toml"))
     ap.add_argument("--quick", action="store_true", help="fewer starts (for a smoke test)")
     ap.add_argument("--no-loo", action="store_true", help="skip the leave-one-run-out prediction")
+    ap.add_argument("--out", default=None, help="output folder (default: output.dir of the config)")
     ap.add_argument("--json", action="store_true")
     args = ap.parse_args(argv)
 
@@ -91,7 +92,7 @@ def main(argv=None) -> int:
     insample = res.rmse_by_condition()
     loo = None if args.no_loo else leave_out(model, cfg.params, "each", progress=say, **opt)
     base = baseline_rmse(cfg.data)
-    write_report(res, cfg.out_dir, loo, plots=cfg.plots)
+    write_report(res, args.out or cfg.out_dir, loo, plots=cfg.plots)
     out = {
         "n_params": res.n_params, "n_data": res.n_data, "in_sample_mean_rmse": float(np.mean(list(insample.values()))),
         "loo_mean_rmse": None if loo is None else loo["mean_rmse"], "baseline_mean_rmse": float(np.mean(list(base.values()))),

@@ -17,6 +17,7 @@ def add_parser(subparsers) -> None:
     p.add_argument("config", help="TOML configuration (see docs/fitting.md)")
     p.add_argument("--json", action="store_true", help="print one JSON object instead of the text summary")
     p.add_argument("--data-dir", default=None, help="SPRITE data folder (overrides data.sprite_folder)")
+    p.add_argument("--out", default=None, help="output folder (overrides output.dir of the config)")
     p.add_argument("--no-plots", action="store_true", help="do not write plots")
     p.add_argument("--quiet", action="store_true", help="no progress messages")
     p.set_defaults(func=run)
@@ -50,7 +51,7 @@ def run(args) -> int:
         prediction = leave_out(model, cfg.params, cfg.hold_out, progress=say, **cfg.optimizer)
         out["prediction"] = {c: {"rmse": v} for c, v in prediction["rmse"].items()}
         out["prediction_mean_rmse"] = prediction["mean_rmse"]
-    files = write_report(result, cfg.out_dir, prediction, plots=cfg.plots and not args.no_plots)
+    files = write_report(result, args.out or cfg.out_dir, prediction, plots=cfg.plots and not args.no_plots)
     out["files"] = files
     if args.json:
         print(json.dumps(out, default=float))

@@ -11,7 +11,7 @@ Tables and keys (paths relative to the config file)::
     [params.NAME] value, min, max, vary
     [optimizer]   global = true, starts = 20, popsize = 15, maxiter = 200, seed = 0
     [validation]  hold_out = "each" | ["cond", ...] | [["a", "b"], ...]
-    [output]      dir = "fit_output", plots = true
+    [output]      dir = "fit-results", plots = true   (relative to the config file)
     [[candidates]] label = "...", plus any [model] keys: extra forms to rank (AIC/BIC, F)
 """
 from __future__ import annotations
@@ -29,7 +29,7 @@ __all__ = ["FitConfig", "load_config"]
 
 _TABLES = {"data", "grid", "model", "params", "optimizer", "validation", "output", "candidates"}
 _MODEL_KEYS = {"mode", "rate", "breakage", "classification", "rate_process", "param_process", "screen_column",
-               "tau_column",
+               "tau_column", "n_tanks",
                "x0_mm", "objective", "label"}
 _OPT_KEYS = {"global", "starts", "popsize", "maxiter", "seed"}
 
@@ -43,7 +43,7 @@ class FitConfig:
     grid: SizeGrid | None
     optimizer: dict
     hold_out: object = None
-    out_dir: str = "fit_output"
+    out_dir: str = "fit-results"
     plots: bool = True
     candidates: list = field(default_factory=list)   # [(label, ModelSpec, params)]
     label: str = "model"
@@ -53,7 +53,8 @@ def _spec(table: dict, where: str) -> tuple[str, ModelSpec]:
     unknown = set(table) - _MODEL_KEYS
     if unknown:
         raise InputError(f"{where}: unknown keys {sorted(unknown)}; expected some of {sorted(_MODEL_KEYS)}")
-    kw = {k: table[k] for k in ("mode", "rate", "breakage", "screen_column", "tau_column", "objective") if k in table}
+    kw = {k: table[k] for k in ("mode", "rate", "breakage", "screen_column", "tau_column", "objective", "n_tanks")
+          if k in table}
     if "classification" in table:
         c = table["classification"]
         kw["classification"] = None if c in ("none", "", None) else c
@@ -123,5 +124,5 @@ def load_config(path, data_dir: str | None = None) -> FitConfig:
         lab, sp = _spec(c, f"{path} [[candidates]] #{k + 1}")
         cands.append((lab, sp, default_parameters(sp, cp)))
     return FitConfig(path, data, spec, params, grid, opt, val.get("hold_out"),
-                     rel(out.get("dir", "fit_output")), bool(out.get("plots", True)), cands, label)
+                     rel(out.get("dir", "fit-results")), bool(out.get("plots", True)), cands, label)
 

@@ -194,15 +194,30 @@ def psd_data_from_frames(psd: pd.DataFrame, process: pd.DataFrame | None = None,
     return PSDData(out, proc, source)
 
 
+def _read(p):
+    if not os.path.isfile(p):
+        raise InputError(f"{p}: file not found")
+    try:
+        return pd.read_csv(p)
+    except Exception as exc:  # pandas raises many types for malformed CSV
+        raise InputError(f"{p}: cannot read as CSV ({exc})") from exc
+
+
+def read_process_table(path) -> pd.DataFrame:
+    """Read a process table (CSV): column ``condition`` and numeric columns; index condition."""
+    p = _read(path)
+    p.columns = [str(c).strip() for c in p.columns]
+    if "condition" not in p.columns:
+        raise InputError(f"{path}: missing column 'condition'; columns are {list(p.columns)}")
+    p["condition"] = p.condition.astype(str).str.strip()
+    for col in p.columns:
+        if col != "condition":
+            p[col] = _numeric(p, col, str(path))
+    return p.set_index("condition")
+
+
 def read_psd_table(path, process_path=None) -> PSDData:
     """Read a long PSD table (CSV) and optionally a process table (CSV); see module doc."""
-    def _read(p):
-        if not os.path.isfile(p):
-            raise InputError(f"{p}: file not found")
-        try:
-            return pd.read_csv(p)
-        except Exception as exc:  # pandas raises many types for malformed CSV
-            raise InputError(f"{p}: cannot read as CSV ({exc})") from exc
     psd = _read(path)
     proc = _read(process_path) if process_path else None
     return psd_data_from_frames(psd, proc, source=str(path), process_source=str(process_path))

@@ -254,7 +254,7 @@ def fit(model: ForwardModel, params: dict | None = None, *, global_search: bool 
         say(f"differential evolution over {p} parameters (population {popsize * p})")
         de = differential_evolution(prob.ssr_pop, list(zip(lo, hi)), popsize=popsize, maxiter=maxiter, tol=de_tol,
                                     seed=seed, polish=False, vectorized=True, updating="deferred",
-                                    init="sobol")
+                                    init="latinhypercube")
         say(f"  DE: SSR {de.fun:.6g} after {de.nit} generations")
         candidates.append(de.x)
     else:

@@ -26,7 +26,8 @@ Parameters (positive ones in logs, named ``ln_...``):
   limit of ``screen`` when c50 is far below the measured sizes (then only
   A / c50^n is identifiable from product samples: the fit reports correlation 1).
 - mode ``batch`` (eq. 4, times from the table), ``plug_flow`` (eq. 4 at t = tau),
-  ``well_mixed`` (eq. 3). For continuous modes tau comes from a process column
+  ``well_mixed`` (eq. 3; ``n_tanks`` > 1: equal well-mixed tanks in series, tau/n each,
+  the same classification in each). For continuous modes tau comes from a process column
   (``tau_column``) or is 1, in which case A is the dimensionless tau*A.
   Location ``holdup`` of a well-mixed mill predicts the mill content, proportional
   to p_i / d_i*: sampling product and hold-up separates breakage from classification.
@@ -38,7 +39,7 @@ product per evaluation.
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass, field, replace
+from dataclasses import dataclass, field
 
 import numpy as np
 
@@ -105,6 +106,7 @@ class ModelSpec:
     screen_column: str = "screen_mm"
     tau_column: str | None = None
     x0_m: float = 1e-3
+    n_tanks: int = 1
     b_matrix: np.ndarray | None = field(default=None, compare=False)
     objective: str = "cumulative"
 
@@ -115,6 +117,8 @@ class ModelSpec:
                              ("objective", self.objective, ("cumulative", "fractional"))):
             if val not in ok:
                 raise InputError(f"model.{key} = {val!r}: expected one of {[k for k in ok]}")
+        if int(self.n_tanks) != self.n_tanks or self.n_tanks < 1:
+            raise InputError(f"model.n_tanks = {self.n_tanks!r}: expected an integer >= 1")
         if self.breakage == "fixed" and self.b_matrix is None:
             raise InputError("model.breakage = 'fixed' needs b_matrix (the fractional b on the numerical grid)")
         object.__setattr__(self, "rate_process", tuple(self.rate_process))
@@ -246,8 +250,8 @@ class ForwardModel:
             if self.spec.mode != "batch" and loc not in ("product", "holdup"):
                 raise InputError(f"location {loc!r} of condition {cond!r}: a {self.spec.mode} mill predicts "
                                  "'product' and (well_mixed) 'holdup' samples")
-            if self.spec.mode == "plug_flow" and loc == "holdup":
-                raise InputError("location 'holdup' needs mode well_mixed")
+            if loc == "holdup" and (self.spec.mode != "well_mixed" or self.spec.n_tanks != 1):
+                raise InputError("location 'holdup' needs mode well_mixed with n_tanks = 1")
             groups.append((cond_index[cond], loc, float(t)))
             ys.append(grp.passing.to_numpy())
             ws.append(grp.weight.to_numpy())
@@ -398,7 +402,10 @@ class ForwardModel:
         out = np.empty((n_pop, len(self.groups), self.n))
         if mode == "well_mixed":
             d = self.discharge(p, n_pop)
-            prod = _well_mixed(S * tau[None, :, None] / d, b, self._feeds)
+            s_eff = S * tau[None, :, None] / d / self.spec.n_tanks
+            prod = self._feeds
+            for _ in range(self.spec.n_tanks):  # equal well-mixed tanks in series, tau/n each
+                prod = _well_mixed(s_eff, b, prod)
             for g, (c, loc, _) in enumerate(self.groups):
                 if loc == "holdup":
                     m = prod[:, c] / d[:, c]
@@ -450,15 +457,16 @@ def _well_mixed(s, b, feeds):
     every term is non-negative, so nothing cancels.
     """
     n_pop, C, N = s.shape
+    f = np.broadcast_to(feeds, (n_pop, C, N))
     q = np.zeros((n_pop, C, N))
     p = np.empty((n_pop, C, N))
     for i in range(N):
         if i == 0:
-            acc = np.broadcast_to(feeds[None, :, 0], (n_pop, C))
+            acc = f[:, :, 0]
         elif b.ndim == 4:
-            acc = feeds[None, :, i] + np.einsum("pcj,pcj->pc", b[:, :, i, :i], q[:, :, :i])
+            acc = f[:, :, i] + np.einsum("pcj,pcj->pc", b[:, :, i, :i], q[:, :, :i])
         else:
-            acc = feeds[None, :, i] + np.einsum("pj,pcj->pc", b[:, i, :i], q[:, :, :i])
+            acc = f[:, :, i] + np.einsum("pj,pcj->pc", b[:, i, :i], q[:, :, :i])
         p[:, :, i] = acc / (1.0 + s[:, :, i])
         q[:, :, i] = s[:, :, i] * p[:, :, i]
     return p

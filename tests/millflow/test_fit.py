@@ -222,3 +222,43 @@ def test_to_dict_is_json():
     for key in ("params", "ssr", "ser", "n_data", "n_params", "starts", "spread"):
         assert key in out
     assert set(out["params"]["alpha"]) >= {"value", "se", "p_value", "ci95"}
+
+
+def test_tanks_in_series_tend_to_plug_flow():
+    """n equal well-mixed tanks (tau/n each) approach plug flow, the batch grind at tau,
+    with an error O(1/n)."""
+    x = SizeGrid.geometric(4e-3, 2 ** 0.5, 10).x
+    rows = [pd.DataFrame({"condition": "*", "location": "feed", "size_m": x[:2], "passing": [1.0, 0.0]}),
+            pd.DataFrame({"condition": "c", "location": "product", "size_m": x, "passing": np.linspace(1, 0, 10)})]
+    d = psd_data_from_frames(pd.concat(rows))
+    theta = np.array([0.3, 1.0, 0.4, 0.8, 3.0])
+    plug = ForwardModel(ModelSpec(mode="plug_flow"), d, SizeGrid(x)).predict_grid(theta[None])[0, 0]
+    errs = [np.abs(ForwardModel(ModelSpec(mode="well_mixed", n_tanks=n), d, SizeGrid(x))
+                   .predict_grid(theta[None])[0, 0] - plug).max() for n in (50, 100)]
+    assert errs[1] < 0.6 * errs[0] and errs[1] < 5e-3
+
+
+def test_hybrid_fit_with_fixed_breakage_and_fractional_objective():
+    model, params, truth = make_batch_problem(n_times=4, n_sieves=15, n_grid=29, seed=7)
+    for n in ("phi", "gamma", "beta"):
+        params[n] = Parameter(n, truth[n], vary=False)
+    res = fit(model, params, global_search=False, starts=3)
+    assert res.n_params == 2 and set(res.to_dict()["fixed"]) == {"phi", "gamma", "beta"}
+    assert abs(res.params["alpha"].value - truth["alpha"]) < 4 * res.stats["params"]["alpha"]["se"]
+    frac = ForwardModel(ModelSpec(mode="batch", objective="fractional"), model.data, model.grid)
+    theta = np.array([truth[n] for n in frac.param_names])
+    y = frac.predict(theta).reshape(4, 15)
+    P = frac.predict_cum(theta).reshape(4, 15)
+    # retained on each sieve: differences of cumulative passing; they add up to 1 - P(finest)
+    np.testing.assert_allclose(y[:, 1:], P[:, :-1] - P[:, 1:], atol=1e-15)
+    np.testing.assert_allclose(y.sum(axis=1), 1.0 - P[:, -1], atol=1e-14)
+
+
+def test_benchmark_global_5p_fit_under_10_s():
+    """Issue 6 benchmark: 5-parameter global fit, 8 times x 30 sieves, 60-class grid,
+    20 starts. CPU time is asserted (wall time depends on other jobs on the machine)."""
+    from millflow.bench.fit import run
+
+    (row,) = run(quick=False)
+    assert row["cpu_s"] < 10.0, row
+    assert row["max_abs_error"] < 0.1

@@ -109,18 +109,19 @@ def test_read_sprite_folder_builds_long_tables():
 
 @needs_sprite
 def test_knife_mill_shared_model_in_sample_and_one_held_out_run():
-    """The example's model: 7 shared parameters, all significant, in-sample mean RMSE
-    below the 0.025 bar; one run predicted from the other eleven."""
+    """The example's model: 8 shared parameters, all significant, in-sample mean RMSE
+    0.018 (below the 0.025 bar); one run predicted from the other eleven."""
     from millflow.fitting.config import load_config
     from millflow.fitting.estimate import fit
     from millflow.fitting.validate import leave_out
 
     cfg = load_config(os.path.join(REPO, "examples", "knife_mill", "knife_mill.toml"), data_dir=SPRITE)
-    model = ForwardModel(cfg.spec, cfg.data, cfg.grid)
+    # the example's grid is 2^(1/16); 2^(1/8) keeps this test fast and changes SSR by 0.2 %
+    model = ForwardModel(cfg.spec, cfg.data, SizeGrid.between(32e-3, 0.05e-3, 2 ** 0.125))
     opt = dict(starts=2, popsize=6, maxiter=60, seed=1)
     res = fit(model, cfg.params, grid_check=False, **opt)
     rmse = np.mean(list(res.rmse_by_condition().values()))
-    assert res.n_params == 7 and rmse < 0.0205
+    assert res.n_params == 8 and rmse < 0.019
     assert all(s["significant"] for s in res.stats["params"].values())
     pred = leave_out(model, cfg.params, ["JRS_50Hz_40p_0.75_output"], **opt)
     assert pred["mean_rmse"] < 0.03
