@@ -76,11 +76,11 @@ def validate_rates(S, x=None, *, name: str = "S") -> np.ndarray:
         raise BreakageError(f"{name}: expected a 1-D array of rates [1/s], got shape {s.shape}")
     if xs is not None and s.size != xs.size:
         raise BreakageError(f"{name}: {s.size} rates for a grid of {xs.size} classes")
-    bad = np.flatnonzero(~np.isfinite(s))
-    if bad.size:
+    if not np.isfinite(s).all():  # locate the offender only on failure (hot path)
+        bad = np.flatnonzero(~np.isfinite(s))
         raise BreakageError(f"{name}: {class_label(bad[0], xs)} has rate {float(s[bad[0]])!r} 1/s; expected finite")
-    bad = np.flatnonzero(s < 0)
-    if bad.size:
+    if (s < 0).any():
+        bad = np.flatnonzero(s < 0)
         raise BreakageError(f"{name}: {class_label(bad[0], xs)} has rate {float(s[bad[0]])!r} 1/s; expected >= 0")
     if s[-1] != 0:
         raise BreakageError(

@@ -63,6 +63,13 @@ def breakage_matrix(S: np.ndarray, b: np.ndarray) -> np.ndarray:
     return K
 
 
+def _minus_breakage_matrix(S: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """A = -K = (I - b) diag(S) in one pass (the decomposition works with A)."""
+    A = b * -S
+    A.flat[:: S.size + 1] = S
+    return A
+
+
 def cluster_rates(S: np.ndarray, gap: float = DEFAULT_CLUSTER_GAP) -> np.ndarray:
     """Label each class with its cluster of nearly equal rates.
 
@@ -71,6 +78,9 @@ def cluster_rates(S: np.ndarray, gap: float = DEFAULT_CLUSTER_GAP) -> np.ndarray
     (N,) numbered 0.. in order of first appearance.
     """
     S = np.asarray(S, dtype=float)
+    s_sorted = np.sort(S)
+    if not (np.diff(s_sorted) <= gap * s_sorted[1:]).any():  # all distinct: the common case
+        return np.arange(S.size)
     order = np.argsort(S, kind="stable")
     s_sorted = S[order]
     close = np.abs(np.diff(s_sorted)) <= gap * np.maximum(s_sorted[1:], s_sorted[:-1])
@@ -116,16 +126,25 @@ class SpectralBlocks:
         for the worst unit feed). One cluster is Taylor scaling and squaring of the
         whole Metzler matrix: slower, but accurate because no term cancels.
         """
+        return cls.decompose(S, b, gap, feed=feed, target=target)[0]
+
+    @classmethod
+    def decompose(cls, S, b, gap: float | None = None, *, feed=None, target: float = 1e-13):
+        """As :meth:`from_rates`, also returning w = X^-1 feed and the cancellation
+        estimate eps * max |X| |w| (None and the unit-feed estimate without a feed)."""
         S = np.asarray(S, dtype=float)
-        b = np.asarray(b, dtype=float)
-        A = -breakage_matrix(S, b)
-        if gap is not None:
-            return cls._build(A, S, gap)
-        for trial in GAP_SEQUENCE:
+        A = _minus_breakage_matrix(S, np.asarray(b, dtype=float))
+        for trial in (gap,) if gap is not None else GAP_SEQUENCE:
             blocks = cls._build(A, S, trial)
-            if blocks.cancellation(feed) <= target:
+            if feed is None:
+                w, estimate = None, blocks.cancellation()
+            else:
+                w = blocks.coordinates(feed)
+                estimate = float(np.finfo(float).eps * (np.abs(blocks.X) @ np.abs(w)).max())
+                estimate = estimate if np.isfinite(estimate) else np.inf
+            if estimate <= target:
                 break
-        return blocks
+        return blocks, w, estimate
 
     @classmethod
     def _build(cls, A, S, gap):
@@ -158,10 +177,13 @@ class SpectralBlocks:
         w, info = dtrtrs(self.X, v, lower=1, unitdiag=1)
         return w
 
-    def expm_apply(self, v: np.ndarray, t: np.ndarray) -> np.ndarray:
-        """exp(-A t) v = exp(K t) v for each time in t; returns (T, N)."""
+    def expm_apply(self, v: np.ndarray, t: np.ndarray, *, w: np.ndarray | None = None) -> np.ndarray:
+        """exp(-A t) v = exp(K t) v for each time in t; returns (T, N).
+
+        ``w = X^-1 v`` may be passed when it is already known."""
         t = np.atleast_1d(np.asarray(t, dtype=float))
-        w = self.coordinates(v)
+        if w is None:
+            w = self.coordinates(v)
         # singleton clusters: exp(-S_j t) w_j, underflow to zero is exact enough
         coeff = np.exp(-np.outer(t, self.S)) * w[np.newaxis, :]
         for members, blocks in self._clusters_by_size():
@@ -195,13 +217,14 @@ def _eigenvectors_distinct(A: np.ndarray, S: np.ndarray) -> np.ndarray:
     """Unit lower-triangular eigenvector matrix of A for well separated rates.
 
     Column j solves (A - S_j I) x = 0 with x_j = 1: for i > j,
-    x_i = sum_{k<i} A_ik x_k / (S_j - S_i). Vectorised over all columns j < i.
+    x_i = sum_{k<i} A_ik x_k / (S_j - S_i). Vectorised over all columns j < i; the
+    row is written in place (this loop is the cost of a batch solve).
     """
     n = S.size
     X = np.eye(n)
+    gaps = S[np.newaxis, :] - S[:, np.newaxis]  # gaps[i, j] = S_j - S_i
     for i in range(1, n):
-        r = A[i, :i] @ X[:i, :i]
-        X[i, :i] = r / (S[:i] - S[i])
+        np.divide(A[i, :i] @ X[:i, :i], gaps[i, :i], out=X[i, :i])
     return X
 
 

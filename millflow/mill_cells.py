@@ -134,7 +134,8 @@ def _solve_chain(S, b, feed, net, d, where) -> CellSolution:
         key = (float(tau_k[k]), classified)
         if key not in cache:
             scale = tau_k[k] / d if classified else np.full(S.size, tau_k[k])
-            cache[key] = (eye - K * scale[np.newaxis, :], scale)
+            # Fortran order once: LAPACK would otherwise copy the matrix on every cell
+            cache[key] = (np.asfortranarray(eye - K * scale[np.newaxis, :]), scale)
         M, scale = cache[key]
         stream, info = _trtrs(M, stream, lower=1)
         if info != 0:

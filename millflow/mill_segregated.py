@@ -40,31 +40,31 @@ def _feasible(blocks: SpectralBlocks) -> bool:
     return True
 
 
-def decompose(S, b, feed=None) -> SpectralBlocks:
-    """Block eigen-decomposition for segregated flow.
+def decompose(S, b, feed=None):
+    """Block eigen-decomposition for segregated flow: (blocks, w, estimate).
 
     Gaps of :data:`SEGREGATED_GAPS` in turn; the first whose cancellation estimate is
     below 1e-13 and whose clusters are narrow enough for :func:`contour_funm` wins,
     else the feasible one with the smallest estimate (never one cluster for all
-    rates: a Taylor series about one rate cannot span decades).
+    rates: a Taylor series about one rate cannot span decades). w = X^-1 feed (None
+    without a 1-D feed) and the estimate are returned so that callers reuse them.
     """
     best = None
     for gap in SEGREGATED_GAPS:
-        blocks = SpectralBlocks.from_rates(S, b, gap=gap)
+        blocks, w, est = SpectralBlocks.decompose(S, b, gap, feed=feed)
         if not _feasible(blocks):
             continue
-        est = blocks.cancellation(feed)
-        if best is None or est < best[1]:
-            best = (blocks, est)
+        if best is None or est < best[2]:
+            best = (blocks, w, est)
         if est <= _TARGET:
             break
     if best is None:
         raise SolverError("segregated flow: clusters of close rates are too wide for every cluster gap")
-    return best[0]
+    return best
 
 
 def apply_function(blocks: SpectralBlocks, fun, V, analytic_left: float = 0.0,
-                   block_fun=None, errors: list | None = None) -> np.ndarray:
+                   block_fun=None, errors: list | None = None, w=None) -> np.ndarray:
     """fun(A) V for V (N,) or (N, m) (SpectralBlocks.apply for several columns).
 
     Inside clusters ``block_fun(block)`` if given, else :func:`contour_funm` at two
@@ -72,7 +72,7 @@ def apply_function(blocks: SpectralBlocks, fun, V, analytic_left: float = 0.0,
     mapped back through X, is appended to ``errors`` (a rounding estimate).
     """
     V = np.asarray(V, dtype=float)
-    w = blocks.coordinates(V)
+    w = blocks.coordinates(V) if w is None else w
     vals = np.real(np.asarray(fun(blocks.S), dtype=complex))
     coeff = (vals if V.ndim == 1 else vals[:, np.newaxis]) * w
     delta = np.zeros_like(coeff)
@@ -113,20 +113,24 @@ def segregated(S, b, feed, model, *, holdup: bool = True, blocks: SpectralBlocks
     """
     S = np.asarray(S, dtype=float)
     feed = np.asarray(feed, dtype=float)
+    w = cancel = None
     if blocks is None:
-        blocks = decompose(S, b, feed if feed.ndim == 1 else None)
+        blocks, w, cancel = decompose(S, b, feed if feed.ndim == 1 else None)
     # the half plane Re s > 0, not the model's own (wider) region of analyticity: there
     # |E_hat(s)| <= E_hat(Re s) <= 1 for every RTD, so the Cauchy integral cannot pick
     # up the huge values near a high-order pole (tanks in series: (1 + s tau/n)^-n)
     left = 0.0
     errors = []
-    product = apply_function(blocks, model.laplace, feed, left, errors=errors)
+    if w is None:
+        w = blocks.coordinates(feed)
+    product = apply_function(blocks, model.laplace, feed, left, errors=errors, w=w)
     hold = None
     if holdup:
-        hold = apply_function(blocks, survival_transform(model), feed, left, errors=errors)
+        hold = apply_function(blocks, survival_transform(model), feed, left, errors=errors, w=w)
         errors[-1] /= max(float(model.mean), 1e-300)  # hold-up error in units of tau
     scale = float(np.abs(feed).sum(axis=0).max()) if feed.size else 0.0
-    cancel = blocks.cancellation(feed if feed.ndim == 1 else None)
+    if cancel is None:
+        cancel = blocks.cancellation(feed if feed.ndim == 1 else None)
     error = 4.0 * cancel * max(scale, 1.0) + 8 * np.finfo(float).eps * scale + max(errors, default=0.0)
     info = {"cluster_gap": float(blocks.gap), "cluster_sizes": [int(c.size) for c in blocks.clusters],
             "blocks": blocks}
@@ -152,8 +156,11 @@ def plug_flow(S, b, feed, tau: float, *, holdup: bool = True, blocks: SpectralBl
 
     S = np.asarray(S, dtype=float)
     feed = np.asarray(feed, dtype=float)
+    w = cancel = None
     if blocks is None:  # exp and its integral are exact on any cluster: the core's choice
-        blocks = SpectralBlocks.from_rates(S, b, feed=feed if feed.ndim == 1 else None)
+        blocks, w, cancel = SpectralBlocks.decompose(S, b, feed=feed if feed.ndim == 1 else None)
+    if w is None:
+        w = blocks.coordinates(feed)
 
     def expm_block(B):
         return _block_expm(B, np.array([tau]))[0]
@@ -172,10 +179,11 @@ def plug_flow(S, b, feed, tau: float, *, holdup: bool = True, blocks: SpectralBl
             out = np.where(x > 1e-8, -np.expm1(-x) / np.where(x > 0, s, 1.0), tau * (1 - 0.5 * x))
         return out
 
-    product = apply_function(blocks, lambda s: np.exp(-np.real(s) * tau), feed, block_fun=expm_block)
-    hold = apply_function(blocks, integral, feed, block_fun=integral_block) if holdup else None
+    product = apply_function(blocks, lambda s: np.exp(-np.real(s) * tau), feed, block_fun=expm_block, w=w)
+    hold = apply_function(blocks, integral, feed, block_fun=integral_block, w=w) if holdup else None
     scale = float(np.abs(feed).sum(axis=0).max()) if feed.size else 0.0
-    cancel = blocks.cancellation(feed if feed.ndim == 1 else None)
+    if cancel is None:
+        cancel = blocks.cancellation(feed if feed.ndim == 1 else None)
     error = 4.0 * cancel * max(scale, 1.0) + 8 * np.finfo(float).eps * scale
     info = {"cluster_gap": float(blocks.gap), "cluster_sizes": [int(c.size) for c in blocks.clusters],
             "blocks": blocks}

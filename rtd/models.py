@@ -17,6 +17,7 @@ Wilhelm, Chem. Eng. Sci. 6 (1956) 89.
 from __future__ import annotations
 
 import dataclasses
+import functools
 import math
 from dataclasses import dataclass
 from typing import ClassVar
@@ -140,8 +141,7 @@ class PerfectMixing(RTDModel):
 
     def network(self):
         """The equivalent one-cell :class:`rtd.CompartmentNetwork` (flow 1, volume tau)."""
-        from rtd.compartments import CompartmentNetwork
-        return CompartmentNetwork.tanks_in_series(self.tau, 1)
+        return _tanks_network(self.tau, 1)
 
     @classmethod
     def from_moments(cls, mean: float, variance: float) -> "PerfectMixing":
@@ -250,12 +250,24 @@ class TanksInSeries(RTDModel):
 
     def network(self):
         """The equivalent :class:`rtd.CompartmentNetwork` (integer n only)."""
-        from rtd.compartments import CompartmentNetwork
         if self.n != round(self.n):
             raise ParameterError(f"TanksInSeries.network: n = {self.n!r}; expected an integer")
-        return CompartmentNetwork.tanks_in_series(self.tau, int(round(self.n)))
+        return _tanks_network(self.tau, int(round(self.n)))
 
     @classmethod
     def from_moments(cls, mean: float, variance: float) -> "TanksInSeries":
         """Initial guess: tau = mean, n = mean^2/variance (at least 1)."""
         return cls(mean, max(1.0, mean**2 / variance) if variance > 0 else 50.0)
+
+
+@functools.lru_cache(maxsize=64)
+def _tanks_network(tau: float, n: int):
+    """n equal cells in a row as a CompartmentNetwork, cached: networks are immutable
+    and validating one costs more than the mill's solve with it."""
+    from rtd.compartments import CompartmentNetwork
+
+    net = CompartmentNetwork.tanks_in_series(tau, n)
+    for value in vars(net).values():  # shared between callers: nobody may write into it
+        if isinstance(value, np.ndarray):
+            value.flags.writeable = False
+    return net
