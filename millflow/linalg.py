@@ -249,26 +249,32 @@ def _block_basis(A: np.ndarray, S: np.ndarray, labels: np.ndarray):
     gaps = S[np.newaxis, :] - S[:, np.newaxis]  # gaps[i, j] = S_j - S_i
     gaps[:, cc] = np.inf  # clustered columns get 0 from the division, then their solve
     n_before = np.searchsorted(cc, np.arange(n))  # clustered columns < i
+    # per clustered row: positions (among cc[:k]) of the earlier members of its cluster
+    own_pos = [None] * n
+    for i in cc:
+        own_pos[i] = np.flatnonzero(label_cc[: n_before[i]] == labels[i])
     for i in range(1, n):
+        xi = X[i, :i]  # the row is written in place
         r = A[i, :i] @ X[:i, :i]
-        xi = r / gaps[i, :i]
+        np.divide(r, gaps[i, :i], out=xi)
         k = n_before[i]
-        if k:
-            rc = r[cc[:k]]
-            own = None
-            if not single[i]:
-                own = label_cc[:k] == labels[i]
-                D_cc[pos[i], :k][own] = rc[own]
-                rc[own] = 0.0
-            if rc.any():
-                M = D_cc[:k, :k].copy()
-                M.flat[:: k + 1] -= S[i]
-                if own is not None:
-                    M.flat[np.flatnonzero(own) * (k + 1)] = 1.0
-                # LAPACK directly: scipy.linalg.solve_triangular costs ~90 us a call
-                # in scipy 1.17, dtrtrs ~6 us, and this runs once per row
-                xi[cc[:k]] = dtrtrs(M, rc, lower=1, trans=1)[0]
-        X[i, :i] = xi
+        if not k:
+            continue
+        idx = cc[:k]
+        rc = r[idx]
+        own = own_pos[i]
+        if own is not None:
+            D_cc[pos[i], own] = rc[own]
+            rc[own] = 0.0
+        if not rc.any():
+            continue
+        M = D_cc[:k, :k].copy(order="F")  # Fortran order: f2py would copy again
+        M.flat[:: k + 1] -= S[i]
+        if own is not None:
+            M.flat[own * (k + 1)] = 1.0  # own cluster: decoupled, zero right-hand side
+        # LAPACK directly: scipy.linalg.solve_triangular costs ~90 us a call in scipy
+        # 1.17, dtrtrs ~6 us, and this runs once per row
+        xi[idx] = dtrtrs(M, rc, lower=1, trans=1)[0]
     D = np.diag(S).astype(float)
     D[np.ix_(cc, cc)] = D_cc
     return X, D
