@@ -20,7 +20,7 @@ from dataclasses import dataclass, field
 import numpy as np
 from scipy.integrate import solve_ivp
 
-from millflow.breakage import validate_b, validate_rates
+from millflow import checks
 from millflow.errors import InputError, SolverError
 from millflow.linalg import SpectralBlocks, breakage_matrix
 
@@ -56,21 +56,8 @@ class BatchResult:
 
 
 def _check_inputs(S, b, feed, t):
-    S = validate_rates(S, name="S")
-    n = S.size
-    b = np.asarray(b, dtype=float)
-    if b.shape != (n, n):
-        raise InputError(f"b has shape {b.shape}; expected ({n}, {n}) to match S of length {n}")
-    b = validate_b(b)
-    feed = np.asarray(feed, dtype=float)
-    if feed.shape != (n,):
-        raise InputError(f"feed has shape {feed.shape}; expected ({n},) to match S of length {n}")
-    if not np.all(np.isfinite(feed)):
-        i = int(np.flatnonzero(~np.isfinite(feed))[0])
-        raise InputError(f"feed: class {i + 1} is {feed[i]!r}; expected a finite mass fraction")
-    if np.any(feed < 0):
-        i = int(np.flatnonzero(feed < 0)[0])
-        raise InputError(f"feed: class {i + 1} is {feed[i]!r}; expected a mass fraction >= 0")
+    S, b = checks.kernel(S, b)
+    feed = checks.class_vector(feed, S.size, "feed", "mass fraction")
     t = np.atleast_1d(np.asarray(t, dtype=float))
     if t.ndim != 1:
         raise InputError(f"t has shape {t.shape}; expected a scalar or a 1-D array of times")

@@ -43,7 +43,7 @@ import numpy as np
 import xarray as xr
 
 import rtd
-from millflow.breakage import validate_b, validate_rates
+from millflow import checks
 from millflow.errors import InputError, SolverError
 from millflow.linalg import solve_well_mixed
 from millflow.mill_axial import solve_axial
@@ -92,34 +92,13 @@ _WHERE_OK = {
 _WHERE_DEFAULT = {"perfect_mixing": "discharge", "network": "discharge", "plug": "axis", "axial": "axis"}
 
 
-def _check_breakage(S, b):
-    S = validate_rates(S, name="S")
-    n = S.size
-    b = np.asarray(b, dtype=float)
-    if b.shape != (n, n):
-        raise InputError(f"b has shape {b.shape}; expected ({n}, {n}) to match S of length {n}")
-    return S, validate_b(b)
-
-
-def _check_vector(v, n: int, name: str, what: str, positive: bool) -> np.ndarray:
-    arr = np.asarray(v, dtype=float)
-    if arr.shape != (n,):
-        raise InputError(f"{name} has shape {arr.shape}; expected ({n},) to match S of length {n}")
-    bad = np.flatnonzero(~np.isfinite(arr) | ((arr <= 0) if positive else (arr < 0)))
-    if bad.size:
-        i = int(bad[0])
-        op = "> 0" if positive else ">= 0"
-        raise InputError(f"{name}: class {i + 1} is {arr[i]!r}; expected a finite {what} {op}")
-    return arr
-
-
 def _check_feed(feed, n: int) -> np.ndarray:
     feed = np.asarray(feed, dtype=float)
     if feed.ndim == 2 and feed.shape[0] == n:
         if not np.all(np.isfinite(feed)) or np.any(feed < 0):
             raise InputError("feed: expected finite flows >= 0 in every column")
         return feed
-    return _check_vector(feed, n, "feed", "feed flow", positive=False)
+    return checks.class_vector(feed, n, "feed", "feed flow")
 
 
 @dataclass(frozen=True)
@@ -139,16 +118,16 @@ class _Scene:
 
 
 def _scene(S, b, transport, d=None, where=None, dispersion=None, method=None) -> _Scene:
-    S, b = _check_breakage(S, b)
+    S, b = checks.kernel(S, b)
     n = S.size
     kind = _kind(transport)
     if d is not None:
-        d = _check_vector(d, n, "d", "normalised discharge rate d_i*", positive=True)
+        d = checks.class_vector(d, n, "d", "normalised discharge rate d_i*", positive=True)
     if dispersion is not None:
         if kind != "axial":
             raise InputError(f"dispersion is given but transport {transport!r} has no axial "
                              "dispersion; expected rtd.AxialDispersion(bc='closed')")
-        dispersion = _check_vector(dispersion, n, "dispersion", "relative dispersion", positive=True)
+        dispersion = checks.class_vector(dispersion, n, "dispersion", "relative dispersion", positive=True)
     if d is not None:
         allowed = _WHERE_OK[kind]
         if not allowed:
