@@ -244,7 +244,9 @@ class AxialDispersion(RTDModel):
         p = s * self.tau
         if self.bc == "open":
             a = np.sqrt(1 + 4 * p / self.pe + 0j)
-            with np.errstate(over="ignore"):
+            # left of Re s = 0 at huge Pe the value exceeds 1e308: inf, whose complex
+            # division by a sets a NaN imaginary part that is discarded for real s
+            with np.errstate(over="ignore", invalid="ignore"):
                 out = np.exp(0.5 * self.pe * (1 - a)) / a
         else:
             out = closed_transform(p, self.pe)

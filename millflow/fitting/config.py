@@ -7,7 +7,10 @@ Tables and keys (paths relative to the config file)::
     [grid]        ratio = 1.0905, top_mm = 32, bottom_mm = 0.05   # optional (auto otherwise)
     [model]       mode, rate, breakage, classification, rate_process = [...],
                   param_process = [["alpha", "moisture"], ...]   # eq. 10 on other parameters
-                  screen_column, tau_column, x0_mm, objective
+                  screen_column, tau_column, x0_mm, objective, n_tanks
+                  mode = "mill": transport = "axial_dispersion", where = "cells" (optional)
+                  b_matrix_csv = "b.csv", b_kind = "b" | "B"   # fixed breakage (hybrid fit)
+    [model.transport_params]  n = 10 / pe = 8.0 / n = 5, r = 1.0   # fixed, tau from tau_column
     [params.NAME] value, min, max, vary
     [optimizer]   global = true, starts = 20, popsize = 15, maxiter = 200, seed = 0
     [validation]  hold_out = "each" | ["cond", ...] | [["a", "b"], ...]
@@ -20,16 +23,19 @@ import os
 import tomllib
 from dataclasses import dataclass, field
 
+import numpy as np
+
+from millflow.breakage import b_from_B, validate_b
 from millflow.errors import InputError
 from millflow.fitting.data import PSDData, read_psd_table, read_sprite_folder
-from millflow.fitting.models import ModelSpec, default_parameters
+from millflow.fitting.models import ModelSpec, auto_grid, default_parameters
 from millflow.grid import SizeGrid
 
-__all__ = ["FitConfig", "load_config"]
+__all__ = ["FitConfig", "load_config", "read_b_matrix"]
 
 _TABLES = {"data", "grid", "model", "params", "optimizer", "validation", "output", "candidates"}
 _MODEL_KEYS = {"mode", "rate", "breakage", "classification", "rate_process", "param_process", "screen_column",
-               "tau_column", "n_tanks",
+               "tau_column", "n_tanks", "transport", "transport_params", "where", "b_matrix_csv", "b_kind",
                "x0_mm", "objective", "label"}
 _OPT_KEYS = {"global", "starts", "popsize", "maxiter", "seed"}
 
@@ -49,12 +55,54 @@ class FitConfig:
     label: str = "model"
 
 
-def _spec(table: dict, where: str) -> tuple[str, ModelSpec]:
+def read_b_matrix(path, grid: SizeGrid, kind: str = "b") -> np.ndarray:
+    """Fractional b (N, N) from a CSV of b or cumulative B on the numerical grid.
+
+    Format: N rows of N comma-separated numbers, no header (lines starting with ``#``
+    are comments); row i = receiving class, column j = breaking class, classes coarse
+    to fine as ``grid.x`` (class N is the sink). ``kind`` "B" is converted by
+    :func:`millflow.breakage.b_from_B`; both are validated.
+    """
+    if kind not in ("b", "B"):
+        raise InputError(f"b_kind = {kind!r}: expected 'b' (fractional) or 'B' (cumulative)")
+    if not os.path.isfile(path):
+        raise InputError(f"b_matrix_csv {path}: file not found")
+    try:
+        M = np.loadtxt(path, delimiter=",", ndmin=2, dtype=float)
+    except ValueError as exc:
+        raise InputError(f"b_matrix_csv {path}: expected N rows of N comma-separated numbers without a header "
+                         f"({exc})") from exc
+    n = grid.x.size
+    if M.shape != (n, n):
+        raise InputError(f"b_matrix_csv {path}: shape {M.shape[0]} x {M.shape[1]} does not match the numerical "
+                         f"grid of {n} classes ({grid.x[0] * 1e3:.4g} to {grid.x[-1] * 1e3:.4g} mm); "
+                         f"expected {n} x {n}")
+    try:
+        return b_from_B(M, grid.x) if kind == "B" else validate_b(M, grid.x)
+    except InputError as exc:
+        raise InputError(f"b_matrix_csv {path} (b_kind = {kind!r}): {exc}") from exc
+
+
+def _spec(table: dict, where: str, rel=None, grid_of=None) -> tuple[str, ModelSpec]:
     unknown = set(table) - _MODEL_KEYS
     if unknown:
         raise InputError(f"{where}: unknown keys {sorted(unknown)}; expected some of {sorted(_MODEL_KEYS)}")
-    kw = {k: table[k] for k in ("mode", "rate", "breakage", "screen_column", "tau_column", "objective", "n_tanks")
+    kw = {k: table[k] for k in ("mode", "rate", "breakage", "screen_column", "tau_column", "objective", "n_tanks",
+                                "transport", "where")
           if k in table}
+    if "transport_params" in table:
+        if not isinstance(table["transport_params"], dict):
+            raise InputError(f"{where}: transport_params must be a table, e.g. [model.transport_params] n = 10")
+        kw["transport_params"] = dict(table["transport_params"])
+    if "b_kind" in table and "b_matrix_csv" not in table:
+        raise InputError(f"{where}: b_kind needs b_matrix_csv")
+    if "b_matrix_csv" in table:
+        if kw.setdefault("breakage", "fixed") != "fixed":
+            raise InputError(f"{where}: b_matrix_csv fixes B; breakage must be 'fixed' (or omitted), "
+                             f"not {kw['breakage']!r}")
+        kw["b_matrix"] = read_b_matrix(rel(str(table["b_matrix_csv"])), grid_of(), str(table.get("b_kind", "b")))
+    elif kw.get("breakage") == "fixed":
+        raise InputError(f"{where}: breakage = 'fixed' needs b_matrix_csv = \"file.csv\" (b or B on the grid)")
     if "classification" in table:
         c = table["classification"]
         kw["classification"] = None if c in ("none", "", None) else c
@@ -98,8 +146,6 @@ def load_config(path, data_dir: str | None = None) -> FitConfig:
         data = read_psd_table(rel(d["psd"]), rel(d["process"]) if "process" in d else None)
     else:
         raise InputError(f"{path}: [data] needs 'psd' (and 'process') or 'sprite_folder'")
-    label, spec = _spec(cfg.get("model", {}), f"{path} [model]")
-    params = default_parameters(spec, cfg.get("params", {}))
     g = cfg.get("grid", {})
     grid = None
     if g:
@@ -108,6 +154,15 @@ def load_config(path, data_dir: str | None = None) -> FitConfig:
         top = float(g["top_mm"]) * 1e-3 if "top_mm" in g else float(sizes.max()) * 1.0001
         bottom = float(g["bottom_mm"]) * 1e-3 if "bottom_mm" in g else float(sizes.min()) / 2
         grid = SizeGrid.between(top, bottom, ratio)
+
+    def grid_of():  # a fixed b matrix belongs to the grid: make the automatic grid explicit
+        nonlocal grid
+        if grid is None:
+            grid = auto_grid(data)
+        return grid
+
+    label, spec = _spec(cfg.get("model", {}), f"{path} [model]", rel, grid_of)
+    params = default_parameters(spec, cfg.get("params", {}))
     opt = dict(cfg.get("optimizer", {}))
     unknown = set(opt) - _OPT_KEYS
     if unknown:
@@ -121,7 +176,7 @@ def load_config(path, data_dir: str | None = None) -> FitConfig:
     for k, c in enumerate(cfg.get("candidates", [])):
         c = dict(c)
         cp = c.pop("params", {})
-        lab, sp = _spec(c, f"{path} [[candidates]] #{k + 1}")
+        lab, sp = _spec(c, f"{path} [[candidates]] #{k + 1}", rel, grid_of)
         cands.append((lab, sp, default_parameters(sp, cp)))
     return FitConfig(path, data, spec, params, grid, opt, val.get("hold_out"),
                      rel(out.get("dir", "fit-results")), bool(out.get("plots", True)), cands, label)

@@ -31,6 +31,17 @@ Parameters (positive ones in logs, named ``ln_...``):
   (``tau_column``) or is 1, in which case A is the dimensionless tau*A.
   Location ``holdup`` of a well-mixed mill predicts the mill content, proportional
   to p_i / d_i*: sampling product and hold-up separates breakage from classification.
+- mode ``mill``: any transport model of :mod:`millflow.mill` (``transport`` one of
+  :data:`TRANSPORTS`, its fixed parameters in ``transport_params``, tau from
+  ``tau_column`` or 1), classification d_i* as above placed by ``where`` (None: the
+  mill's default, the discharge for cells and the axis for plug flow and axial
+  dispersion; ``"cells"`` = every cell outlet, as ``well_mixed`` with ``n_tanks``).
+  Locations ``product``, ``holdup`` (mill content) and ``cell_K`` (content of cell K,
+  1-based, cell transports). Evaluated member by member and condition by condition by
+  :class:`millflow.mill.Mill` (``steady_mill`` for hold-up samples): exact, but much
+  slower than the vectorised modes (milliseconds per member and condition instead of
+  one array operation for the whole population): prefer local fits from a good start
+  (``fit(..., global_search=False)``) or a small differential-evolution population.
 
 The model curve (cumulative passing at the grid edges, 0 at size 0, 1 above the grid)
 is interpolated linearly in size at each measured sieve: one sparse-in-effect matrix
@@ -49,11 +60,20 @@ from millflow.grid import SizeGrid
 from millflow.psd import from_sieves
 
 __all__ = ["Parameter", "ModelSpec", "ForwardModel", "RATE_FORMS", "BREAKAGE_FORMS", "MODES",
-           "CLASSIFICATIONS", "default_parameters"]
+           "CLASSIFICATIONS", "TRANSPORTS", "default_parameters"]
 
 RATE_FORMS = {"power": ("ln_A0", "alpha"), "austin": ("ln_A0", "alpha", "ln_mu", "Lambda")}
 BREAKAGE_FORMS = {"normalized": ("phi", "gamma", "beta"), "single": ("gamma",), "fixed": ()}
-MODES = ("batch", "plug_flow", "well_mixed")
+MODES = ("batch", "plug_flow", "well_mixed", "mill")
+#: Transport models of mode "mill": name -> (rtd class name, required, optional parameters).
+TRANSPORTS = {
+    "perfect_mixing": ("PerfectMixing", (), ()),
+    "tanks_in_series": ("TanksInSeries", ("n",), ()),
+    "recirculating_cells": ("RecirculatingCells", ("n",), ("r", "dead", "bypass")),
+    "axial_dispersion": ("AxialDispersion", ("pe",), ("bc",)),
+    "plug_flow": ("PlugFlow", (), ()),
+}
+_CELL_TRANSPORTS = ("perfect_mixing", "tanks_in_series", "recirculating_cells")
 CLASSIFICATIONS = {None: (), "screen": ("ln_c50", "ln_sharp"), "screen_power": ("n_screen",)}
 
 _DEFAULTS = {  # value, min, max
@@ -86,7 +106,12 @@ class ModelSpec:
 
     Attributes
     ----------
-    mode : "batch", "plug_flow" or "well_mixed".
+    mode : "batch", "plug_flow", "well_mixed" or "mill".
+    transport : mode "mill" only: one of :data:`TRANSPORTS`.
+    transport_params : mode "mill": fixed transport parameters other than tau, a dict
+        (e.g. ``{"n": 10}``, ``{"pe": 8.0}``, ``{"n": 5, "r": 1.0}``); stored as sorted pairs.
+    where : mode "mill": where classification acts (None: the mill's default), see
+        :func:`millflow.mill.steady_mill`.
     rate, breakage, classification : form names (classification None or "screen").
     rate_process : process-table columns entering A by eq. 10.
     screen_column : process column holding the screen opening [mm] for "screen".
@@ -109,6 +134,9 @@ class ModelSpec:
     n_tanks: int = 1
     b_matrix: np.ndarray | None = field(default=None, compare=False)
     objective: str = "cumulative"
+    transport: str | None = None
+    transport_params: tuple = ()
+    where: str | None = None
 
     def __post_init__(self):
         for key, val, ok in (("mode", self.mode, MODES), ("rate", self.rate, RATE_FORMS),
@@ -119,6 +147,7 @@ class ModelSpec:
                 raise InputError(f"model.{key} = {val!r}: expected one of {[k for k in ok]}")
         if int(self.n_tanks) != self.n_tanks or self.n_tanks < 1:
             raise InputError(f"model.n_tanks = {self.n_tanks!r}: expected an integer >= 1")
+        self._check_transport()
         if self.breakage == "fixed" and self.b_matrix is None:
             raise InputError("model.breakage = 'fixed' needs b_matrix (the fractional b on the numerical grid)")
         object.__setattr__(self, "rate_process", tuple(self.rate_process))
@@ -130,6 +159,45 @@ class ModelSpec:
             if name not in allowed:
                 raise InputError(f"model.param_process: {name!r} cannot depend on process parameters here; "
                                  f"expected one of {allowed}")
+
+    def _check_transport(self):
+        tp = self.transport_params
+        items = tp.items() if isinstance(tp, dict) else tp
+        try:
+            tp = tuple(sorted((str(k), v) for k, v in items))
+        except (TypeError, ValueError) as exc:
+            raise InputError(f"model.transport_params = {self.transport_params!r}: expected a dict "
+                             "name -> value") from exc
+        object.__setattr__(self, "transport_params", tp)
+        if self.mode != "mill":
+            if self.transport is not None or tp or self.where is not None:
+                raise InputError(f"model.transport, transport_params and where need mode = 'mill' "
+                                 f"(mode is {self.mode!r})")
+            return
+        if self.transport not in TRANSPORTS:
+            raise InputError(f"model.transport = {self.transport!r}: mode 'mill' needs one of {list(TRANSPORTS)}")
+        _, required, optional = TRANSPORTS[self.transport]
+        names = dict(tp)
+        unknown = sorted(set(names) - set(required) - set(optional))
+        missing = [k for k in required if k not in names]
+        if unknown or missing:
+            raise InputError(f"model.transport_params for {self.transport!r}: "
+                             + (f"unknown {unknown}; " if unknown else "") + (f"missing {missing}; " if missing else "")
+                             + f"expected {list(required)} (required) and {list(optional)} (optional); "
+                             "tau comes from tau_column")
+        self.make_transport(1.0)  # parameter values checked by rtd
+        if self.where is not None and self.classification is None:
+            raise InputError("model.where is given but there is no classification")
+
+    def make_transport(self, tau: float):
+        """The rtd transport model of mode "mill" with mean residence time ``tau``."""
+        import rtd
+        cls = getattr(rtd, TRANSPORTS[self.transport][0])
+        try:
+            return cls(float(tau), **dict(self.transport_params))
+        except (rtd.RTDError, TypeError, ValueError) as exc:
+            raise InputError(f"model.transport = {self.transport!r} with transport_params "
+                             f"{dict(self.transport_params)}: {exc}") from exc
 
     @property
     def base_names(self) -> tuple:
@@ -145,6 +213,8 @@ class ModelSpec:
 
     def label(self) -> str:
         parts = [self.mode, f"rate={self.rate}", f"B={self.breakage}"]
+        if self.mode == "mill":
+            parts.insert(1, f"transport={self.transport}" + "".join(f",{k}={v}" for k, v in self.transport_params))
         if self.classification:
             parts.append(f"class={self.classification}")
         if self.rate_process:
@@ -247,10 +317,12 @@ class ForwardModel:
         groups, rows, ys, ws, sizes, conds = [], [], [], [], [], []
         cond_index = {c: k for k, c in enumerate(self.conditions)}
         for (cond, loc, t), grp in samples.groupby(["condition", "location", "time_s"], sort=False):
-            if self.spec.mode != "batch" and loc not in ("product", "holdup"):
+            if self.spec.mode == "mill":
+                self._check_mill_location(loc, cond)
+            elif self.spec.mode != "batch" and loc not in ("product", "holdup"):
                 raise InputError(f"location {loc!r} of condition {cond!r}: a {self.spec.mode} mill predicts "
                                  "'product' and (well_mixed) 'holdup' samples")
-            if loc == "holdup" and (self.spec.mode != "well_mixed" or self.spec.n_tanks != 1):
+            if loc == "holdup" and self.spec.mode != "mill" and (self.spec.mode != "well_mixed" or self.spec.n_tanks != 1):
                 raise InputError("location 'holdup' needs mode well_mixed with n_tanks = 1")
             groups.append((cond_index[cond], loc, float(t)))
             ys.append(grp.passing.to_numpy())
@@ -298,6 +370,17 @@ class ForwardModel:
             self.y = y_cum
         self.weights = np.concatenate(ws)
         self.times = np.array(sorted({t for _, _, t in groups}))
+
+    def _check_mill_location(self, loc, cond):
+        spec = self.spec
+        if loc in ("product", "holdup"):
+            return
+        cells = {"perfect_mixing": 1}.get(spec.transport) or dict(spec.transport_params).get("n")
+        ok = "'product', 'holdup'" + (f" or 'cell_K' (K = 1..{int(cells)})" if spec.transport in _CELL_TRANSPORTS else "")
+        k = loc[5:] if loc.startswith("cell_") else ""
+        if not (spec.transport in _CELL_TRANSPORTS and k.isdigit() and 1 <= int(k) <= int(cells)):
+            raise InputError(f"location {loc!r} of condition {cond!r}: a mill with transport {spec.transport!r} "
+                             f"predicts {ok}")
 
     def _apply_D(self, Y):
         out = Y @ self._D.T
@@ -412,12 +495,41 @@ class ForwardModel:
                     out[:, g] = m / m.sum(axis=1, keepdims=True)
                 else:
                     out[:, g] = prod[:, c]
+        elif mode == "mill":
+            d = self.discharge(p, n_pop) if self.spec.classification else None
+            self._predict_mill(S, b, d, tau, out)
         else:
             for c in range(len(self.conditions)):
                 gsel = [g for g, grp in enumerate(self.groups) if grp[0] == c]
                 t = np.array([self.groups[g][2] for g in gsel]) if mode == "batch" else np.full(len(gsel), tau[c])
                 out[:, gsel] = _batch(S[:, c], b[:, c] if b.ndim == 4 else b, self._feeds[c], t)
         return out
+
+    def _predict_mill(self, S, b, d, tau, out):
+        """Mode "mill": one :class:`~millflow.mill.Mill` per member and condition (slow path)."""
+        from millflow.mill import Mill, steady_mill
+        spec = self.spec
+        transports = [spec.make_transport(t) for t in tau]
+        loc_of = {"product": "discharge", "holdup": "holdup"}
+        for c, tr in enumerate(transports):
+            gsel = [g for g, grp in enumerate(self.groups) if grp[0] == c]
+            locs = [self.groups[g][1] for g in gsel]
+            only_product = all(loc == "product" for loc in locs)
+            specs = [loc_of.get(loc) or "cell:" + loc[5:] for loc in locs]
+            for k in range(S.shape[0]):
+                Sk = S[k, c]
+                bk = b[k, c] if b.ndim == 4 else b[k]
+                dk = None if d is None else d[k, c]
+                if not (np.isfinite(Sk).all() and np.isfinite(bk).all() and (dk is None or np.isfinite(dk).all())):
+                    out[k, gsel] = np.nan  # outside the model's domain: reported, not solved
+                    continue
+                if only_product:
+                    out[k, gsel] = Mill(Sk, bk, tr, dk, spec.where).product(self._feeds[c])
+                else:
+                    ds = steady_mill(Sk, bk, self._feeds[c], tr, dk, where=spec.where, locations=specs)
+                    vals = ds["sample"].values
+                    for r, (g, loc) in enumerate(zip(gsel, locs)):
+                        out[k, g] = ds["product"].values if loc == "product" else vals[r]
 
     def predict(self, theta):
         theta = np.asarray(theta, dtype=float)

@@ -1,0 +1,167 @@
+"""Mode "mill" (any rtd transport inside the fit) and a fixed B from the TOML config."""
+from __future__ import annotations
+
+import time
+
+import numpy as np
+import pandas as pd
+import pytest
+
+from millflow.breakage import b_from_B, normalized_B
+from millflow.errors import InputError
+from millflow.fitting.config import load_config
+from millflow.fitting.data import psd_data_from_frames
+from millflow.fitting.estimate import fit
+from millflow.fitting.models import ForwardModel, ModelSpec, default_parameters
+from millflow.grid import SizeGrid
+
+GRID = SizeGrid.geometric(4e-3, 2 ** 0.5, 16)
+X = GRID.x
+
+
+def _data(conds, locs, process, values=None):
+    """Feed all in the top class; every sample measured at every grid edge. ``values``:
+    (condition, location) -> cumulative passing (placeholder curve if absent)."""
+    rows = [pd.DataFrame({"condition": "*", "location": "feed", "size_m": X[:2], "passing": [1.0, 0.0]})]
+    for c in conds:
+        for loc in locs:
+            v = np.linspace(1, 0, X.size) if values is None else values[(c, loc)]
+            rows.append(pd.DataFrame({"condition": c, "location": loc, "size_m": X, "passing": v}))
+    return psd_data_from_frames(pd.concat(rows, ignore_index=True), process, strict=False)
+
+
+def _synthetic(model, theta, noise=0.0, seed=0):
+    """Measured values of ``model`` at ``theta`` (+ noise), keyed like :func:`_data`."""
+    y = model.predict(theta)
+    y = y + noise * np.random.default_rng(seed).standard_normal(y.size)
+    s = model.group_slices
+    return {(model.conditions[c], loc): y[s[g]:s[g + 1]] for g, (c, loc, _) in enumerate(model.groups)}
+
+
+PROC = pd.DataFrame({"condition": ["c1", "c2", "c3"], "tau_s": [60.0, 120.0, 240.0], "screen_mm": [1.0, 2.0, 1.5]})
+
+
+@pytest.mark.parametrize("cls", [None, "screen"])
+def test_mill_mode_equals_well_mixed_and_tanks(cls):
+    theta = np.array([[-3.5, 1.0, 0.4, 0.8, 3.0, 0.0, 1.5], [-3.0, 0.7, 0.5, 1.0, 4.0, 0.2, 1.0]])
+    theta = theta if cls else theta[:, :5]
+    d = _data(["c1", "c2"], ["product", "holdup"], PROC)
+    wm = ForwardModel(ModelSpec(mode="well_mixed", classification=cls, tau_column="tau_s"), d, GRID)
+    mm = ForwardModel(ModelSpec(mode="mill", transport="perfect_mixing", classification=cls,
+                                tau_column="tau_s"), d, GRID)
+    np.testing.assert_allclose(mm.predict_grid(theta), wm.predict_grid(theta), rtol=0, atol=1e-10)
+    d = _data(["c1", "c2"], ["product"], PROC)
+    wm = ForwardModel(ModelSpec(mode="well_mixed", n_tanks=3, classification=cls, tau_column="tau_s"), d, GRID)
+    # well_mixed n_tanks classifies at every tank outlet: where = "cells"
+    mm = ForwardModel(ModelSpec(mode="mill", transport="tanks_in_series", transport_params={"n": 3},
+                                where="cells" if cls else None, classification=cls, tau_column="tau_s"), d, GRID)
+    np.testing.assert_allclose(mm.predict_grid(theta), wm.predict_grid(theta), rtol=0, atol=1e-10)
+    np.testing.assert_allclose(mm.predict(theta), wm.predict(theta), rtol=0, atol=1e-10)
+
+
+def test_mill_mode_cell_samples():
+    """Without classification the last of n tanks holds what it discharges: cell_n = product."""
+    d = _data(["c1"], ["cell_1", "cell_3", "product"], PROC)
+    m = ForwardModel(ModelSpec(mode="mill", transport="tanks_in_series", transport_params={"n": 3},
+                               tau_column="tau_s"), d, GRID)
+    M = m.predict_grid(np.array([-3.5, 1.0, 0.4, 0.8, 3.0]))[0]
+    g = {loc: k for k, (_, loc, _) in enumerate(m.groups)}
+    np.testing.assert_allclose(M[g["cell_3"]], M[g["product"]], atol=1e-12)
+    assert M[g["cell_1"]][0] > M[g["cell_3"]][0]  # coarser near the feed end
+    with pytest.raises(InputError, match="cell_4.*'product', 'holdup' or 'cell_K' \\(K = 1..3\\)"):
+        ForwardModel(m.spec, _data(["c1"], ["cell_4"], PROC), GRID)
+    with pytest.raises(InputError, match="predicts 'product', 'holdup'$"):
+        ForwardModel(ModelSpec(mode="mill", transport="axial_dispersion", transport_params={"pe": 5}),
+                     _data(["c1"], ["cell_1"], PROC), GRID)
+
+
+def test_mill_mode_names_are_validated():
+    with pytest.raises(InputError, match="'perfect_mixing', 'tanks_in_series', 'recirculating_cells', "
+                                         "'axial_dispersion', 'plug_flow'"):
+        ModelSpec(mode="mill", transport="cstr")
+    with pytest.raises(InputError, match="unknown \\['pe'\\]; missing \\['n'\\]"):
+        ModelSpec(mode="mill", transport="recirculating_cells", transport_params={"pe": 3})
+    with pytest.raises(InputError, match="n = 0"):
+        ModelSpec(mode="mill", transport="tanks_in_series", transport_params={"n": 0})
+    with pytest.raises(InputError, match="need mode = 'mill'"):
+        ModelSpec(mode="well_mixed", transport="plug_flow")
+
+
+def test_mill_mode_axial_dispersion_fit_separates_breakage_and_classification():
+    """Axial dispersion (Pe 5) with classification along the axis, three residence times,
+    product and hold-up samples: rate, breakage and classification recovered."""
+    spec = ModelSpec(mode="mill", transport="axial_dispersion", transport_params={"pe": 5.0}, breakage="single",
+                     classification="screen_power", tau_column="tau_s")
+    truth = {"ln_A0": -4.5, "alpha": 1.0, "gamma": 0.9, "n_screen": 1.0}
+    conds, locs = ["c1", "c2", "c3"], ["product", "holdup"]
+    m0 = ForwardModel(spec, _data(conds, locs, PROC), GRID)
+    theta = np.array([truth[n] for n in m0.param_names])
+    model = ForwardModel(spec, _data(conds, locs, PROC, _synthetic(m0, theta, noise=0.01, seed=1)), GRID)
+    params = default_parameters(spec, {n: {"value": truth[n] + 0.3} for n in model.param_names})
+    t0 = time.perf_counter()
+    res = fit(model, params, global_search=False, starts=1, grid_check=False)
+    assert time.perf_counter() - t0 < 20
+    for n in model.param_names:
+        se = res.stats["params"][n]["se"]
+        assert abs(res.params[n].value - truth[n]) < 4 * se, (n, res.params[n].value, se)
+        assert se < 0.05
+    assert res.ssr < 1.5 * model.n_data * 0.01 ** 2
+
+
+def _write_config(tmp_path, b_name="B.csv", b_kind="B"):
+    (tmp_path / "fit.toml").write_text(f"""
+[data]
+psd = "psd.csv"
+process = "process.csv"
+[grid]
+ratio = {2 ** 0.5!r}
+top_mm = 4.0
+bottom_mm = {float(X[-1]) * 1e3!r}
+[model]
+mode = "mill"
+transport = "tanks_in_series"
+tau_column = "tau_s"
+b_matrix_csv = "{b_name}"
+b_kind = "{b_kind}"
+[model.transport_params]
+n = 2
+[optimizer]
+global = false
+starts = 1
+""")
+    return tmp_path / "fit.toml"
+
+
+def test_b_matrix_csv_config_round_trip(tmp_path):
+    truth = {"ln_A0": -4.0, "alpha": 1.2, "phi": 0.4, "gamma": 0.8, "beta": 3.0}
+    B = normalized_B(X, truth["phi"], truth["gamma"], truth["beta"])
+    gen = ForwardModel(ModelSpec(mode="mill", transport="tanks_in_series", transport_params={"n": 2},
+                                 tau_column="tau_s"), _data(["c1", "c2"], ["product"], PROC), GRID)
+    vals = _synthetic(gen, np.array([truth[n] for n in gen.param_names]))
+    rows = [pd.DataFrame({"condition": "*", "location": "feed", "size_m": X[:2], "passing": [1.0, 0.0]})]
+    rows += [pd.DataFrame({"condition": c, "location": loc, "size_m": X, "passing": v}) for (c, loc), v in vals.items()]
+    pd.concat(rows).to_csv(tmp_path / "psd.csv", index=False)
+    PROC.to_csv(tmp_path / "process.csv", index=False)
+    np.savetxt(tmp_path / "B.csv", B, delimiter=",")
+    np.savetxt(tmp_path / "b.csv", b_from_B(B), delimiter=",")
+
+    cfg = load_config(_write_config(tmp_path))
+    assert cfg.spec.breakage == "fixed" and cfg.spec.param_names == ("ln_A0", "alpha")
+    np.testing.assert_allclose(cfg.spec.b_matrix, b_from_B(B), atol=1e-15)
+    np.testing.assert_allclose(cfg.grid.x, X, rtol=1e-12)
+    model = ForwardModel(cfg.spec, cfg.data, cfg.grid)
+    params = default_parameters(cfg.spec, {"ln_A0": {"value": -3.0}, "alpha": {"value": 0.5}})
+    res = fit(model, params, global_search=False, starts=1, grid_check=False)
+    assert res.params["ln_A0"].value == pytest.approx(truth["ln_A0"], abs=1e-6)
+    assert res.params["alpha"].value == pytest.approx(truth["alpha"], abs=1e-6)
+    assert res.ssr < 1e-16
+
+    cfg_b = load_config(_write_config(tmp_path, "b.csv", "b"))
+    np.testing.assert_allclose(cfg_b.spec.b_matrix, cfg.spec.b_matrix, atol=1e-15)
+
+    np.savetxt(tmp_path / "small.csv", B[:-1, :-1], delimiter=",")
+    with pytest.raises(InputError, match="small.csv: shape 15 x 15 does not match .* 16 classes"):
+        load_config(_write_config(tmp_path, "small.csv"))
+    np.savetxt(tmp_path / "notb.csv", B, delimiter=",")
+    with pytest.raises(InputError, match="notb.csv.*sums to"):
+        load_config(_write_config(tmp_path, "notb.csv", "b"))  # a cumulative B given as b
