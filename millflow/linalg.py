@@ -11,7 +11,7 @@ evaluates them without the failure of Reid's (1965) closed form, which divides b
 S_i - S_j and loses everything when rates coincide.
 
 Method (block eigen-decomposition). With A = -K (eigenvalues S_i >= 0), the rates are
-grouped into clusters of nearly equal values (relative gap below ``cluster_gap``).
+grouped into clusters of nearly equal values (relative gap below the cluster gap).
 A is then factored exactly as A = X D X^-1, X unit lower triangular with X = I on the
 rows of each cluster, D lower triangular and block diagonal over the clusters (blocks
 sit at the clusters' own, possibly scattered, indices). Row i of A X = X D gives the
@@ -21,9 +21,11 @@ recurrence
     D_i = S_i e_i + sum_{k<i} A_ik x_k               (i inside C)
 
 solved row by row. Columns of different clusters never divide by a difference smaller
-than ``cluster_gap`` times the rates, so X stays well conditioned; inside a cluster
-the function of the small block D_C is evaluated directly (``scipy.linalg.expm``, an
-exact finite series for equal rates, or a contour integral for a general transform).
+than the gap times the rates, so X stays well conditioned; inside a cluster
+the function of the small block D_C is evaluated directly: exp by a Taylor series on
+the vector (finite for equal rates) or Taylor scaling and squaring of the block, a
+general transform by a Taylor series about the cluster centre (:func:`contour_funm`).
+The gap adapts to an a-posteriori cancellation estimate (:meth:`SpectralBlocks.decompose`).
 For distinct rates (all clusters of size one) this reduces to Reid's eigenvectors,
 computed stably, and each function value costs one O(N^2) product.
 """
@@ -35,7 +37,7 @@ import numpy as np
 import scipy.linalg
 from scipy.linalg.lapack import dtrtrs
 
-from millflow.errors import BreakageError, InputError, SolverError
+from millflow.errors import InputError, SolverError
 
 __all__ = ["breakage_matrix", "cluster_rates", "SpectralBlocks"]
 
@@ -174,8 +176,7 @@ class SpectralBlocks:
 
     def coordinates(self, v: np.ndarray) -> np.ndarray:
         """w = X^-1 v (one unit lower-triangular solve); v may be (N,) or (N, m)."""
-        w, info = dtrtrs(self.X, v, lower=1, unitdiag=1)
-        return w
+        return dtrtrs(self.X, v, lower=1, unitdiag=1)[0]  # unit diagonal: never singular
 
     def expm_apply(self, v: np.ndarray, t: np.ndarray, *, w: np.ndarray | None = None) -> np.ndarray:
         """exp(-A t) v = exp(K t) v for each time in t; returns (T, N).
@@ -196,21 +197,6 @@ class SpectralBlocks:
         for p in sizes:
             pick = [k for k, idx in enumerate(self.clusters) if idx.size == p]
             yield (np.array([self.clusters[k] for k in pick]), np.array([self.blocks[k] for k in pick]))
-
-    def apply(self, fun, v: np.ndarray, *, block_fun=None) -> np.ndarray:
-        """fun(A) v for a scalar function fun of the rate s (A = -K, eigenvalues S).
-
-        fun must be vectorised over arrays. Inside a cluster, ``block_fun(block)``
-        (if given) returns fun of the small lower-triangular block directly;
-        otherwise fun(block) is a contour integral of fun around the cluster, so fun
-        must then accept complex arrays and be analytic in a disc around it.
-        """
-        w = self.coordinates(np.asarray(v, dtype=float))
-        coeff = np.real(np.asarray(fun(self.S))) * w
-        for idx, block in zip(self.clusters, self.blocks):
-            fb = block_fun(block) if block_fun is not None else contour_funm(fun, block)
-            coeff[idx] = np.real(fb) @ w[idx]
-        return self.X @ coeff
 
 
 def _eigenvectors_distinct(A: np.ndarray, S: np.ndarray) -> np.ndarray:
