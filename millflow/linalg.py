@@ -154,9 +154,14 @@ class SpectralBlocks:
         counts = np.bincount(labels)
         if np.all(counts == 1):
             return cls(S=S, X=_eigenvectors_distinct(A, S), labels=labels, gap=gap)
-        X, D = _block_basis(A, S, labels)
-        clusters = [np.flatnonzero(labels == c) for c in np.flatnonzero(counts > 1)]
-        blocks = [D[np.ix_(idx, idx)] for idx in clusters]
+        X, cc, D_cc = _block_basis(A, S, labels)
+        # clusters in index order of their members, from one stable sort of the labels
+        order = np.argsort(labels[cc], kind="stable")
+        bounds = np.cumsum(np.bincount(labels[cc])[np.unique(labels[cc])])[:-1]
+        clusters, blocks = [], []
+        for local in np.split(order, bounds):  # positions within cc
+            clusters.append(cc[local])
+            blocks.append(D_cc[np.ix_(local, local)])
         return cls(S=S, X=X, labels=labels, clusters=clusters, blocks=blocks, gap=gap)
 
     def cancellation(self, v: np.ndarray | None = None) -> float:
@@ -215,7 +220,8 @@ def _eigenvectors_distinct(A: np.ndarray, S: np.ndarray) -> np.ndarray:
 
 
 def _block_basis(A: np.ndarray, S: np.ndarray, labels: np.ndarray):
-    """Basis X and block-diagonal D for clustered rates (see module docstring).
+    """Basis X and, on the clustered indices cc, the block-diagonal D_cc (returns
+    X, cc, D_cc) for clustered rates (see module docstring).
 
     Row i: r = A[i, :i] X[:i, :i]. Singleton columns divide by S_j - S_i. The
     columns of all multi-member clusters together form a compact lower-triangular
@@ -261,9 +267,7 @@ def _block_basis(A: np.ndarray, S: np.ndarray, labels: np.ndarray):
         # LAPACK directly: scipy.linalg.solve_triangular costs ~90 us a call in scipy
         # 1.17, dtrtrs ~6 us, and this runs once per row
         xi[idx] = dtrtrs(M, rc, lower=1, trans=1)[0]
-    D = np.diag(S).astype(float)
-    D[np.ix_(cc, cc)] = D_cc
-    return X, D
+    return X, cc, D_cc
 
 
 def _blocks_expm_apply(blocks: np.ndarray, t: np.ndarray, w: np.ndarray) -> np.ndarray:

@@ -98,9 +98,7 @@ def test_mill_mode_axial_dispersion_fit_separates_breakage_and_classification():
     theta = np.array([truth[n] for n in m0.param_names])
     model = ForwardModel(spec, _data(conds, locs, PROC, _synthetic(m0, theta, noise=0.01, seed=1)), GRID)
     params = default_parameters(spec, {n: {"value": truth[n] + 0.3} for n in model.param_names})
-    t0 = time.perf_counter()
     res = fit(model, params, global_search=False, starts=1, grid_check=False)
-    assert time.perf_counter() - t0 < 20
     for n in model.param_names:
         se = res.stats["params"][n]["se"]
         assert abs(res.params[n].value - truth[n]) < 4 * se, (n, res.params[n].value, se)
