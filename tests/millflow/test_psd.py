@@ -41,7 +41,9 @@ def test_cum_passing_and_retained_by_hand():
 def test_retained_inverts_cum_passing(a):
     f = _norm(a)
     back = psd.retained(psd.cum_passing(f))
-    assert_allclose(back, f, atol=1e-15)
+    # fractions summing to 1 within SUM_TOL are accepted as they are; retained takes
+    # P(x_1) = 1, so the input's own sum defect may move into class 1
+    assert_allclose(back, f, atol=1e-15 + abs(f.sum() - 1.0))
     assert abs(back.sum() - 1.0) <= MASS_TOL
 
 
