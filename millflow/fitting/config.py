@@ -10,6 +10,7 @@ Tables and keys (paths relative to the config file)::
                   screen_column, tau_column, x0_mm, objective, n_tanks
                   mode = "mill": transport = "axial_dispersion", where = "cells" (optional)
                   b_matrix_csv = "b.csv", b_kind = "b" | "B"   # fixed breakage (hybrid fit)
+                  t10_table_csv = "tn_t10.csv", t10 = 0.2      # or: B from the ore's t10 family
     [model.transport_params]  n = 10 / pe = 8.0 / n = 5, r = 1.0   # fixed, tau from tau_column
     [params.NAME] value, min, max, vary
     [optimizer]   global = true, starts = 20, popsize = 15, maxiter = 200, seed = 0
@@ -36,7 +37,7 @@ __all__ = ["FitConfig", "load_config", "read_b_matrix"]
 _TABLES = {"data", "grid", "model", "params", "optimizer", "validation", "output", "candidates"}
 _MODEL_KEYS = {"mode", "rate", "breakage", "classification", "rate_process", "param_process", "screen_column",
                "tau_column", "n_tanks", "transport", "transport_params", "where", "b_matrix_csv", "b_kind",
-               "x0_mm", "objective", "label"}
+               "t10_table_csv", "t10", "x0_mm", "objective", "label"}
 _OPT_KEYS = {"global", "starts", "popsize", "maxiter", "seed"}
 
 
@@ -101,8 +102,19 @@ def _spec(table: dict, where: str, rel=None, grid_of=None) -> tuple[str, ModelSp
             raise InputError(f"{where}: b_matrix_csv fixes B; breakage must be 'fixed' (or omitted), "
                              f"not {kw['breakage']!r}")
         kw["b_matrix"] = read_b_matrix(rel(str(table["b_matrix_csv"])), grid_of(), str(table.get("b_kind", "b")))
+    elif "t10_table_csv" in table or "t10" in table:
+        # hybrid fit with B from the ore's t10 family at a measured t10 (fixed)
+        if "t10_table_csv" not in table or "t10" not in table:
+            raise InputError(f"{where}: a t10 breakage needs both t10_table_csv = \"file.csv\" and t10 = <fraction>")
+        if kw.setdefault("breakage", "fixed") != "fixed":
+            raise InputError(f"{where}: t10 fixes B; breakage must be 'fixed' (or omitted), not {kw['breakage']!r}")
+        from millflow.breakage_t10 import T10Breakage, read_t10_table
+
+        model = T10Breakage(float(table["t10"]), read_t10_table(rel(str(table["t10_table_csv"]))))
+        kw["b_matrix"] = model.b(grid_of())
     elif kw.get("breakage") == "fixed":
-        raise InputError(f"{where}: breakage = 'fixed' needs b_matrix_csv = \"file.csv\" (b or B on the grid)")
+        raise InputError(f"{where}: breakage = 'fixed' needs b_matrix_csv = \"file.csv\" (b or B on the grid)"
+                         " or t10_table_csv and t10")
     if "classification" in table:
         c = table["classification"]
         kw["classification"] = None if c in ("none", "", None) else c

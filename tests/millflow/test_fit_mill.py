@@ -1,8 +1,6 @@
 """Mode "mill" (any rtd transport inside the fit) and a fixed B from the TOML config."""
 from __future__ import annotations
 
-import time
-
 import numpy as np
 import pandas as pd
 import pytest
