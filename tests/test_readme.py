@@ -18,7 +18,7 @@ def test_readme_block_runs(code, monkeypatch, capsys):
 
 def test_readme_has_exactly_two_setup_commands():
     text = (ROOT / "README.md").read_text()
-    commands = re.findall(r"^    (python3 -m pip install .*)$", text, flags=re.M)
+    commands = re.findall(r"^    (python -m pip install .*)$", text, flags=re.M)
     assert len(commands) == 2
     ci = (ROOT / ".ci" / "run").read_text()
     assert commands[1] in ci  # CI runs the README's test command
