@@ -531,21 +531,23 @@ class ForwardModel:
                     for r, (g, loc) in enumerate(zip(gsel, locs)):
                         out[k, g] = ds["product"].values if loc == "product" else vals[r]
 
+    def _cum_at_rows(self, theta):
+        """Cumulative passing of the grid solution, interpolated to every measured row; (P, rows)."""
+        M = self.predict_grid(theta)
+        P = np.cumsum(M[..., ::-1], axis=-1)[..., ::-1]
+        return P.reshape(P.shape[0], -1) @ self._W.T + self._const
+
     def predict(self, theta):
         theta = np.asarray(theta, dtype=float)
         single = theta.ndim == 1
-        M = self.predict_grid(theta)
-        P = np.cumsum(M[..., ::-1], axis=-1)[..., ::-1]
-        Y = P.reshape(P.shape[0], -1) @ self._W.T + self._const
+        Y = self._cum_at_rows(theta)
         if self._D is not None:
             Y = self._apply_D(Y)
         return Y[0] if single else Y
 
     def predict_cum(self, theta):
         """Cumulative passing at every measured row (the README metric's model values)."""
-        M = self.predict_grid(np.atleast_2d(theta))
-        P = np.cumsum(M[..., ::-1], axis=-1)[..., ::-1]
-        return (P.reshape(P.shape[0], -1) @ self._W.T + self._const)[0]
+        return self._cum_at_rows(np.atleast_2d(theta))[0]
 
     def with_grid(self, grid: SizeGrid) -> "ForwardModel":
         spec = self.spec

@@ -22,7 +22,7 @@ from pathlib import Path
 import numpy as np
 
 from millflow.errors import GridError
-from millflow.psd import cum_passing, cum_passing_at, percentile_size
+from millflow.psd import _fix_sum, cum_passing, cum_passing_at, percentile_size
 
 __all__ = ["stream_properties", "circulating_loads", "mass_balance", "to_dataset", "summary",
            "stream_table", "unit_table", "psd_table", "save"]
@@ -46,8 +46,9 @@ def stream_properties(sol) -> dict:
         total = math.fsum(f)
         n = fs.grid.n
         if total > 0:
-            frac = np.maximum(f, 0.0) / math.fsum(np.maximum(f, 0.0))
-            frac[np.argmax(frac)] += 1.0 - math.fsum(frac)
+            # rounding-level negatives of the linear solve (mass balance is reported
+            # separately); the sum residual goes to the largest class as in psd
+            frac = _fix_sum(np.maximum(f, 0.0) / math.fsum(np.maximum(f, 0.0)))
             cum = cum_passing(frac)
             p80, p50 = _percentile(fs.grid, frac, 80), _percentile(fs.grid, frac, 50)
             passing = (cum_passing_at(fs.grid, frac, np.array(fs.passing_sizes)) if fs.passing_sizes
