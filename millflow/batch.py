@@ -97,11 +97,7 @@ def batch_solve(S, b, feed, t, method: str = "exact", *, rtol: float = 1e-10, at
         # sum, inside the error estimate. It is set to zero and the amount recorded.
         rounding = np.clip(-M[:, -1], 0.0, error)
         M[:, -1] += rounding
-        info = {
-            "cluster_gap": float(blocks.gap),
-            "cluster_sizes": [int(c.size) for c in blocks.clusters],
-            "sink_rounding_removed": float(rounding.max()),
-        }
+        info = {**blocks.summary(), "sink_rounding_removed": float(rounding.max())}
     elif method in ODE_METHODS:
         M, info = _ode_solve(breakage_matrix(S, b), feed, t, method, rtol, atol)
         error = float(rtol * np.abs(M).max() + atol)

@@ -31,6 +31,7 @@ computed stably, and each function value costs one O(N^2) product.
 """
 from __future__ import annotations
 
+import os
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -38,6 +39,18 @@ import scipy.linalg
 from scipy.linalg.lapack import dtrtrs
 
 from millflow.errors import InputError, SolverError
+
+#: The compiled row recurrences (millflow/_eigenbasis.c, an optional build); None
+#: runs the numpy loops instead, as does MILLFLOW_KERNEL=numpy in the environment.
+_compiled = None
+if os.environ.get("MILLFLOW_KERNEL", "").lower() != "numpy":
+    try:
+        from millflow import _eigenbasis as _compiled
+
+        if getattr(_compiled, "KERNEL_VERSION", None) != 1:  # a stale build of older source
+            _compiled = None
+    except ImportError:
+        _compiled = None
 
 __all__ = ["breakage_matrix", "cluster_rates", "SpectralBlocks"]
 
@@ -151,8 +164,7 @@ class SpectralBlocks:
     @classmethod
     def _build(cls, A, S, gap):
         labels = cluster_rates(S, gap) if np.isfinite(gap) else np.zeros(S.size, dtype=int)
-        counts = np.bincount(labels)
-        if np.all(counts == 1):
+        if labels.max(initial=-1) + 1 == S.size:  # as many clusters as classes: all singletons
             return cls(S=S, X=_eigenvectors_distinct(A, S), labels=labels, gap=gap)
         X, cc, D_cc = _block_basis(A, S, labels)
         # clusters in index order of their members, from one stable sort of the labels
@@ -174,6 +186,12 @@ class SpectralBlocks:
             return float(eps * (np.abs(self.X) @ np.abs(Xinv)).max()) if np.isfinite(Xinv).all() else np.inf
         w = self.coordinates(v)
         return float(eps * (np.abs(self.X) @ np.abs(w)).max()) if np.isfinite(w).all() else np.inf
+
+    def summary(self) -> dict:
+        """What a result reports of the decomposition: cluster gap, sizes of the
+        multi-member clusters, and which kernel ran the row recurrences."""
+        return {"cluster_gap": float(self.gap), "cluster_sizes": [int(c.size) for c in self.clusters],
+                "kernel": kernel_name()}
 
     @property
     def n(self) -> int:
@@ -204,13 +222,28 @@ class SpectralBlocks:
             yield (np.array([self.clusters[k] for k in pick]), np.array([self.blocks[k] for k in pick]))
 
 
+def kernel_name() -> str:
+    """Which implementation runs the row recurrences: "compiled" or "numpy"."""
+    return "compiled" if _compiled is not None else "numpy"
+
+
 def _eigenvectors_distinct(A: np.ndarray, S: np.ndarray) -> np.ndarray:
     """Unit lower-triangular eigenvector matrix of A for well separated rates.
 
     Column j solves (A - S_j I) x = 0 with x_j = 1: for i > j,
-    x_i = sum_{k<i} A_ik x_k / (S_j - S_i). Vectorised over all columns j < i; the
-    row is written in place (this loop is the cost of a batch solve).
+    x_i = sum_{k<i} A_ik x_k / (S_j - S_i), row by row (this recurrence is the cost
+    of a batch solve). Runs compiled when the optional kernel was built.
     """
+    if _compiled is None:
+        return _eigenvectors_distinct_numpy(A, S)
+    X = np.eye(S.size)
+    _compiled.distinct(np.ascontiguousarray(A), np.ascontiguousarray(S), X)
+    return X
+
+
+def _eigenvectors_distinct_numpy(A: np.ndarray, S: np.ndarray) -> np.ndarray:
+    """:func:`_eigenvectors_distinct` in numpy: vectorised over the columns j < i,
+    one row at a time, written in place (the reference and the fallback)."""
     n = S.size
     X = np.eye(n)
     gaps = S[np.newaxis, :] - S[:, np.newaxis]  # gaps[i, j] = S_j - S_i
@@ -221,7 +254,22 @@ def _eigenvectors_distinct(A: np.ndarray, S: np.ndarray) -> np.ndarray:
 
 def _block_basis(A: np.ndarray, S: np.ndarray, labels: np.ndarray):
     """Basis X and, on the clustered indices cc, the block-diagonal D_cc (returns
-    X, cc, D_cc) for clustered rates (see module docstring).
+    X, cc, D_cc) for clustered rates (see module docstring and
+    :func:`_block_basis_numpy`). Runs compiled when the optional kernel was built.
+    """
+    if _compiled is None:
+        return _block_basis_numpy(A, S, labels)
+    labels = np.ascontiguousarray(labels, dtype=np.int64)
+    counts = np.bincount(labels)
+    cc = np.flatnonzero(counts[labels] > 1).astype(np.int64)
+    X = np.eye(S.size)
+    D_cc = np.diag(S[cc])
+    _compiled.clustered(np.ascontiguousarray(A), np.ascontiguousarray(S), X, cc, labels, D_cc)
+    return X, cc, D_cc
+
+
+def _block_basis_numpy(A: np.ndarray, S: np.ndarray, labels: np.ndarray):
+    """:func:`_block_basis` in numpy (the reference and the fallback).
 
     Row i: r = A[i, :i] X[:i, :i]. Singleton columns divide by S_j - S_i. The
     columns of all multi-member clusters together form a compact lower-triangular

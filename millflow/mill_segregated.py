@@ -73,7 +73,8 @@ def apply_function(blocks: SpectralBlocks, fun, V, analytic_left: float = 0.0,
     """
     V = np.asarray(V, dtype=float)
     w = blocks.coordinates(V) if w is None else w
-    vals = np.real(np.asarray(fun(blocks.S), dtype=complex))
+    vals = np.asarray(fun(blocks.S))  # a transform of real rates: real (complex only by type)
+    vals = vals.real if np.iscomplexobj(vals) else vals.astype(float, copy=False)
     coeff = (vals if V.ndim == 1 else vals[:, np.newaxis]) * w
     delta = np.zeros_like(coeff)
     for idx, block in zip(blocks.clusters, blocks.blocks):
@@ -83,8 +84,9 @@ def apply_function(blocks: SpectralBlocks, fun, V, analytic_left: float = 0.0,
             coeff[idx] = contour_funm(fun, block, analytic_left=analytic_left, radius_factor=0.9, v=w[idx])
             other = contour_funm(fun, block, analytic_left=analytic_left, radius_factor=0.7, v=w[idx])
             delta[idx] = np.abs(coeff[idx] - other)
-    if errors is not None:
-        errors.append(float((np.abs(blocks.X) @ delta).max()) if delta.size else 0.0)
+    if errors is not None:  # without clusters there is no contour difference to map back
+        errors.append(float((np.abs(blocks.X) @ delta).max()) if delta.size and blocks.clusters
+                      and block_fun is None else 0.0)
     return blocks.X @ coeff
 
 
@@ -132,8 +134,7 @@ def segregated(S, b, feed, model, *, holdup: bool = True, blocks: SpectralBlocks
     if cancel is None:
         cancel = blocks.cancellation(feed if feed.ndim == 1 else None)
     error = 4.0 * cancel * max(scale, 1.0) + 8 * np.finfo(float).eps * scale + max(errors, default=0.0)
-    info = {"cluster_gap": float(blocks.gap), "cluster_sizes": [int(c.size) for c in blocks.clusters],
-            "blocks": blocks}
+    info = {**blocks.summary(), "blocks": blocks}
     return _clip(product, error), _clip(hold, error * max(float(model.mean), 1e-300)), float(error), info
 
 
@@ -185,8 +186,7 @@ def plug_flow(S, b, feed, tau: float, *, holdup: bool = True, blocks: SpectralBl
     if cancel is None:
         cancel = blocks.cancellation(feed if feed.ndim == 1 else None)
     error = 4.0 * cancel * max(scale, 1.0) + 8 * np.finfo(float).eps * scale
-    info = {"cluster_gap": float(blocks.gap), "cluster_sizes": [int(c.size) for c in blocks.clusters],
-            "blocks": blocks}
+    info = {**blocks.summary(), "blocks": blocks}
     return _clip(product, error), _clip(hold, error * tau), float(error), info
 
 
@@ -228,5 +228,5 @@ def segregated_quadrature(S, b, feed, model, *, holdup: bool = True, tol: float 
     product = total[:n] + float(getattr(model, "atom_at_zero", 0.0)) * feed
     hold = total[n:] if holdup else None
     error += 4.0 * blocks.cancellation(feed) * scale
-    info = {"cluster_gap": float(blocks.gap), "cluster_sizes": [int(c.size) for c in blocks.clusters]}
+    info = blocks.summary()
     return _clip(product, error), _clip(hold, error * mean), float(error), info

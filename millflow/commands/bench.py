@@ -26,6 +26,7 @@ import subprocess
 import sys
 
 from millflow.errors import InputError
+from millflow.linalg import kernel_name
 
 THREAD_VARS = ("OPENBLAS_NUM_THREADS", "OMP_NUM_THREADS", "MKL_NUM_THREADS")
 _NO_REEXEC = "MILLFLOW_BENCH_REEXEC"
@@ -112,13 +113,16 @@ def run_command(args) -> int:
             raise InputError(f"benchmark suite {args.suite!r} has no references to make")
         maker()
     rows = suite.run(quick=args.quick)
+    kernel = kernel_name()
     for row in rows:
         row.setdefault("suite", args.suite)
         row["blas_threads"] = threads
+        row["kernel"] = kernel
     if args.json:
         print(json.dumps(_jsonable(rows), indent=1, allow_nan=False))
     else:
         fmt = getattr(suite, "format_table", _generic_table)
-        print(f"millflow bench {args.suite}: {suite.DESCRIPTION}" + (" (quick)" if args.quick else ""))
+        print(f"millflow bench {args.suite}: {suite.DESCRIPTION}" + (" (quick)" if args.quick else "")
+              + f"; eigenbasis kernel: {kernel}")
         print(fmt(rows))
     return 0

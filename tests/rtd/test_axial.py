@@ -96,3 +96,32 @@ def test_cdf_of_large_pe_is_a_sharp_monotone_front(pe):
     sd = np.sqrt(2 / pe)  # Gaussian limit: F(1 -/+ 2 sd) -> Phi(-/+ 2)
     np.testing.assert_allclose(m.cdf(np.array([1 - 2 * sd, 1 + 2 * sd])), [0.02275, 0.97725],
                                atol=0.05)
+
+
+def wehner_wilhelm_reference(p: float, pe: float) -> float:
+    """E_hat(p) of the closed vessel in 50 digits: 4 a e^{q} / [(1+a)^2 e^{qa} - (1-a)^2 e^{-qa}]."""
+    with mp.workdps(50):
+        q = mp.mpf(pe) / 2
+        a = mp.sqrt(1 + 4 * mp.mpf(p) / pe)
+        return float(4 * a * mp.exp(q) / ((1 + a) ** 2 * mp.exp(q * a) - (1 - a) ** 2 * mp.exp(-q * a)))
+
+
+@pytest.mark.parametrize("pe", [1e-2, 0.3, 10.0, 100.0, 1e4])
+def test_closed_transform_real_path_matches_complex_path_and_reference(pe):
+    # real p > -Pe/4 runs in float64 (the segregated mill's case); complex p in complex
+    p = np.r_[-0.2 * pe, 0.0, np.geomspace(1e-9, 1e9, 37)]
+    real = axial.closed_transform(p, pe)
+    assert real.dtype == float
+    np.testing.assert_allclose(real, axial.closed_transform(p.astype(complex), pe).real, rtol=1e-13, atol=1e-300)
+    ref = np.array([wehner_wilhelm_reference(v, pe) for v in p])
+    np.testing.assert_allclose(real, ref, rtol=1e-13, atol=1e-300)
+
+
+@pytest.mark.parametrize("pe", [1e-2, 10.0, 1e4])
+def test_open_transform_matches_reference_at_small_and_large_p(pe):
+    # open vessel: E_hat = exp(Pe (1 - a) / 2) / a, in 50 digits
+    p = np.r_[0.0, np.geomspace(1e-9, 1e9, 19)]
+    with mp.workdps(50):
+        ref = [float(mp.exp(mp.mpf(pe) / 2 * (1 - mp.sqrt(1 + 4 * mp.mpf(v) / pe))) / mp.sqrt(1 + 4 * mp.mpf(v) / pe))
+               for v in p]
+    np.testing.assert_allclose(rtd.AxialDispersion(1.0, pe, bc="open").laplace(p), ref, rtol=1e-13, atol=1e-300)
