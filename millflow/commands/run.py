@@ -29,7 +29,7 @@ def _f(v, fmt="{:.4g}") -> str:
     return "-" if v is None or (isinstance(v, float) and not math.isfinite(v)) else fmt.format(v)
 
 
-def format_summary(s: dict, out_dir: str | None) -> str:
+def format_summary(s: dict, out_dir: str | None, written: list[str] | None = None) -> str:
     """The terminal summary as text."""
     streams = s["streams"]
     sizes = list(next(iter(streams.values()))["passing_pct"]) if streams else []
@@ -61,8 +61,9 @@ def format_summary(s: dict, out_dir: str | None) -> str:
         how += f" ({tear['method']}, {tear['iterations']} iterations, last change {tear['residual_history'][-1]:.1e})"
     lines.append(f"solved in {1e3 * s['runtime_s']:.1f} ms: {how}")
     if out_dir:
-        lines.append(f"results written to {out_dir}/ (results.nc, streams.csv, units.csv, psd.csv, summary.json, "
-                     "psd.png, classifiers.png, flowsheet.png)")
+        names = written if written is not None else ["results.nc", "streams.csv", "units.csv", "psd.csv",
+                                                      "summary.json", "psd.png", "classifiers.png", "flowsheet.png"]
+        lines.append(f"results written to {out_dir}/ ({', '.join(names)})")
     return "\n".join(lines)
 
 
@@ -73,9 +74,10 @@ def run(args) -> int:
     fs = load(path)
     sol = solve(fs, method=args.method)
     out = Path(args.out) if args.out else Path.cwd() / f"{path.stem}-results"
-    save(sol, out, plots=not args.no_plots)
+    files = save(sol, out, plots=not args.no_plots)
     s = summary(sol)
     s["output_dir"] = str(out)
+    s["files_written"] = [Path(f).name for f in files.values()]
     if args.json:
         print(json.dumps(s))
     else:
@@ -83,5 +85,5 @@ def run(args) -> int:
             shown = str(out.relative_to(Path.cwd()))
         except ValueError:
             shown = str(out)
-        print(format_summary(s, shown))
+        print(format_summary(s, shown, s["files_written"]))
     return 0

@@ -123,6 +123,10 @@ def test_cli_table_and_error(tmp_path, capsys, monkeypatch):
     assert "P80 um" in out and "circulating load: cyclones" in out
     assert "closed_circuit_ball_mill-results" in out
     assert (tmp_path / "closed_circuit_ball_mill-results" / "summary.json").exists()
+    # the files line names what was written, and only that: no plots with --no-plots
+    listed = out.split("results written to ")[1].split("(")[1].rstrip(")\n").split(", ")
+    assert sorted(listed) == sorted(p.name for p in (tmp_path / "closed_circuit_ball_mill-results").iterdir())
+    assert not any(name.endswith(".png") for name in listed)
     bad = tmp_path / "bad.toml"
     bad.write_text(CLOSED.read_text().replace('type = "hydrocyclone"', 'type = "cyclone"'))
     assert main(["run", str(bad), "--no-plots"]) == 2
