@@ -19,7 +19,15 @@
 #include <stdint.h>
 #include <string.h>
 
+/* Bump when the interface or the arithmetic changes: an editable install does not
+   rebuild this module by itself, and millflow.linalg ignores a build of another version. */
 #define KERNEL_VERSION 1
+
+#if defined(_MSC_VER)
+#define RESTRICT __restrict /* MSVC's C mode before /std:c11 has no restrict */
+#else
+#define RESTRICT restrict
+#endif
 
 /* Get a C-contiguous buffer of `n` items (any number if n < 0) of format `fmt`
    ("d" float64 or "q" int64). */
@@ -60,8 +68,8 @@ static int get_buffer(PyObject *obj, Py_buffer *view, const char *name, Py_ssize
 /* r[0:i] = A[i, 0:i] X[0:i, 0:i] for lower-triangular X (row-major, n columns,
    zeros above the diagonal). Four rows of X per pass: r is loaded and stored once
    for four multiply-adds. */
-HOT_LOOP static void row_times_basis(const double *restrict A, const double *restrict X, Py_ssize_t n,
-                            Py_ssize_t i, double *restrict r)
+HOT_LOOP static void row_times_basis(const double *RESTRICT A, const double *RESTRICT X, Py_ssize_t n,
+                                     Py_ssize_t i, double *RESTRICT r)
 {
     const double *a = A + i * n;
     for (Py_ssize_t j = 0; j < i; j++)
