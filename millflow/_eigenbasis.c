@@ -14,10 +14,7 @@
  * Arrays come through the buffer protocol (C-contiguous float64 / int64); no numpy
  * headers are needed to build. The GIL is released while computing.
  */
-#define PY_SSIZE_T_CLEAN
-#include <Python.h>
-#include <stdint.h>
-#include <string.h>
+#include "_buffer.h"
 
 /* Bump when the interface or the arithmetic changes: an editable install does not
    rebuild this module by itself, and millflow.linalg ignores a build of another version. */
@@ -28,33 +25,6 @@
 #else
 #define RESTRICT restrict
 #endif
-
-/* Get a C-contiguous buffer of `n` items (any number if n < 0) of format `fmt`
-   ("d" float64 or "q" int64). */
-static int get_buffer(PyObject *obj, Py_buffer *view, const char *name, Py_ssize_t n,
-                      const char *fmt, int writable)
-{
-    int flags = PyBUF_C_CONTIGUOUS | PyBUF_FORMAT | (writable ? PyBUF_WRITABLE : 0);
-    if (PyObject_GetBuffer(obj, view, flags) < 0)
-        return -1;
-    Py_ssize_t itemsize = (fmt[0] == 'd') ? (Py_ssize_t)sizeof(double) : (Py_ssize_t)sizeof(int64_t);
-    const char *f = view->format ? view->format : "B";
-    if (f[0] == '<' || f[0] == '=' || f[0] == '@')
-        f++;
-    int ok_format = (fmt[0] == 'd') ? (strcmp(f, "d") == 0)
-                                    : ((strcmp(f, "q") == 0 || strcmp(f, "l") == 0) && view->itemsize == 8);
-    if (!ok_format || view->itemsize != itemsize || (n >= 0 && view->len != n * itemsize)) {
-        if (n >= 0)
-            PyErr_Format(PyExc_ValueError, "%s: expected %zd C-contiguous %s items", name, n,
-                         fmt[0] == 'd' ? "float64" : "int64");
-        else
-            PyErr_Format(PyExc_ValueError, "%s: expected C-contiguous %s items", name,
-                         fmt[0] == 'd' ? "float64" : "int64");
-        PyBuffer_Release(view);
-        return -1;
-    }
-    return 0;
-}
 
 /* gcc >= 11 (ISA level names) on x86-64 Linux: one copy of the hot loop for AVX2+FMA
    machines, chosen at load time (ifunc), and the baseline copy for the rest; other

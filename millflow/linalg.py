@@ -31,26 +31,18 @@ computed stably, and each function value costs one O(N^2) product.
 """
 from __future__ import annotations
 
-import os
 from dataclasses import dataclass, field
 
 import numpy as np
 import scipy.linalg
 from scipy.linalg.lapack import dtrtrs
 
+from millflow import compiled
 from millflow.errors import InputError, SolverError
 
 #: The compiled row recurrences (millflow/_eigenbasis.c, an optional build); None
 #: runs the numpy loops instead, as does MILLFLOW_KERNEL=numpy in the environment.
-_compiled = None
-if os.environ.get("MILLFLOW_KERNEL", "").lower() != "numpy":
-    try:
-        from millflow import _eigenbasis as _compiled
-
-        if getattr(_compiled, "KERNEL_VERSION", None) != 1:  # a stale build of older source
-            _compiled = None
-    except ImportError:
-        _compiled = None
+_compiled = compiled.load("_eigenbasis", 1)
 
 __all__ = ["breakage_matrix", "cluster_rates", "SpectralBlocks"]
 

@@ -253,6 +253,7 @@ def _solve(sc: _Scene, feed, *, tol: float, holdup: bool = True, cache: dict | N
         out.update(product=sol.product, holdup=sol.holdup.sum(axis=0), error=_triangular_error(sol.product))
         out["cell_holdup"] = sol.holdup
         out["extras"]["solver"] = sol.method
+        out["extras"]["kernel"] = sol.kernel
     elif sc.method == "plug_flow":
         rates = S if d is None else S / d
         p, h, err, info = plug_flow(rates, b, feed, _tau(T), holdup=holdup, blocks=blocks)

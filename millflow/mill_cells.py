@@ -35,8 +35,12 @@ import scipy.linalg
 
 from scipy.linalg import lapack
 
+from millflow import compiled
 from millflow.errors import SolverError
 from millflow.linalg import breakage_matrix
+
+#: The compiled class loop for rows of cells (millflow/_cells.c, optional build).
+_compiled = compiled.load("_cells", 1)
 
 _gtsv = lapack.get_lapack_funcs("gtsv", dtype=np.float64)
 _trtrs = lapack.get_lapack_funcs("trtrs", dtype=np.float64)
@@ -55,11 +59,14 @@ class CellSolution:
         rate [s] (mass in the cell / feed mass rate).
     method : "cells_chain" (cell by cell triangular solves) or "cells_block"
         (class by class banded solves).
+    kernel : which ran the class loop of "cells_block": "compiled" (rows of cells,
+        millflow/_cells.c) or "numpy"; "lapack" for "cells_chain".
     """
 
     product: np.ndarray
     holdup: np.ndarray
     method: str
+    kernel: str = "lapack"
 
 
 def network_of(transport):
@@ -160,8 +167,9 @@ def cell_operators(net, d, where, n_cls: int):
 def _solve_block(S, b, feed, net, d, where) -> CellSolution:
     """Class by class: (S_i I - T^i) m_i = (1 - beta) u f_i + sum_{j<i} b_ij S_j m_j.
 
-    Tridiagonal networks (cells in a row with back-mixing) use LAPACK gtsv; others a
-    dense solve per class."""
+    Tridiagonal networks (cells in a row with back-mixing) run the compiled class loop
+    (millflow/_cells.c: Thomas elimination, no pivoting needed for this M-matrix) or,
+    without it, LAPACK gtsv per class; other networks a dense solve per class."""
     n_cls = S.size
     n = net.n
     feed = np.asarray(feed, dtype=float)
@@ -172,24 +180,43 @@ def _solve_block(S, b, feed, net, d, where) -> CellSolution:
     tridiagonal = n > 2 and (rows.size == 0 or np.abs(rows - cls_).max() <= 1)
     inlet = (1.0 - net.bypass) * np.asarray(net.inlet, dtype=float)
     source = np.array(inlet.reshape((1, n) + (1,) * len(cols)) * feed[:, np.newaxis], dtype=float)
-    holdup = np.empty((n_cls, n) + cols)
     diag_all = S[:, np.newaxis] + G * drain + H * exit_rate  # (N, n)
     sub, sup = np.diag(offdiag, -1), np.diag(offdiag, 1)  # flows l -> l+1 and l+1 -> l
-    bshape = (-1,) + (1,) * (1 + len(cols))
+    lower_all, upper_all = -G[:, :-1] * sub, -G[:, 1:] * sup  # (N, n - 1) each
+    bS = b * S[np.newaxis, :]  # bS[i, j]: rate at which class j breaks into class i
+    if tridiagonal and _compiled is not None:
+        holdup = np.empty((n_cls, n) + cols)
+        bad = _compiled.tridiagonal_classes(lower_all, diag_all, upper_all, bS, source, holdup,
+                                            n_cls, n, int(np.prod(cols, dtype=int)))
+        if bad:
+            raise SolverError(f"cells: zero or non-finite pivot for class {bad} (the cell system is singular)")
+        kernel = "compiled"
+    else:
+        holdup = _class_loop(diag_all, lower_all, upper_all, bS, source, offdiag, G, tridiagonal, cols)
+        kernel = "numpy"
+    weights = H * exit_rate  # (N, n): classified exit rate of each class from each cell
+    product = np.einsum("il,il...->i...", weights, holdup) + net.bypass * feed
+    return CellSolution(product, np.moveaxis(holdup, 1, 0), "cells_block", kernel)
+
+
+def _class_loop(diag_all, lower_all, upper_all, bS, source, offdiag, G, tridiagonal: bool, cols):
+    """Hold-up (N, n, *cols) class by class in numpy: LAPACK gtsv for rows of cells
+    (the reference and the fallback of millflow/_cells.c), a dense solve otherwise."""
+    n_cls, n = diag_all.shape
+    holdup = np.empty((n_cls, n) + cols)
+    flat = holdup.reshape(n_cls, -1)  # (N, n m): class i's source is bS[i, :i] @ flat[:i]
     for i in range(n_cls):
-        if tridiagonal:
-            rhs = source[i] if cols else source[i][:, np.newaxis]
-            _, _, _, m_i, info = _gtsv(-G[i, :-1] * sub, diag_all[i].copy(), -G[i, 1:] * sup, rhs)
+        rhs = source[i] + (bS[i, :i] @ flat[:i]).reshape(source[i].shape) if i else source[i]
+        if tridiagonal:  # gtsv copies its inputs (no overwrite flags): rows can be passed as they are
+            _, _, _, m_i, info = _gtsv(lower_all[i], diag_all[i], upper_all[i], rhs if cols else rhs[:, np.newaxis])
+            if info != 0:
+                raise SolverError(f"cells: singular tridiagonal system for class {i + 1} (info {info})")
             m_i = m_i if cols else m_i[:, 0]
         else:
             M = np.diag(diag_all[i]) - offdiag * G[i][np.newaxis, :]
-            m_i = scipy.linalg.solve(M, source[i], check_finite=False)
+            m_i = scipy.linalg.solve(M, rhs, check_finite=False)
         holdup[i] = m_i
-        if i + 1 < n_cls and S[i] > 0:
-            source[i + 1:] += (b[i + 1:, i] * S[i]).reshape(bshape) * m_i[np.newaxis]
-    weights = H * exit_rate  # (N, n): classified exit rate of each class from each cell
-    product = np.einsum("il,il...->i...", weights, holdup) + net.bypass * feed
-    return CellSolution(product, np.moveaxis(holdup, 1, 0), "cells_block")
+    return holdup
 
 
 def solve_cells(S, b, feed, net, d=None, where: str = "discharge") -> CellSolution:

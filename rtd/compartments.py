@@ -287,9 +287,7 @@ class RecirculatingCells(RTDModel):
 
     def network(self) -> CompartmentNetwork:
         """The compartment network (feed flow 1, volumes in units of tau)."""
-        qc = 1.0 - self.bypass
-        v = np.full(self.n, self.tau * (1 - self.dead) / self.n)
-        return CompartmentNetwork.cells_in_series(v, (1 + self.r) * qc, self.r * qc, self.bypass)
+        return _recirculating_network(self.tau, self.n, self.r, self.dead, self.bypass)
 
     def pdf(self, t):
         return self.network().pdf(t)
@@ -331,3 +329,12 @@ class RecirculatingCells(RTDModel):
             return cls(tau, n, 1e4, dead, bypass)
         r = optimize.brentq(lambda x: excess(math.expm1(x)), 0.0, math.log1p(1e4), xtol=1e-10)
         return cls(tau, n, math.expm1(r), dead, bypass)
+
+
+@functools.lru_cache(maxsize=64)
+def _recirculating_network(tau: float, n: int, r: float, dead: float, bypass: float) -> CompartmentNetwork:
+    """RecirculatingCells' network, cached: networks are immutable (read-only arrays)
+    and building and validating one costs more than a mill's solve with it."""
+    qc = 1.0 - bypass
+    v = np.full(n, tau * (1 - dead) / n)
+    return CompartmentNetwork.cells_in_series(v, (1 + r) * qc, r * qc, bypass)

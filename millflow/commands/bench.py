@@ -26,7 +26,7 @@ import subprocess
 import sys
 
 from millflow.errors import InputError
-from millflow.linalg import kernel_name
+from millflow.compiled import status as kernel_status
 
 THREAD_VARS = ("OPENBLAS_NUM_THREADS", "OMP_NUM_THREADS", "MKL_NUM_THREADS")
 _NO_REEXEC = "MILLFLOW_BENCH_REEXEC"
@@ -113,16 +113,16 @@ def run_command(args) -> int:
             raise InputError(f"benchmark suite {args.suite!r} has no references to make")
         maker()
     rows = suite.run(quick=args.quick)
-    kernel = kernel_name()
+    kernels = kernel_status()
     for row in rows:
         row.setdefault("suite", args.suite)
         row["blas_threads"] = threads
-        row["kernel"] = kernel
+        row["kernels"] = kernels
     if args.json:
         print(json.dumps(_jsonable(rows), indent=1, allow_nan=False))
     else:
         fmt = getattr(suite, "format_table", _generic_table)
         print(f"millflow bench {args.suite}: {suite.DESCRIPTION}" + (" (quick)" if args.quick else "")
-              + f"; eigenbasis kernel: {kernel}")
+              + f"; kernels: {kernels}")
         print(fmt(rows))
     return 0
