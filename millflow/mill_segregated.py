@@ -84,9 +84,9 @@ def apply_function(blocks: SpectralBlocks, fun, V, analytic_left: float = 0.0,
             coeff[idx] = contour_funm(fun, block, analytic_left=analytic_left, radius_factor=0.9, v=w[idx])
             other = contour_funm(fun, block, analytic_left=analytic_left, radius_factor=0.7, v=w[idx])
             delta[idx] = np.abs(coeff[idx] - other)
-    if errors is not None:  # without clusters there is no contour difference to map back
-        errors.append(float((np.abs(blocks.X) @ delta).max()) if delta.size and blocks.clusters
-                      and block_fun is None else 0.0)
+    if errors is not None:  # delta is zero unless clusters went through contour_funm
+        contour = blocks.clusters and block_fun is None and delta.size
+        errors.append(float((np.abs(blocks.X) @ delta).max()) if contour else 0.0)
     return blocks.X @ coeff
 
 
