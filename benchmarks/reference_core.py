@@ -125,8 +125,7 @@ def make_entry(case, dps: int, check_dps: int, expm_check: bool) -> dict:
     M = expo_poly_solution(case.S, case.b, case.feed, case.t_s, dps)
     M_check = expo_poly_solution(case.S, case.b, case.feed, case.t_s, check_dps)
     entry = {
-        "input_sha256": case.sha256(),
-        "t_s": [float(v) for v in case.t_s],
+        "inputs": case.inputs(),  # matched to a case by value (millflow.bench.core.INPUT_RTOL)
         "dps": dps,
         "check_dps": check_dps,
         "max_diff_between_precisions": max_diff(M, M_check),

@@ -16,7 +16,7 @@ import numpy as np
 import pytest
 
 from millflow.batch import batch_solve
-from millflow.bench.core import CASE_NAMES, REFERENCE_DIR, core_cases, load_reference, rate_degeneracy
+from millflow.bench.core import CASE_NAMES, REFERENCE_DIR, CoreCase, core_cases, load_reference, rate_degeneracy
 from millflow.cli import main
 
 ROOT = Path(__file__).resolve().parents[2]
@@ -33,6 +33,18 @@ def test_exact_path_matches_reference_at_100_classes(name):
     assert err.max() <= 1e-12, f"{name}: max error {err.max():.3e} at t = {case.t_s[i]:g} s, class {j + 1}"
     assert res.M.min() >= -1e-15
     assert np.abs(res.M.sum(axis=1) - case.feed.sum()).max() <= 1e-13
+
+
+def test_reference_is_matched_by_value_not_by_digest():
+    # another CPU or libm computes the inputs a few ulps apart: still the same case
+    case = core_cases(100)["degenerate"]
+    nudged = CoreCase(case.name, case.S * (1 + 4e-16), case.b * (1 - 4e-16), case.feed, case.t_s * (1 + 2e-16),
+                      case.description)
+    assert load_reference("degenerate", 100, nudged)[0] is not None
+    # a real change of the case (the 1e-9 scale the degenerate rates use) is refused, by name
+    moved = CoreCase(case.name, case.S * (1 + 1e-9), case.b, case.feed, case.t_s, case.description)
+    ref, why = load_reference("degenerate", 100, moved)
+    assert ref is None and "S[" in why and "regenerate" in why
 
 
 @pytest.mark.parametrize("name", CASE_NAMES)
