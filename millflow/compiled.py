@@ -9,7 +9,10 @@ from __future__ import annotations
 import importlib
 import os
 
-__all__ = ["load", "status"]
+__all__ = ["KERNELS", "load", "status"]
+
+#: The compiled pieces: name -> (module, the KERNEL_VERSION its callers are written for).
+KERNELS = {"eigenbasis": ("_eigenbasis", 1), "cells": ("_cells", 1)}
 
 
 def load(name: str, version: int):
@@ -26,7 +29,4 @@ def load(name: str, version: int):
 
 def status() -> str:
     """Which kernel runs each compiled piece, e.g. "eigenbasis=compiled, cells=numpy"."""
-    from millflow import linalg, mill_cells
-
-    pieces = {"eigenbasis": linalg._compiled, "cells": mill_cells._compiled}
-    return ", ".join(f"{name}={'numpy' if mod is None else 'compiled'}" for name, mod in pieces.items())
+    return ", ".join(f"{name}={'numpy' if load(*spec) is None else 'compiled'}" for name, spec in KERNELS.items())

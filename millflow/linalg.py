@@ -42,7 +42,7 @@ from millflow.errors import InputError, SolverError
 
 #: The compiled row recurrences (millflow/_eigenbasis.c, an optional build); None
 #: runs the numpy loops instead, as does MILLFLOW_KERNEL=numpy in the environment.
-_compiled = compiled.load("_eigenbasis", 1)
+_compiled = compiled.load(*compiled.KERNELS["eigenbasis"])
 
 __all__ = ["breakage_matrix", "cluster_rates", "SpectralBlocks"]
 

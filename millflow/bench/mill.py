@@ -34,8 +34,8 @@ from millflow.breakage import b_from_B, normalized_B, power_law_rates
 from millflow.grid import SizeGrid
 from millflow.linalg import breakage_matrix
 from millflow.mill import Mill, steady_mill, transfer_matrix
-from millflow.mill_axial import solve_axial, solve_axial_grid
-from millflow.mill_segregated import segregated
+from millflow.mill.axial import solve_axial, solve_axial_grid
+from millflow.mill.segregated import segregated
 
 __all__ = ["DESCRIPTION", "run", "format_table", "kernel"]
 

@@ -108,7 +108,7 @@ def _spec(table: dict, where: str, rel=None, grid_of=None) -> tuple[str, ModelSp
             raise InputError(f"{where}: a t10 breakage needs both t10_table_csv = \"file.csv\" and t10 = <fraction>")
         if kw.setdefault("breakage", "fixed") != "fixed":
             raise InputError(f"{where}: t10 fixes B; breakage must be 'fixed' (or omitted), not {kw['breakage']!r}")
-        from millflow.breakage_t10 import T10Breakage, read_t10_table
+        from millflow.breakage.t10 import T10Breakage, read_t10_table
 
         model = T10Breakage(float(table["t10"]), read_t10_table(rel(str(table["t10_table_csv"]))))
         kw["b_matrix"] = model.b(grid_of())

@@ -4,7 +4,7 @@ import pandas as pd
 import pytest
 
 from millflow.breakage import b_from_B, validate_b
-from millflow.breakage_t10 import T10Breakage, T10Table, read_t10_table, t10_B
+from millflow.breakage.t10 import T10Breakage, T10Table, read_t10_table, t10_B
 from millflow.errors import BreakageError, InputError
 from millflow.grid import SizeGrid
 

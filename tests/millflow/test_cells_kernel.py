@@ -13,7 +13,8 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 import rtd
-from millflow import mill_cells, steady_mill
+from millflow import steady_mill
+from millflow.mill import cells as mill_cells
 from millflow.breakage import b_from_B, normalized_B
 
 compiled = pytest.mark.skipif(mill_cells._compiled is None, reason="compiled kernel not built")

@@ -15,8 +15,8 @@ from millflow.breakage import b_from_B, normalized_B, power_law_rates
 from millflow.errors import InputError
 from millflow.grid import SizeGrid
 from millflow.mill import Mill, steady_mill, transfer_matrix
-from millflow.mill_axial import solve_axial, solve_axial_grid
-from millflow.mill_segregated import segregated
+from millflow.mill.axial import solve_axial, solve_axial_grid
+from millflow.mill.segregated import segregated
 
 
 def kernel(n=30, a=1.0 / 60, ratio=2**0.25, plateau=None):
@@ -197,7 +197,7 @@ def test_axial_velocity_and_dispersion_scaled_equals_rescaled_rates():
 
 # --------------------------------------------------------------- classification
 def test_classification_at_declared_cells():
-    from millflow.mill_cells import _solve_block, _solve_chain
+    from millflow.mill.cells import _solve_block, _solve_chain
 
     grid, S, b, f = kernel()
     d = np.where(grid.x > 1e-3, 0.3, 1.2)

@@ -11,8 +11,8 @@ import rtd
 from millflow.batch import batch_grind
 from millflow.errors import InputError
 from millflow.mill import steady_mill
-from millflow.mill_axial import solve_axial
-from millflow.mill_transient import transient_mill
+from millflow.mill.axial import solve_axial
+from millflow.mill.transient import transient_mill
 
 N = 6
 B = np.tril(np.ones((N, N)), -1)

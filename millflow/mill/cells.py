@@ -40,7 +40,7 @@ from millflow.errors import SolverError
 from millflow.linalg import breakage_matrix
 
 #: The compiled class loop for rows of cells (millflow/_cells.c, optional build).
-_compiled = compiled.load("_cells", 1)
+_compiled = compiled.load(*compiled.KERNELS["cells"])
 
 _gtsv = lapack.get_lapack_funcs("gtsv", dtype=np.float64)
 _trtrs = lapack.get_lapack_funcs("trtrs", dtype=np.float64)

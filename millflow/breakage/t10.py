@@ -26,7 +26,7 @@ from dataclasses import dataclass, field
 import numpy as np
 from scipy.interpolate import PchipInterpolator
 
-from millflow.breakage_distributions import b_from_B, validate_B
+from millflow.breakage.distributions import b_from_B, validate_B
 from millflow.errors import BreakageError, InputError
 from millflow.grid import as_sizes
 

@@ -9,13 +9,13 @@ method that is exact for them (``METHODS``):
 - ``well_mixed``: ``rtd.PerfectMixing``, eq. (3) by one triangular solve;
 - ``cells``: tanks in series (integer n), ``rtd.RecirculatingCells`` or any
   ``rtd.CompartmentNetwork``: every cell well mixed, classification at the discharge
-  or at every cell outlet, one exact block solve (:mod:`millflow.mill_cells`);
+  or at every cell outlet, one exact block solve (:mod:`millflow.mill.cells`);
 - ``plug_flow``: ``rtd.PlugFlow``, the batch solution at contact time tau (eq. 4),
   classification along the axis = class i travelling at d_i* u (rates S/d*);
 - ``segregated``: any other ``rtd`` model without classification, product
-  E_hat(-K) f (exact for first-order breakage, :mod:`millflow.mill_segregated`);
+  E_hat(-K) f (exact for first-order breakage, :mod:`millflow.mill.segregated`);
 - ``axial_fv``: ``rtd.AxialDispersion`` (closed) with size-dependent axial velocity
-  or dispersion, finite volumes with Richardson extrapolation (:mod:`millflow.mill_axial`);
+  or dispersion, finite volumes with Richardson extrapolation (:mod:`millflow.mill.axial`);
   also the fallback of axial dispersion when the eigenbasis of segregated flow cancels;
 - ``quadrature`` (on request only): segregated flow as int E(t) exp(K t) f dt by adaptive
   quadrature, for rates whose eigenbasis cancels (slow: seconds);
@@ -46,9 +46,9 @@ import rtd
 from millflow import checks
 from millflow.errors import InputError, SolverError
 from millflow.linalg import solve_well_mixed
-from millflow.mill_axial import solve_axial
-from millflow.mill_cells import network_of, solve_cells
-from millflow.mill_segregated import plug_flow, segregated, segregated_quadrature
+from millflow.mill.axial import solve_axial
+from millflow.mill.cells import network_of, solve_cells
+from millflow.mill.segregated import plug_flow, segregated, segregated_quadrature
 
 __all__ = ["METHODS", "Mill", "steady_mill", "transfer_matrix", "choose_method", "WHERE"]
 
@@ -502,7 +502,7 @@ class Mill:
 
     ``Mill(S, b, transport=rtd.TanksInSeries(600.0, 3), d=None)``: what is absent is
     None; the repr shows the composition. Methods delegate to :func:`steady_mill`,
-    :func:`transfer_matrix` and :func:`millflow.mill_transient.transient_mill`.
+    :func:`transfer_matrix` and :func:`millflow.mill.transient.transient_mill`.
     """
 
     S: np.ndarray = field(repr=False)
@@ -550,7 +550,7 @@ class Mill:
                                dispersion=self.dispersion, **kwargs)
 
     def transient(self, t, **kwargs) -> xr.Dataset:
-        """:func:`millflow.mill_transient.transient_mill` for this mill."""
-        from millflow.mill_transient import transient_mill
+        """:func:`millflow.mill.transient.transient_mill` for this mill."""
+        from millflow.mill.transient import transient_mill
         return transient_mill(self.S, self.b, self.transport, t, d=self.d, where=self.where,
                               x=self.x, **kwargs)

@@ -1,15 +1,15 @@
 """Breakage functions: specific rates S_i and distributions B_ij, b_ij (eqs. 5-8, 10).
 
-The public face of :mod:`millflow.breakage_rates` (eq. 5 power law, eq. 7 Austin's
+The public face of :mod:`millflow.breakage.rates` (eq. 5 power law, eq. 7 Austin's
 rate with a maximum and ball-size dependence, eq. 10 process-parameter prefactor,
-form-free vectors) and :mod:`millflow.breakage_distributions` (eq. 6 normalized and
+form-free vectors) and :mod:`millflow.breakage.distributions` (eq. 6 normalized and
 eq. 8 non-normalized cumulative distributions, form-free B or b, conversions and
-validation) and :mod:`millflow.breakage_t10` (B from an ore's tn-t10 family). Sizes are upper class edges [m], rates [1/s]; class N is the sink:
+validation) and :mod:`millflow.breakage.t10` (B from an ore's tn-t10 family). Sizes are upper class edges [m], rates [1/s]; class N is the sink:
 S_N = 0 and column N of B and b is zero. A rate model is any callable ``x -> S``,
 a distribution model any callable ``x -> b``; the dataclasses here are such
 callables with validated parameters, and a user's own function plugs in the same way.
 """
-from millflow.breakage_distributions import (
+from millflow.breakage.distributions import (
     COLUMN_TOL,
     B_from_b,
     NonNormalizedBreakage,
@@ -22,8 +22,8 @@ from millflow.breakage_distributions import (
     validate_B,
     validate_b,
 )
-from millflow.breakage_t10 import T10Breakage, T10Table, read_t10_table, t10_B
-from millflow.breakage_rates import (
+from millflow.breakage.t10 import T10Breakage, T10Table, read_t10_table, t10_B
+from millflow.breakage.rates import (
     AustinRate,
     PowerLawRate,
     TabulatedRate,

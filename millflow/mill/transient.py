@@ -5,9 +5,9 @@ network): the hold-up m_ik of class i in cell k obeys the linear system
 
     dm_i/dt = T^i m_i - S_i m_i + sum_{j<i} b_ij S_j m_j + (1 - beta) u f_i(t),
 
-T^i the transport matrix of class i with classification (:mod:`millflow.mill_cells`),
+T^i the transport matrix of class i with classification (:mod:`millflow.mill.cells`),
 product p_i = h_i sum_k (o_k / V_k) m_ik + beta f_i. Axial dispersion: the same
-system from the finite-volume discretisation of :mod:`millflow.mill_axial` (method of
+system from the finite-volume discretisation of :mod:`millflow.mill.axial` (method of
 lines on a fixed grid). Both are integrated by scipy's implicit ``solve_ivp`` (BDF by
 default) with the constant sparse Jacobian, so stiff rates (tau S up to 1e8) cost
 little. A pulse is an initial hold-up distributed like the inlet (for axial
@@ -30,10 +30,10 @@ from scipy.integrate import solve_ivp
 from millflow.batch import batch_grind
 from millflow.errors import InputError, SolverError
 from millflow.linalg import breakage_matrix
-from millflow.mill import _check_feed, _scene, _size_coords, _tau
-from millflow.mill_axial import _bernoulli, solve_axial_grid
-from millflow.mill_cells import cell_operators, solve_cells
-from millflow.mill_segregated import plug_flow
+from millflow.mill.steady import _check_feed, _scene, _size_coords, _tau
+from millflow.mill.axial import _bernoulli, solve_axial_grid
+from millflow.mill.cells import cell_operators, solve_cells
+from millflow.mill.segregated import plug_flow
 
 __all__ = ["transient_mill"]
 

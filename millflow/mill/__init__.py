@@ -1,0 +1,20 @@
+"""Continuous mills: breakage (eq. 4 kinetics) coupled to transport and classification.
+
+``Mill`` composes rates S [1/s], fractional breakage b, an ``rtd`` transport model and
+the normalised discharge d_i* (eq. 1-3); :func:`steady_mill` and
+:func:`transfer_matrix` solve the steady state by the cheapest exact method for the
+scene, :func:`transient_mill` the dynamics. Modules, one job each:
+
+- :mod:`~millflow.mill.steady`: the scene (validation, method choice) and the steady
+  solve, ``Mill``;
+- :mod:`~millflow.mill.segregated`: segregated flow and plug flow (eq. 4 in contact
+  time) through the spectral decomposition of the breakage matrix;
+- :mod:`~millflow.mill.cells`: compartment networks (tanks, recirculating cells),
+  one class at a time;
+- :mod:`~millflow.mill.axial`: the axial-dispersion PDE by finite volumes;
+- :mod:`~millflow.mill.transient`: the dynamic response.
+"""
+from millflow.mill.steady import Mill, steady_mill, transfer_matrix
+from millflow.mill.transient import transient_mill
+
+__all__ = ["Mill", "steady_mill", "transfer_matrix", "transient_mill"]
