@@ -27,7 +27,7 @@ from typing import ClassVar
 import numpy as np
 from scipy import optimize, special
 
-from rtd.models import ParameterError, RTDModel, as_s, as_time, check_positive
+from rtd.base import ParameterError, RTDModel, as_s, as_time, check_positive
 
 SERIES_MAX_PE = 16.0   # below: series cancellation costs < exp(Pe/4) ~ 55 ulp
 SERIES_MIN_THETA = 2.0  # above: every series term is <= O(1), no cancellation

@@ -23,7 +23,7 @@ from typing import ClassVar
 import numpy as np
 from scipy import optimize
 
-from rtd.models import ParameterError, RTDModel, as_s, as_time, check_fraction, check_positive
+from rtd.base import ParameterError, RTDModel, as_s, as_time, check_fraction, check_positive
 
 
 def _frozen(a) -> np.ndarray:

@@ -1,5 +1,5 @@
 """Plots and tables of a fit: fitted vs measured cumulative passing (log size), parity plot,
-parameter table. matplotlib (Agg backend) is imported only inside the plotting function."""
+parameter table. matplotlib (through millflow.plotting) is imported only inside the plotting function."""
 from __future__ import annotations
 
 import os
@@ -43,10 +43,7 @@ def write_report(result, out_dir: str, prediction: dict | None = None, plots: bo
 
 
 def _plots(result, out_dir):
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
+    from millflow.plotting import figure, save
 
     m = result.model
     theta = result.theta
@@ -55,7 +52,7 @@ def _plots(result, out_dir):
     n = len(m.groups)
     cols = min(4, n)
     rows = int(np.ceil(n / cols))
-    fig, axes = plt.subplots(rows, cols, figsize=(3.2 * cols, 2.6 * rows), squeeze=False, sharey=True)
+    fig, axes = figure(rows, cols, figsize=(3.2 * cols, 2.6 * rows), squeeze=False, sharey=True)
     for g, (c, loc, t) in enumerate(m.groups):
         ax = axes.flat[g]
         a, b = m.group_slices[g], m.group_slices[g + 1]
@@ -71,18 +68,14 @@ def _plots(result, out_dir):
         ax.axis("off")
     axes.flat[0].set_ylabel("cumulative passing [-]", fontsize=7)
     axes.flat[0].legend(fontsize=6)
-    fig.tight_layout()
     f1 = os.path.join(out_dir, "fit_psd.png")
-    fig.savefig(f1, dpi=110)
-    plt.close(fig)
-    fig, ax = plt.subplots(figsize=(4, 4))
+    save(fig, f1, dpi=110)
+    fig, ax = figure(figsize=(4, 4))
     ax.plot(m.y_cum, m.predict_cum(theta), ".", ms=3)
     ax.plot([0, 1], [0, 1], "k-", lw=0.8)
     ax.set_xlabel("measured cumulative passing [-]")
     ax.set_ylabel("model cumulative passing [-]")
     ax.set_title(f"parity, SER {result.ser:.3g}")
-    fig.tight_layout()
     f2 = os.path.join(out_dir, "parity.png")
-    fig.savefig(f2, dpi=110)
-    plt.close(fig)
+    save(fig, f2, dpi=110)
     return [f1, f2]

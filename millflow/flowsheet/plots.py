@@ -1,4 +1,4 @@
-"""PNG plots of a solved flowsheet (matplotlib, Agg backend; imported only here).
+"""PNG plots of a solved flowsheet (matplotlib through millflow.plotting).
 
 - ``psd.png``: cumulative passing of every stream on a log size axis [um].
 - ``classifiers.png``: partition curves of every classifier and mill discharge screen
@@ -13,16 +13,9 @@ from pathlib import Path
 
 import numpy as np
 
+from millflow.plotting import figure, save
+
 __all__ = ["save_plots", "plot_psd", "plot_classifiers", "plot_flowsheet"]
-
-
-def _plt():
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-
-    return plt
 
 
 def plot_psd(ds, ax):
@@ -120,7 +113,6 @@ def plot_flowsheet(sol, ax):
 
 def save_plots(sol, ds, out_dir) -> dict:
     """Write psd.png, classifiers.png and flowsheet.png to ``out_dir``; returns name -> path."""
-    plt = _plt()
     out = Path(out_dir)
     files = {}
     for key, fname, fun, arg, size in (
@@ -128,10 +120,7 @@ def save_plots(sol, ds, out_dir) -> dict:
         ("classifiers_png", "classifiers.png", plot_classifiers, sol, (8, 5)),
         ("flowsheet_png", "flowsheet.png", plot_flowsheet, sol, (10, 5)),
     ):
-        fig, ax = plt.subplots(figsize=size)
+        fig, ax = figure(figsize=size)
         fun(arg, ax)
-        fig.tight_layout()
-        files[key] = out / fname
-        fig.savefig(files[key], dpi=110)
-        plt.close(fig)
+        files[key] = save(fig, out / fname, dpi=110)
     return files

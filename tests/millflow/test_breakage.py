@@ -7,13 +7,13 @@ import pytest
 from hypothesis import given, settings, strategies as st
 from numpy.testing import assert_allclose, assert_array_equal
 
-# Two call paths to one formula: libm pow/exp may round differently between a SIMD
-# path and a scalar one (array length, CPU), so 'the same' means a few ulps apart.
-SAME = dict(rtol=1e-14, atol=0)
-
 from millflow import breakage as bk
 from millflow.errors import BreakageError
 from millflow.grid import SizeGrid
+
+# Two call paths to one formula: libm pow/exp may round differently between a SIMD
+# path and a scalar one (array length, CPU), so 'the same' means a few ulps apart.
+SAME = dict(rtol=1e-14, atol=0)
 
 GRID = SizeGrid.geometric(4e-3, 2 ** 0.5, 12)
 

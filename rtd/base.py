@@ -1,0 +1,88 @@
+"""What every rtd model shares: the error types, parameter checks and the RTDModel base.
+
+A module of its own so that the model modules (:mod:`rtd.models`, :mod:`rtd.axial`,
+:mod:`rtd.compartments`, :mod:`rtd.compose`) import it and not each other in a circle.
+"""
+from __future__ import annotations
+
+import dataclasses
+import math
+from dataclasses import dataclass
+from typing import ClassVar
+
+import numpy as np
+
+
+class RTDError(ValueError):
+    """Base class of rtd errors: a parameter, data value or option is unusable."""
+
+
+class ParameterError(RTDError):
+    """A model parameter is outside its valid range (the message names it)."""
+
+
+def check_positive(model: str, name: str, value) -> float:
+    """Return ``value`` as float, or raise ParameterError if it is not finite and > 0."""
+    value = float(value)
+    if not (math.isfinite(value) and value > 0.0):
+        raise ParameterError(f"{model}: {name} = {value!r}; expected a finite number > 0")
+    return value
+
+
+def check_fraction(model: str, name: str, value, upper_open: bool = False) -> float:
+    """Return ``value`` as float, or raise ParameterError if it is not in [0, 1]."""
+    value = float(value)
+    ok = math.isfinite(value) and 0.0 <= value and (value < 1.0 if upper_open else value <= 1.0)
+    if not ok:
+        upper = "1)" if upper_open else "1]"
+        raise ParameterError(f"{model}: {name} = {value!r}; expected a fraction in [0, {upper}")
+    return value
+
+
+def as_time(t) -> np.ndarray:
+    """Times as a float array (any shape)."""
+    return np.asarray(t, dtype=float)
+
+
+def as_s(s) -> tuple[np.ndarray, bool]:
+    """Transform variable as an array and whether it was real (result is then real)."""
+    arr = np.asarray(s)
+    if np.iscomplexobj(arr):
+        return arr.astype(complex), False
+    return arr.astype(float), True
+
+
+@dataclass(frozen=True)
+class RTDModel:
+    """Common interface of every RTD model (one level of inheritance only).
+
+    Subclasses define ``pdf``, ``cdf``, ``laplace``, ``mean``, ``variance`` and
+    ``analytic_for_re_s_greater_than``; ``param_names`` lists the parameters that
+    :func:`rtd.fit` may vary, ``fixed_by_default`` those it keeps fixed unless asked.
+    """
+
+    param_names: ClassVar[tuple[str, ...]] = ()
+    fixed_by_default: ClassVar[tuple[str, ...]] = ()
+
+    @property
+    def params(self) -> dict[str, float]:
+        """Parameters by name (a new dict)."""
+        return {f.name: getattr(self, f.name) for f in dataclasses.fields(self)
+                if f.name in self.param_names}
+
+    def replace(self, **changes) -> "RTDModel":
+        """A copy with some parameters changed (validated again)."""
+        return dataclasses.replace(self, **changes)
+
+    @property
+    def atom_at_zero(self) -> float:
+        """Probability mass leaving at t = 0 (bypass); not part of ``pdf``."""
+        return 0.0
+
+    def moments_from_transform(self, h: float | None = None) -> tuple[float, float]:
+        """Mean and variance from finite differences of log E_hat at s = 0 (a check)."""
+        h = h or 1e-4 / self.mean
+        lp = np.log(np.array([self.laplace(-h), self.laplace(0.0), self.laplace(h)]))
+        mean = -(lp[2] - lp[0]) / (2 * h)
+        var = (lp[2] - 2 * lp[1] + lp[0]) / h**2
+        return float(mean), float(var)
