@@ -16,6 +16,8 @@ from rtd.compartments import CompartmentNetwork, RecirculatingCells
 from rtd.compose import Parallel, Series, talbot_inverse
 from rtd.fit import MODELS, FitResult, compare, fit
 from rtd.models import ParameterError, PerfectMixing, PlugFlow, RTDError, RTDModel, TanksInSeries
+from rtd.names import TRANSPORTS, canonical_name
+from rtd.names import build as build_transport
 from rtd.tracer import (Moments, TracerCurve, TracerError, check_tracer, convolve_inlet, moments,
                         normalise, read_tracer_csv, step_moments, subtract_baseline)
 
@@ -24,5 +26,5 @@ __all__ = [
     "ParameterError", "PerfectMixing", "PlugFlow", "RTDError", "RTDModel", "RecirculatingCells",
     "Series", "TanksInSeries", "TracerCurve", "TracerError", "check_tracer", "compare",
     "convolve_inlet", "fit", "moments", "normalise", "read_tracer_csv", "step_moments",
-    "subtract_baseline", "talbot_inverse",
+    "subtract_baseline", "talbot_inverse", "TRANSPORTS", "canonical_name", "build_transport",
 ]

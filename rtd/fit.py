@@ -20,19 +20,15 @@ from dataclasses import dataclass, field
 import numpy as np
 from scipy import optimize, stats
 
-from rtd.axial import AxialDispersion
 from rtd.compartments import RecirculatingCells
-from rtd.models import PerfectMixing, PlugFlow, RTDError, TanksInSeries
+from rtd.models import PlugFlow, RTDError
+from rtd.names import ALIASES, TRANSPORTS, canonical_name
 from rtd.tracer import TracerCurve, TracerError, check_tracer, convolve_inlet, moments, step_moments
 
-MODELS = {
-    "cstr": (PerfectMixing, {}),
-    "plug": (PlugFlow, {}),
-    "tis": (TanksInSeries, {}),
-    "ad-closed": (AxialDispersion, {"bc": "closed"}),
-    "ad-open": (AxialDispersion, {"bc": "open"}),
-    "cells": (RecirculatingCells, {}),
-}
+#: Model names for :func:`fit`: every canonical name and alias of :mod:`rtd.names`
+#: -> (class, fixed keywords).
+MODELS = {name: (entry.cls, dict(entry.fixed))
+          for name, entry in [*TRANSPORTS.items(), *((a, TRANSPORTS[c]) for a, c in ALIASES.items())]}
 
 # (lower, upper, fitted in logs) per parameter name; tau bounds scale with the mean
 BOUNDS = {
@@ -124,15 +120,14 @@ class FitResult:
 def resolve_model(model, **fixed):
     """A model class and fixed keyword arguments from a name, class or instance."""
     if isinstance(model, str):
-        if model not in MODELS:
-            raise RTDError(f"model {model!r} unknown; expected one of {sorted(MODELS)}")
-        cls, kw = MODELS[model]
+        cls, kw = MODELS[canonical_name(model)]
         return cls, {**kw, **fixed}, None
     if isinstance(model, type):
         return model, dict(fixed), None
     if hasattr(model, "params") and hasattr(type(model), "from_moments"):
         return type(model), dict(fixed), model
-    raise RTDError(f"model {model!r}: expected a name {sorted(MODELS)}, an rtd model class or instance")
+    raise RTDError(f"model {model!r}: expected a name ({', '.join(TRANSPORTS)} or an alias), "
+                   "an rtd model class or instance")
 
 
 def _start(cls, kw, instance, mom, guess):

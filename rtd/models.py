@@ -16,7 +16,6 @@ Wilhelm, Chem. Eng. Sci. 6 (1956) 89.
 """
 from __future__ import annotations
 
-import dataclasses
 import functools
 import math
 from dataclasses import dataclass
