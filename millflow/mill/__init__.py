@@ -14,7 +14,8 @@ scene, :func:`transient_mill` the dynamics. Modules, one job each:
 - :mod:`~millflow.mill.axial`: the axial-dispersion PDE by finite volumes;
 - :mod:`~millflow.mill.transient`: the dynamic response.
 """
-from millflow.mill.steady import Mill, steady_mill, transfer_matrix
+from millflow.mill.composed import Mill
+from millflow.mill.steady import steady_mill, transfer_matrix
 from millflow.mill.transient import transient_mill
 
 __all__ = ["Mill", "steady_mill", "transfer_matrix", "transient_mill"]

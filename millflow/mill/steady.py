@@ -37,7 +37,7 @@ from __future__ import annotations
 
 import dataclasses
 import time
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 
 import numpy as np
 import xarray as xr
@@ -50,7 +50,7 @@ from millflow.mill.axial import solve_axial
 from millflow.mill.cells import network_of, solve_cells
 from millflow.mill.segregated import plug_flow, segregated, segregated_quadrature
 
-__all__ = ["METHODS", "Mill", "steady_mill", "transfer_matrix", "choose_method", "WHERE"]
+__all__ = ["METHODS", "steady_mill", "transfer_matrix", "choose_method", "WHERE"]
 
 #: Steady-state methods by name (see the module docstring).
 METHODS = ("well_mixed", "cells", "plug_flow", "segregated", "axial_fv", "composed", "quadrature")
@@ -494,63 +494,3 @@ def steady_mill(S, b, feed, transport, d=None, *, where=None, dispersion=None, m
     if locations is not None:
         ds["sample"] = _samples(ds, locations)
     return ds
-
-
-@dataclass(frozen=True, eq=False)
-class Mill:
-    """A continuous mill: breakage, transport and classification, composed.
-
-    ``Mill(S, b, transport=rtd.TanksInSeries(600.0, 3), d=None)``: what is absent is
-    None; the repr shows the composition. Methods delegate to :func:`steady_mill`,
-    :func:`transfer_matrix` and :func:`millflow.mill.transient.transient_mill`.
-    """
-
-    S: np.ndarray = field(repr=False)
-    b: np.ndarray = field(repr=False)
-    transport: object
-    d: np.ndarray | None = field(default=None, repr=False)
-    where: str | None = None
-    dispersion: np.ndarray | None = field(default=None, repr=False)
-    x: np.ndarray | None = field(default=None, repr=False)
-
-    def __post_init__(self):
-        sc = _scene(self.S, self.b, self.transport, self.d, self.where, self.dispersion)
-        object.__setattr__(self, "S", sc.S)
-        object.__setattr__(self, "b", sc.b)
-        object.__setattr__(self, "d", sc.d)
-        object.__setattr__(self, "where", sc.where)
-        object.__setattr__(self, "_scene", sc)
-        object.__setattr__(self, "_cache", {})
-
-    def __repr__(self):
-        cls = "None" if self.d is None else f"d* at {self.where}"
-        return (f"Mill(N={self.S.size}, transport={self.transport!r}, classification={cls}, "
-                f"method={self.method!r})")
-
-    @property
-    def method(self) -> str:
-        """The method :meth:`steady` runs."""
-        return self._scene.method
-
-    def product(self, feed, tol: float = 1e-8) -> np.ndarray:
-        """Product flows (N,) or (N, m) for feed (N,) or (N, m): the fast path (inputs
-        validated once at construction, no Dataset, the spectral decomposition of the
-        plug-flow and segregated paths kept after the first call)."""
-        feed = _check_feed(feed, self.S.size)
-        return _solve(self._scene, feed, tol=tol, holdup=False, cache=self._cache)["product"]
-
-    def steady(self, feed, **kwargs) -> xr.Dataset:
-        """:func:`steady_mill` for this mill."""
-        return steady_mill(self.S, self.b, feed, self.transport, self.d, where=self.where,
-                           dispersion=self.dispersion, x=self.x, **kwargs)
-
-    def transfer_matrix(self, **kwargs) -> np.ndarray:
-        """:func:`transfer_matrix` for this mill."""
-        return transfer_matrix(self.S, self.b, self.transport, self.d, where=self.where,
-                               dispersion=self.dispersion, **kwargs)
-
-    def transient(self, t, **kwargs) -> xr.Dataset:
-        """:func:`millflow.mill.transient.transient_mill` for this mill."""
-        from millflow.mill.transient import transient_mill
-        return transient_mill(self.S, self.b, self.transport, t, d=self.d, where=self.where,
-                              x=self.x, **kwargs)

@@ -1,0 +1,78 @@
+"""``Mill``: breakage, transport and classification composed into one object.
+
+It validates its inputs once (the scene of :mod:`millflow.mill.steady`), keeps the
+spectral decomposition of the plug-flow and segregated paths between calls, and
+delegates to :func:`~millflow.mill.steady.steady_mill`,
+:func:`~millflow.mill.steady.transfer_matrix` and
+:func:`~millflow.mill.transient.transient_mill`.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+import xarray as xr
+
+from millflow.mill.steady import _check_feed, _scene, _solve, steady_mill, transfer_matrix
+from millflow.mill.transient import transient_mill
+
+__all__ = ["Mill"]
+
+
+@dataclass(frozen=True, eq=False)
+class Mill:
+    """A continuous mill: breakage, transport and classification, composed.
+
+    ``Mill(S, b, transport=rtd.TanksInSeries(600.0, 3), d=None)``: what is absent is
+    None; the repr shows the composition. Methods delegate to :func:`steady_mill`,
+    :func:`transfer_matrix` and :func:`millflow.mill.transient.transient_mill`.
+    """
+
+    S: np.ndarray = field(repr=False)
+    b: np.ndarray = field(repr=False)
+    transport: object
+    d: np.ndarray | None = field(default=None, repr=False)
+    where: str | None = None
+    dispersion: np.ndarray | None = field(default=None, repr=False)
+    x: np.ndarray | None = field(default=None, repr=False)
+
+    def __post_init__(self):
+        sc = _scene(self.S, self.b, self.transport, self.d, self.where, self.dispersion)
+        object.__setattr__(self, "S", sc.S)
+        object.__setattr__(self, "b", sc.b)
+        object.__setattr__(self, "d", sc.d)
+        object.__setattr__(self, "where", sc.where)
+        object.__setattr__(self, "_scene", sc)
+        object.__setattr__(self, "_cache", {})
+
+    def __repr__(self):
+        cls = "None" if self.d is None else f"d* at {self.where}"
+        return (f"Mill(N={self.S.size}, transport={self.transport!r}, classification={cls}, "
+                f"method={self.method!r})")
+
+    @property
+    def method(self) -> str:
+        """The method :meth:`steady` runs."""
+        return self._scene.method
+
+    def product(self, feed, tol: float = 1e-8) -> np.ndarray:
+        """Product flows (N,) or (N, m) for feed (N,) or (N, m): the fast path (inputs
+        validated once at construction, no Dataset, the spectral decomposition of the
+        plug-flow and segregated paths kept after the first call)."""
+        feed = _check_feed(feed, self.S.size)
+        return _solve(self._scene, feed, tol=tol, holdup=False, cache=self._cache)["product"]
+
+    def steady(self, feed, **kwargs) -> xr.Dataset:
+        """:func:`steady_mill` for this mill."""
+        return steady_mill(self.S, self.b, feed, self.transport, self.d, where=self.where,
+                           dispersion=self.dispersion, x=self.x, **kwargs)
+
+    def transfer_matrix(self, **kwargs) -> np.ndarray:
+        """:func:`transfer_matrix` for this mill."""
+        return transfer_matrix(self.S, self.b, self.transport, self.d, where=self.where,
+                               dispersion=self.dispersion, **kwargs)
+
+    def transient(self, t, **kwargs) -> xr.Dataset:
+        """:func:`millflow.mill.transient.transient_mill` for this mill."""
+        return transient_mill(self.S, self.b, self.transport, t, d=self.d, where=self.where,
+                              x=self.x, **kwargs)

@@ -1,0 +1,146 @@
+"""The package's structure: no import circles in millflow or rtd, rtd stands alone, and
+imports run one way through the layers (kinetics -> mill -> flowsheet/fitting -> commands).
+
+Imports are read from the source with ``ast`` (every import statement, also those inside
+functions: a lazy import is still a dependency), so this checks the code as written, not
+what one interpreter session happened to load.
+"""
+import ast
+from pathlib import Path
+
+import pytest
+
+ROOT = Path(__file__).resolve().parents[1]
+PACKAGES = ("millflow", "rtd")
+
+# Layers, lowest first: a module may import from its own layer and the ones below.
+LAYERS = [
+    ("base", ("millflow.errors", "millflow.grid", "millflow.compiled", "millflow.plotting",
+              "millflow.units_io")),
+    ("kinetics", ("millflow.psd", "millflow.checks", "millflow.classifiers", "millflow.breakage", "millflow.linalg", "millflow.batch",
+                  "millflow.nonlinear")),
+    ("mill", ("millflow.mill",)),
+    ("circuits", ("millflow.flowsheet", "millflow.fitting", "millflow.scaleup", "millflow.sweep")),
+    ("commands", ("millflow.bench", "millflow.commands", "millflow.cli", "millflow.__main__", "millflow.output")),
+]
+
+
+def _module_name(path: Path) -> str:
+    parts = list(path.relative_to(ROOT).with_suffix("").parts)
+    if parts[-1] == "__init__":
+        parts.pop()
+    return ".".join(parts)
+
+
+def _modules() -> dict[str, Path]:
+    return {_module_name(p): p for pkg in PACKAGES for p in (ROOT / pkg).rglob("*.py")}
+
+
+def _resolve(name: str, modules) -> str | None:
+    """The longest known module that ``name`` names (a module, or a name inside one)."""
+    while name:
+        if name in modules:
+            return name
+        name = name.rpartition(".")[0]
+    return None
+
+
+def import_graph() -> dict[str, set[str]]:
+    modules = _modules()
+    graph = {m: set() for m in modules}
+    for mod, path in modules.items():
+        is_pkg = path.name == "__init__.py"
+        for node in ast.walk(ast.parse(path.read_text(encoding="utf-8"))):
+            targets = []
+            if isinstance(node, ast.Import):
+                targets = [a.name for a in node.names]
+            elif isinstance(node, ast.ImportFrom):
+                if node.level:  # relative: from . import x
+                    base = mod.split(".") if is_pkg else mod.split(".")[:-1]
+                    base = base[: len(base) - (node.level - 1)]
+                    stem = ".".join(base + ([node.module] if node.module else []))
+                else:
+                    stem = node.module or ""
+                targets = [f"{stem}.{a.name}" for a in node.names]
+            for t in targets:
+                if t.split(".")[0] in PACKAGES:
+                    hit = _resolve(t, modules)
+                    if hit and hit != mod:
+                        graph[mod].add(hit)
+    return graph
+
+
+def _cycles(graph) -> list[list[str]]:
+    """Strongly connected components with more than one module (Tarjan)."""
+    index, low, stack, on, out = {}, {}, [], set(), []
+
+    def visit(v):
+        index[v] = low[v] = len(index)
+        stack.append(v)
+        on.add(v)
+        for w in graph[v]:
+            if w not in index:
+                visit(w)
+                low[v] = min(low[v], low[w])
+            elif w in on:
+                low[v] = min(low[v], index[w])
+        if low[v] == index[v]:
+            comp = []
+            while True:
+                w = stack.pop()
+                on.discard(w)
+                comp.append(w)
+                if w == v:
+                    break
+            if len(comp) > 1:
+                out.append(sorted(comp))
+
+    for v in sorted(graph):
+        if v not in index:
+            visit(v)
+    return out
+
+
+def _layer(mod: str) -> int | None:
+    for rank, (_, prefixes) in enumerate(LAYERS):
+        if any(mod == p or mod.startswith(p + ".") for p in prefixes):
+            return rank
+    return None
+
+
+def test_no_import_circles():
+    graph = import_graph()
+    # the package __init__ files re-export their modules; a module importing its own
+    # package's __init__ would close a circle and is counted
+    assert _cycles(graph) == []
+
+
+def test_rtd_imports_nothing_of_millflow():
+    graph = import_graph()
+    leaks = {m: sorted(t for t in ts if t.startswith("millflow")) for m, ts in graph.items() if m.startswith("rtd")}
+    assert {m: t for m, t in leaks.items() if t} == {}
+
+
+def test_imports_run_down_the_layers():
+    graph = import_graph()
+    upward = []
+    for mod, targets in graph.items():
+        rank = _layer(mod)
+        if rank is None:
+            continue
+        for t in targets:
+            r = _layer(t)
+            if r is not None and r > rank:
+                upward.append(f"{mod} ({LAYERS[rank][0]}) imports {t} ({LAYERS[r][0]})")
+    assert upward == []
+
+
+def test_every_module_has_a_layer():
+    missing = sorted(m for m in import_graph() if m.startswith("millflow.") and _layer(m) is None)
+    assert missing == [], "place these modules in LAYERS (tests/test_layers.py)"
+
+
+@pytest.mark.parametrize("pkg", PACKAGES)
+def test_the_graph_sees_the_package(pkg):
+    graph = import_graph()
+    assert any(m.startswith(pkg) for m in graph) and sum(len(v) for v in graph.values()) > 20
