@@ -13,7 +13,10 @@ from millflow.errors import InputError
 from millflow.fitting.estimate import fit
 from millflow.fitting.models import ForwardModel
 
-__all__ = ["leave_out", "condition_rmse"]
+__all__ = ["leave_out", "nested_leave_out", "condition_rmse", "CRITERIA"]
+
+#: Criteria by which :func:`nested_leave_out` chooses a structure inside a fold.
+CRITERIA = ("aic", "aicc", "bic")
 
 
 def condition_rmse(model: ForwardModel, theta) -> dict:
@@ -40,20 +43,9 @@ def leave_out(model: ForwardModel, params: dict | None, held_out="each", *, prog
     ``rmse`` (condition -> prediction RMSE) and ``mean_rmse``.
     """
     conds = model.conditions
-    if held_out == "each":
-        groups = [[c] for c in conds]
-    elif held_out and all(isinstance(g, str) for g in held_out):
-        groups = [list(held_out)]
-    else:
-        groups = [list(g) for g in held_out]
     folds, rmse = [], {}
-    for k, group in enumerate(groups):
-        unknown = [c for c in group if c not in conds]
-        if unknown:
-            raise InputError(f"held-out conditions {unknown} are not in the data; conditions are {conds}")
-        train = [c for c in conds if c not in group]
-        if not train:
-            raise InputError("every condition is held out; nothing is left to fit")
+    groups = _groups(conds, held_out)
+    for k, (group, train) in enumerate(groups):
         if progress:
             progress(f"fold {k + 1}/{len(groups)}: predicting {', '.join(group)}")
         res = fit(model.for_conditions(train), params, grid_check=False, **fit_kwargs)
@@ -62,3 +54,81 @@ def leave_out(model: ForwardModel, params: dict | None, held_out="each", *, prog
         folds.append({"held_out": group, "rmse": pred, "params": {n: p.value for n, p in res.params.items()},
                       "ssr_train": res.ssr, "spread": res.spread})
     return {"folds": folds, "rmse": rmse, "mean_rmse": float(np.mean(list(rmse.values())))}
+
+
+def _groups(conds, held_out) -> list[tuple[list, list]]:
+    """(held-out conditions, training conditions) per fold, checked."""
+    if isinstance(held_out, str) and held_out == "each":
+        groups = [[c] for c in conds]
+    elif held_out and all(isinstance(g, str) for g in held_out):
+        groups = [list(held_out)]
+    else:
+        groups = [list(g) for g in held_out]
+    out = []
+    for group in groups:
+        unknown = [c for c in group if c not in conds]
+        if unknown:
+            raise InputError(f"held-out conditions {unknown} are not in the data; conditions are {conds}")
+        train = [c for c in conds if c not in group]
+        if not train:
+            raise InputError("every condition is held out; nothing is left to fit")
+        out.append((group, train))
+    return out
+
+
+def nested_leave_out(candidates: dict, params: dict | None = None, held_out="each", *, criterion: str = "bic",
+                     progress=None, **fit_kwargs) -> dict:
+    """Nested validation: the model structure is chosen inside each outer fold.
+
+    A leave-out score of a structure that was itself chosen by comparing candidates on
+    all the data is optimistic: the held-out conditions took part in the choice. Here,
+    in each outer fold, every candidate is fitted to the training conditions only and
+    ranked by ``criterion`` (AIC, AICc or BIC of that training fit); the winner, and
+    only it, predicts the held-out conditions. ``mean_rmse`` then estimates the
+    prediction error of the whole procedure (selection + fit), and ``chosen`` shows
+    how stable the selection is across folds.
+
+    Parameters
+    ----------
+    candidates : label -> :class:`ForwardModel` on all conditions (same data).
+    params : label -> parameter dict (start values and bounds); None for defaults.
+    held_out : as in :func:`leave_out`.
+    criterion : one of :data:`CRITERIA`.
+    fit_kwargs : passed to :func:`~millflow.fitting.estimate.fit` for every fit.
+
+    Returns
+    -------
+    dict with ``folds`` (held_out, chosen, criteria {label: value}, rmse, params),
+    ``rmse`` (condition -> prediction RMSE), ``mean_rmse``, ``chosen`` (label -> number
+    of folds that chose it) and ``criterion``.
+    """
+    if criterion not in CRITERIA:
+        raise InputError(f"criterion = {criterion!r}; expected one of {', '.join(CRITERIA)}")
+    if not candidates:
+        raise InputError("nested_leave_out needs at least one candidate model")
+    labels = list(candidates)
+    first = candidates[labels[0]]
+    for label in labels[1:]:
+        m = candidates[label]
+        if m.conditions != first.conditions or m.y.shape != first.y.shape or not np.array_equal(m.y, first.y):
+            raise InputError(f"candidate {label!r} is fitted to other data than {labels[0]!r}: "
+                             "nested validation compares structures on the same data")
+    params = params or {}
+    folds, rmse = [], {}
+    chosen = dict.fromkeys(labels, 0)
+    groups = _groups(first.conditions, held_out)
+    for k, (group, train) in enumerate(groups):
+        if progress:
+            progress(f"outer fold {k + 1}/{len(groups)}: choosing among {len(labels)} structures without "
+                     f"{', '.join(group)}")
+        fits = {label: fit(candidates[label].for_conditions(train), params.get(label), grid_check=False, **fit_kwargs)
+                for label in labels}
+        scores = {label: float(r.criteria[criterion]) for label, r in fits.items()}
+        best = min(labels, key=lambda label: scores[label])  # ties: the first listed
+        chosen[best] += 1
+        pred = condition_rmse(candidates[best].for_conditions(group), fits[best].theta)
+        rmse.update(pred)
+        folds.append({"held_out": group, "chosen": best, "criteria": scores, "rmse": pred,
+                      "params": {n: p.value for n, p in fits[best].params.items()}})
+    return {"folds": folds, "rmse": rmse, "mean_rmse": float(np.mean(list(rmse.values()))),
+            "chosen": chosen, "criterion": criterion}
