@@ -18,6 +18,7 @@ from __future__ import annotations
 
 import math
 import warnings
+from dataclasses import dataclass
 
 import numpy as np
 from scipy.interpolate import PchipInterpolator
@@ -37,6 +38,12 @@ __all__ = [
     "regrid",
     "from_sieves",
     "cum_passing_at",
+    "rosin_rammler",
+    "gates_gaudin_schuhmann",
+    "from_distribution",
+    "TAIL_RULES",
+    "TailFit",
+    "fit_tail",
 ]
 
 # Tolerance on sum(fractions) = 1 and P(x_1) = 1: beyond this the input is wrong, not
@@ -266,7 +273,8 @@ def regrid(frac, from_grid, to_grid, *, lump_top: bool = False) -> np.ndarray:
     return _fractions_from_cum(P_new)
 
 
-def from_sieves(size_m, cum_passing_frac, grid, *, oversize: str = "error") -> np.ndarray:
+def from_sieves(size_m, cum_passing_frac, grid, *, oversize: str = "error", tail: str | None = None,
+                tail_points: int = 3) -> np.ndarray:
     """Put a measured sieve PSD onto a (usually finer) grid, conserving mass.
 
     Cumulative passing is interpolated between the sieves by PCHIP in ln x (monotone,
@@ -288,6 +296,11 @@ def from_sieves(size_m, cum_passing_frac, grid, *, oversize: str = "error") -> n
         What to do when the grid's top edge does not pass 100 % (the top sieve
         retains material, or the grid top is below it): "error" raises (beyond
         1e-9); "lump" adds the oversize mass to class 1 and warns how much.
+    tail : None, "rosin_rammler" or "gates_gaudin_schuhmann"
+        Below the finest sieve: None keeps the default (the mass finer than the
+        finest sieve goes to the sink); a rule extrapolates cumulative passing to
+        the finer grid edges with that form fitted to the ``tail_points`` finest
+        sieves (:func:`fit_tail`), scaled to pass through the finest sieve's value.
 
     Returns
     -------
@@ -302,6 +315,12 @@ def from_sieves(size_m, cum_passing_frac, grid, *, oversize: str = "error") -> n
         raise GridError(f"oversize = {oversize!r}: expected 'error' or 'lump'")
     x = as_sizes(grid)
     P_new = _eval_cum(s, P, x)
+    if tail is not None:
+        fitted = fit_tail(s, P, tail, tail_points)
+        below = x < s[-1] * (1 - _MATCH_RTOL)
+        if below.any():
+            # continuous at the finest sieve; never above it (the tail decreases)
+            P_new[below] = np.minimum(P[-1], fitted.passing(x[below]) * (P[-1] / fitted.passing(s[-1:])[0]))
     _handle_top(P_new, x, oversize == "lump", "from_sieves", tol=SUM_TOL)
     return _fractions_from_cum(P_new)
 
@@ -366,3 +385,109 @@ def p80(grid, frac) -> float:
 def p50(grid, frac) -> float:
     """Median size [m] (50 % passing); see :func:`percentile_size`."""
     return percentile_size(grid, frac, 50)
+
+
+# ------------------------------------------------------------ distribution forms
+def rosin_rammler(x, x63: float, n: float) -> np.ndarray:
+    """Rosin-Rammler (Weibull) cumulative passing P(x) = 1 - exp(-(x/x63)^n) [-].
+
+    x, x63 [m] (x63: the size passing 63.2 %), n > 0 the spread. Rosin and Rammler,
+    J. Inst. Fuel 7 (1933) 29.
+    """
+    x = np.asarray(x, dtype=float)
+    return -np.expm1(-(x / x63) ** n)
+
+
+def gates_gaudin_schuhmann(x, xmax: float, m: float) -> np.ndarray:
+    """Gates-Gaudin-Schuhmann cumulative passing P(x) = (x/xmax)^m for x < xmax, else 1.
+
+    x, xmax [m] (the size passing 100 %), m > 0 the distribution modulus.
+    Schuhmann, AIME Tech. Pub. 1189 (1940).
+    """
+    x = np.asarray(x, dtype=float)
+    return np.minimum(x / xmax, 1.0) ** m
+
+
+#: Tail rules of :func:`fit_tail`: name -> (form, its parameter names).
+TAIL_RULES = {"rosin_rammler": (rosin_rammler, ("x63", "n")),
+              "gates_gaudin_schuhmann": (gates_gaudin_schuhmann, ("xmax", "m"))}
+TAIL_RULES["ggs"] = TAIL_RULES["gates_gaudin_schuhmann"]
+
+
+def from_distribution(grid, cdf, *, top_tol: float = 1e-4, where: str = "psd") -> np.ndarray:
+    """Mass fractions on ``grid`` of a cumulative-passing function ``cdf(x [m]) -> P``.
+
+    Mass coarser than the grid's top edge, 1 - P(x_1), has no class: up to ``top_tol``
+    (default 0.01 %) it is added to class 1, beyond that it is an error that asks for
+    a larger grid top (nothing is lumped silently beyond the stated tolerance).
+    """
+    x = as_sizes(grid)
+    P = np.asarray(cdf(x), dtype=float)
+    if P.shape != x.shape or not np.all(np.isfinite(P)) or np.any(P < 0) or np.any(P > 1 + SUM_TOL):
+        raise GridError(f"{where}: the cumulative passing is not a finite fraction in [0, 1] at every grid edge")
+    if P[0] < 1 - top_tol:
+        raise GridError(f"{where}: the size grid does not cover the PSD: {100 * (1 - P[0]):.3g} % of it is coarser "
+                        f"than the grid top ({x[0] * 1e6:.6g} um; at most {100 * top_tol:.3g} % may be lumped into "
+                        "class 1); raise the grid top")
+    P = np.minimum.accumulate(np.minimum(P / P[0], 1.0))  # the <= top_tol above the top edge joins class 1
+    return _fractions_from_cum(P) if x.size > 1 else np.ones(1)
+
+
+@dataclass(frozen=True)
+class TailFit:
+    """A distribution form fitted to the finest sieves, for the PSD below them.
+
+    ``rule`` names the form (:data:`TAIL_RULES`), ``params`` its parameters (sizes in
+    m), ``sizes_m`` the sieves used and ``rms_residual`` the RMS misfit of the
+    linearised fit there (in ln P for GGS, in ln(-ln(1 - P)) for Rosin-Rammler).
+    """
+
+    rule: str
+    params: dict
+    sizes_m: tuple
+    rms_residual: float
+
+    def passing(self, x) -> np.ndarray:
+        """Cumulative passing of the fitted form at sizes x [m]."""
+        return TAIL_RULES[self.rule][0](x, **self.params)
+
+    def describe(self) -> str:
+        p = ", ".join(f"{k} = {v * 1e6:.4g} um" if k in ("x63", "xmax") else f"{k} = {v:.4g}"
+                      for k, v in self.params.items())
+        return (f"{self.rule} fitted to the {len(self.sizes_m)} finest sieves "
+                f"({self.sizes_m[-1] * 1e6:.4g}-{self.sizes_m[0] * 1e6:.4g} um): {p}")
+
+
+def fit_tail(size_m, passing, rule: str, n_points: int = 3) -> TailFit:
+    """Fit a form to the ``n_points`` finest sieves for extrapolation below them.
+
+    Linear least squares on the form's straight-line coordinates: ln P against ln x
+    (Gates-Gaudin-Schuhmann, slope m) or ln(-ln(1 - P)) against ln x (Rosin-Rammler,
+    slope n). Only sieves with 0 < P < 1 are used; at least two are needed, and the
+    slope must be positive (a PSD whose passing does not fall towards fine sizes has
+    no such tail).
+    """
+    if rule not in TAIL_RULES:
+        raise GridError(f"tail = {rule!r}: expected one of {', '.join(TAIL_RULES)}")
+    if int(n_points) != n_points or n_points < 2:
+        raise GridError(f"tail_points = {n_points!r}: expected a whole number >= 2")
+    s = np.asarray(size_m, dtype=float)
+    P = np.asarray(passing, dtype=float)
+    ok = (P > 0) & (P < 1)
+    s, P = s[ok][-int(n_points):], P[ok][-int(n_points):]
+    if s.size < 2:
+        raise GridError(f"tail = {rule!r}: needs at least 2 of the finest sieves with 0 < passing < 1, has {s.size}")
+    lx = np.log(s)
+    y = np.log(P) if rule in ("ggs", "gates_gaudin_schuhmann") else np.log(-np.log1p(-P))
+    slope, icpt = np.polyfit(lx, y, 1)
+    # a slope near 0 is a flat curve: it says nothing of where the fines are (and its
+    # scale size, exp(-intercept/slope), is not finite); 1e-3 is far below real moduli (~0.3-2)
+    if not (np.isfinite(slope) and slope > 1e-3 and np.isfinite(-icpt / slope) and abs(icpt / slope) < 700):
+        raise GridError(f"tail = {rule!r}: the finest {s.size} sieves give a slope {float(slope):.4g}; "
+                        "expected > 1e-3 (passing falling towards fine sizes)")
+    resid = float(np.sqrt(np.mean((slope * lx + icpt - y) ** 2)))
+    scale = float(np.exp(-icpt / slope))
+    params = {"xmax": scale, "m": float(slope)} if rule in ("ggs", "gates_gaudin_schuhmann") \
+        else {"x63": scale, "n": float(slope)}
+    name = "gates_gaudin_schuhmann" if rule == "ggs" else rule
+    return TailFit(name, params, tuple(float(v) for v in s), resid)

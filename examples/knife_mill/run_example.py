@@ -71,6 +71,9 @@ def main(argv=None) -> int:
     ap.add_argument("--config", default=os.path.join(HERE, "knife_mill.toml"))
     ap.add_argument("--quick", action="store_true", help="fewer starts (for a smoke test)")
     ap.add_argument("--no-loo", action="store_true", help="skip the leave-one-run-out prediction")
+    ap.add_argument("--nested", action="store_true",
+                    help="also nested leave-one-run-out: the structure (this config's model and its [[candidates]]) "
+                         "is chosen by BIC inside each fold")
     ap.add_argument("--out", default=None, help="output folder (default: output.dir of the config)")
     ap.add_argument("--json", action="store_true")
     args = ap.parse_args(argv)
@@ -80,7 +83,7 @@ def main(argv=None) -> int:
     from millflow.fitting.estimate import fit
     from millflow.fitting.models import ForwardModel
     from millflow.fitting.report import write_report
-    from millflow.fitting.validate import leave_out
+    from millflow.fitting.validate import leave_out, nested_leave_out
 
     cfg = load_config(args.config, data_dir=args.data_dir)
     opt = dict(cfg.optimizer)
@@ -91,6 +94,11 @@ def main(argv=None) -> int:
     res = fit(model, cfg.params, progress=say, **opt)
     insample = res.rmse_by_condition()
     loo = None if args.no_loo else leave_out(model, cfg.params, "each", progress=say, **opt)
+    nested = None
+    if args.nested:
+        cands = {cfg.label: model, **{label: ForwardModel(spec, cfg.data, model.grid) for label, spec, _ in cfg.candidates}}
+        cparams = {cfg.label: cfg.params, **{label: par for label, _, par in cfg.candidates}}
+        nested = nested_leave_out(cands, cparams, "each", criterion="bic", progress=say, **opt)
     base = baseline_rmse(cfg.data)
     write_report(res, args.out or cfg.out_dir, loo, plots=cfg.plots)
     out = {
@@ -98,6 +106,8 @@ def main(argv=None) -> int:
         "loo_mean_rmse": None if loo is None else loo["mean_rmse"], "baseline_mean_rmse": float(np.mean(list(base.values()))),
         "bar": 0.025, "params": {n: {"value": s["value"], "se": s["se"], "p_value": s["p_value"],
                                      "significant": s["significant"]} for n, s in res.stats["params"].items()},
+        "nested_loo_mean_rmse": None if nested is None else nested["mean_rmse"],
+        "nested_chosen": None if nested is None else nested["chosen"],
         "spread": res.spread, "grid_check": res.grid_check, "peer": peer_comparison(args.data_dir),
         "per_run": {c: {"in_sample": insample[c], "loo": None if loo is None else loo["rmse"][c],
                         "baseline": base[c]} for c in model.conditions},
@@ -113,6 +123,9 @@ def main(argv=None) -> int:
     loo_m = "-" if loo is None else f"{out['loo_mean_rmse']:.4f}"
     print(f"{'mean':<28}{out['in_sample_mean_rmse']:>10.4f}{loo_m:>9}{out['baseline_mean_rmse']:>10.4f}"
           f"   (bar: LOO <= 0.025 with ~7-8 shared parameters)")
+    if nested is not None:
+        print(f"nested leave-one-run-out (structure chosen by BIC in each fold): mean RMSE {nested['mean_rmse']:.4f}; "
+              f"chosen: " + ", ".join(f"{k} x{v}" for k, v in nested["chosen"].items()))
     print("\nSPRITE per-run parameters (5 per run, 60 in all) against the process parameters:")
     for r in out["peer"]:
         print(f"  {r['parameter']:<8} CV {r['cv']:.2f}  R^2 on (speed, moisture, screen) {r['r2_main_effects']:.2f}  "
