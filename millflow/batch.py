@@ -67,7 +67,8 @@ def _check_inputs(S, b, feed, t):
     return S, b, feed, t
 
 
-def batch_solve(S, b, feed, t, method: str = "exact", *, rtol: float = 1e-10, atol: float = 1e-14) -> BatchResult:
+def batch_solve(S, b, feed, t, method: str = "exact", *, rtol: float = 1e-10, atol: float = 1e-14,
+                kernel: str | None = None) -> BatchResult:
     """Solve eq. 4 and return a :class:`BatchResult` with diagnostics.
 
     Parameters
@@ -80,11 +81,13 @@ def batch_solve(S, b, feed, t, method: str = "exact", *, rtol: float = 1e-10, at
     method : "exact" (block eigen-decomposition, default) or one of
         :data:`ODE_METHODS` for scipy's solve_ivp with the analytic Jacobian.
     rtol, atol : tolerances of the ODE path (ignored by the exact path).
+    kernel : who runs the exact path's row recurrences: None (the environment's
+        choice, :func:`millflow.compiled.kernel`), "compiled" or "numpy".
     """
     S, b, feed, t = _check_inputs(S, b, feed, t)
     start = time.perf_counter()
     if method == "exact":
-        blocks, w, cancellation = SpectralBlocks.decompose(S, b, feed=feed)
+        blocks, w, cancellation = SpectralBlocks.decompose(S, b, feed=feed, kernel=kernel)
         M = blocks.expm_apply(feed, t, w=w)
         # The sink row of X is a difference of O(1) terms, which carries eps-level
         # cancellation when the sink is nearly empty; the balance (the same quantity in

@@ -40,10 +40,6 @@ from scipy.linalg.lapack import dtrtrs
 from millflow import compiled
 from millflow.errors import InputError, SolverError
 
-#: The compiled row recurrences (millflow/_eigenbasis.c, an optional build); None
-#: runs the numpy loops instead, as does MILLFLOW_KERNEL=numpy in the environment.
-_compiled = compiled.load(*compiled.KERNELS["eigenbasis"])
-
 __all__ = ["breakage_matrix", "cluster_rates", "SpectralBlocks"]
 
 #: Rates closer than this relative gap are treated as one cluster (first trial).
@@ -120,10 +116,11 @@ class SpectralBlocks:
     clusters: list = field(default_factory=list)
     blocks: list = field(default_factory=list)
     gap: float = DEFAULT_CLUSTER_GAP
+    kernel: str = "numpy"  # which implementation built X: "compiled" or "numpy"
 
     @classmethod
     def from_rates(
-        cls, S, b, gap: float | None = None, *, feed=None, target: float = 1e-13
+        cls, S, b, gap: float | None = None, *, feed=None, target: float = 1e-13, kernel: str | None = None
     ) -> "SpectralBlocks":
         """Decompose the breakage matrix of rates S [1/s] and distribution b.
 
@@ -132,17 +129,20 @@ class SpectralBlocks:
         ``eps * max |X| |X^-1 f|`` is below ``target`` (for ``feed`` if given, else
         for the worst unit feed). One cluster is Taylor scaling and squaring of the
         whole Metzler matrix: slower, but accurate because no term cancels.
+        ``kernel``: who runs the row recurrences (:func:`millflow.compiled.kernel`).
         """
-        return cls.decompose(S, b, gap, feed=feed, target=target)[0]
+        return cls.decompose(S, b, gap, feed=feed, target=target, kernel=kernel)[0]
 
     @classmethod
-    def decompose(cls, S, b, gap: float | None = None, *, feed=None, target: float = 1e-13):
+    def decompose(cls, S, b, gap: float | None = None, *, feed=None, target: float = 1e-13,
+                  kernel: str | None = None):
         """As :meth:`from_rates`, also returning w = X^-1 feed and the cancellation
         estimate eps * max |X| |w| (None and the unit-feed estimate without a feed)."""
         S = np.asarray(S, dtype=float)
         A = _minus_breakage_matrix(S, np.asarray(b, dtype=float))
+        module = compiled.kernel("eigenbasis", kernel)
         for trial in (gap,) if gap is not None else GAP_SEQUENCE:
-            blocks = cls._build(A, S, trial)
+            blocks = cls._build(A, S, trial, module)
             if feed is None:
                 w, estimate = None, blocks.cancellation()
             else:
@@ -154,11 +154,12 @@ class SpectralBlocks:
         return blocks, w, estimate
 
     @classmethod
-    def _build(cls, A, S, gap):
+    def _build(cls, A, S, gap, module=None):
+        name = "numpy" if module is None else "compiled"
         labels = cluster_rates(S, gap) if np.isfinite(gap) else np.zeros(S.size, dtype=int)
         if labels.max(initial=-1) + 1 == S.size:  # as many clusters as classes: all singletons
-            return cls(S=S, X=_eigenvectors_distinct(A, S), labels=labels, gap=gap)
-        X, cc, D_cc = _block_basis(A, S, labels)
+            return cls(S=S, X=_eigenvectors_distinct(A, S, module), labels=labels, gap=gap, kernel=name)
+        X, cc, D_cc = _block_basis(A, S, labels, module)
         # clusters in index order of their members, from one stable sort of the labels
         order = np.argsort(labels[cc], kind="stable")
         bounds = np.cumsum(np.bincount(labels[cc])[np.unique(labels[cc])])[:-1]
@@ -166,7 +167,7 @@ class SpectralBlocks:
         for local in np.split(order, bounds):  # positions within cc
             clusters.append(cc[local])
             blocks.append(D_cc[np.ix_(local, local)])
-        return cls(S=S, X=X, labels=labels, clusters=clusters, blocks=blocks, gap=gap)
+        return cls(S=S, X=X, labels=labels, clusters=clusters, blocks=blocks, gap=gap, kernel=name)
 
     def cancellation(self, v: np.ndarray | None = None) -> float:
         """Rounding-error estimate eps * max_i (|X| |X^-1 v|)_i for a feed v (default:
@@ -183,7 +184,7 @@ class SpectralBlocks:
         """What a result reports of the decomposition: cluster gap, sizes of the
         multi-member clusters, and which kernel ran the row recurrences."""
         return {"cluster_gap": float(self.gap), "cluster_sizes": [int(c.size) for c in self.clusters],
-                "kernel": kernel_name()}
+                "kernel": self.kernel}
 
     @property
     def n(self) -> int:
@@ -214,22 +215,22 @@ class SpectralBlocks:
             yield (np.array([self.clusters[k] for k in pick]), np.array([self.blocks[k] for k in pick]))
 
 
-def kernel_name() -> str:
-    """Which implementation runs the row recurrences: "compiled" or "numpy"."""
-    return "compiled" if _compiled is not None else "numpy"
+def kernel_name(kernel: str | None = None) -> str:
+    """Which implementation runs the row recurrences for ``kernel``: "compiled" or "numpy"."""
+    return "compiled" if compiled.kernel("eigenbasis", kernel) is not None else "numpy"
 
 
-def _eigenvectors_distinct(A: np.ndarray, S: np.ndarray) -> np.ndarray:
+def _eigenvectors_distinct(A: np.ndarray, S: np.ndarray, module=None) -> np.ndarray:
     """Unit lower-triangular eigenvector matrix of A for well separated rates.
 
     Column j solves (A - S_j I) x = 0 with x_j = 1: for i > j,
     x_i = sum_{k<i} A_ik x_k / (S_j - S_i), row by row (this recurrence is the cost
-    of a batch solve). Runs compiled when the optional kernel was built.
+    of a batch solve). Runs in ``module`` (the compiled kernel) when given, else numpy.
     """
-    if _compiled is None:
+    if module is None:
         return _eigenvectors_distinct_numpy(A, S)
     X = np.eye(S.size)
-    _compiled.distinct(np.ascontiguousarray(A), np.ascontiguousarray(S), X)
+    module.distinct(np.ascontiguousarray(A), np.ascontiguousarray(S), X)
     return X
 
 
@@ -244,19 +245,19 @@ def _eigenvectors_distinct_numpy(A: np.ndarray, S: np.ndarray) -> np.ndarray:
     return X
 
 
-def _block_basis(A: np.ndarray, S: np.ndarray, labels: np.ndarray):
+def _block_basis(A: np.ndarray, S: np.ndarray, labels: np.ndarray, module=None):
     """Basis X and, on the clustered indices cc, the block-diagonal D_cc (returns
     X, cc, D_cc) for clustered rates (see module docstring and
-    :func:`_block_basis_numpy`). Runs compiled when the optional kernel was built.
+    :func:`_block_basis_numpy`). Runs in ``module`` (the compiled kernel) when given.
     """
-    if _compiled is None:
+    if module is None:
         return _block_basis_numpy(A, S, labels)
     labels = np.ascontiguousarray(labels, dtype=np.int64)
     counts = np.bincount(labels)
     cc = np.flatnonzero(counts[labels] > 1).astype(np.int64)
     X = np.eye(S.size)
     D_cc = np.diag(S[cc])
-    _compiled.clustered(np.ascontiguousarray(A), np.ascontiguousarray(S), X, cc, labels, D_cc)
+    module.clustered(np.ascontiguousarray(A), np.ascontiguousarray(S), X, cc, labels, D_cc)
     return X, cc, D_cc
 
 

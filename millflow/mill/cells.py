@@ -39,9 +39,6 @@ from millflow import compiled
 from millflow.errors import SolverError
 from millflow.linalg import breakage_matrix
 
-#: The compiled class loop for rows of cells (millflow/_cells.c, optional build).
-_compiled = compiled.load(*compiled.KERNELS["cells"])
-
 _gtsv = lapack.get_lapack_funcs("gtsv", dtype=np.float64)
 _trtrs = lapack.get_lapack_funcs("trtrs", dtype=np.float64)
 
@@ -164,7 +161,7 @@ def cell_operators(net, d, where, n_cls: int):
     return offdiag, drain, exit_rate, G, H
 
 
-def _solve_block(S, b, feed, net, d, where) -> CellSolution:
+def _solve_block(S, b, feed, net, d, where, kernel=None) -> CellSolution:
     """Class by class: (S_i I - T^i) m_i = (1 - beta) u f_i + sum_{j<i} b_ij S_j m_j.
 
     Tridiagonal networks (cells in a row with back-mixing) run the compiled class loop
@@ -184,9 +181,10 @@ def _solve_block(S, b, feed, net, d, where) -> CellSolution:
     sub, sup = np.diag(offdiag, -1), np.diag(offdiag, 1)  # flows l -> l+1 and l+1 -> l
     lower_all, upper_all = -G[:, :-1] * sub, -G[:, 1:] * sup  # (N, n - 1) each
     bS = b * S[np.newaxis, :]  # bS[i, j]: rate at which class j breaks into class i
-    if tridiagonal and _compiled is not None:
+    module = compiled.kernel("cells", kernel) if tridiagonal else None
+    if module is not None:
         holdup = np.empty((n_cls, n) + cols)
-        bad = _compiled.tridiagonal_classes(lower_all, diag_all, upper_all, bS, source, holdup,
+        bad = module.tridiagonal_classes(lower_all, diag_all, upper_all, bS, source, holdup,
                                             n_cls, n, int(np.prod(cols, dtype=int)))
         if bad:
             raise SolverError(f"cells: zero or non-finite pivot for class {bad} (the cell system is singular)")
@@ -219,7 +217,7 @@ def _class_loop(diag_all, lower_all, upper_all, bS, source, offdiag, G, tridiago
     return holdup
 
 
-def solve_cells(S, b, feed, net, d=None, where: str = "discharge") -> CellSolution:
+def solve_cells(S, b, feed, net, d=None, where: str = "discharge", *, kernel: str | None = None) -> CellSolution:
     """Steady product and hold-up of a cell network with breakage (module doc).
 
     Parameters
@@ -231,9 +229,11 @@ def solve_cells(S, b, feed, net, d=None, where: str = "discharge") -> CellSoluti
     d : (N,) normalised discharge rates d_i* or None.
     where : "discharge" (exit flows only), "cells" (every cell outlet) or a sequence
         of 1-based cell numbers whose outlets are classified.
+    kernel : who runs the class loop of rows of cells: None (the environment's
+        choice, :func:`millflow.compiled.kernel`), "compiled" or "numpy".
     """
     S = np.asarray(S, dtype=float)
     b = np.asarray(b, dtype=float)
     if is_chain(net):
         return _solve_chain(S, b, feed, net, d, where)
-    return _solve_block(S, b, feed, net, d, where)
+    return _solve_block(S, b, feed, net, d, where, kernel)

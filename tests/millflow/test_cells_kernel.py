@@ -16,8 +16,10 @@ import rtd
 from millflow import steady_mill
 from millflow.mill import cells as mill_cells
 from millflow.breakage import b_from_B, normalized_B
+from millflow.compiled import kernel as load_kernel
 
-compiled = pytest.mark.skipif(mill_cells._compiled is None, reason="compiled kernel not built")
+CELLS = load_kernel("cells")  # the built kernel (None where it was not built)
+compiled = pytest.mark.skipif(CELLS is None, reason="compiled kernel not built")
 
 
 def _kernel(n_cls=30):
@@ -30,14 +32,14 @@ def _kernel(n_cls=30):
 def test_kernel_is_compiled_where_required():
     if os.environ.get("MILLFLOW_REQUIRE_COMPILED") != "1":
         pytest.skip("MILLFLOW_REQUIRE_COMPILED is not set")
-    assert mill_cells._compiled is not None, "millflow._cells did not build or import"
+    assert CELLS is not None, "millflow._cells did not build or import"
 
 
 def test_mill_reports_the_cells_kernel():
     x, S, b = _kernel()
     ds = steady_mill(S, b, np.r_[1.0, np.zeros(S.size - 1)], rtd.RecirculatingCells(60.0, 4, r=0.5))
     assert ds.attrs["method"] == "cells"
-    assert ds.attrs["kernel"] == ("compiled" if mill_cells._compiled is not None else "numpy")
+    assert ds.attrs["kernel"] == ("compiled" if CELLS is not None else "numpy")
 
 
 @compiled
@@ -61,12 +63,7 @@ def test_compiled_loop_equals_gtsv_loop(n_cells, r, dead, bypass, tau, d_kind, w
     rng = np.random.default_rng(n_cells)
     feed = rng.random(S.size) if columns == 0 else rng.random((S.size, columns))
     fast = mill_cells.solve_cells(S, b, feed, net, d, where)
-    saved = mill_cells._compiled
-    try:
-        mill_cells._compiled = None
-        ref = mill_cells.solve_cells(S, b, feed, net, d, where)
-    finally:
-        mill_cells._compiled = saved
+    ref = mill_cells.solve_cells(S, b, feed, net, d, where, kernel="numpy")
     assert (fast.kernel, ref.kernel) == ("compiled", "numpy")
     # rounding differs (Thomas vs gtsv); retained coarse classes with strong back-mixing
     # make the class systems mildly ill-conditioned (both ~1e-12 from a 40-digit
@@ -97,16 +94,14 @@ def _class_loop_mpmath(S, b, feed, net, d, where, dps=40):
         return np.array([[float(hold[i][k]) for i in range(S.size)] for k in range(n)])
 
 
-def test_both_loops_meet_a_high_precision_solve(monkeypatch):
+def test_both_loops_meet_a_high_precision_solve():
     # coarse classes retained 1000-fold behind a screen, back-mixing ratio 8, 12 cells
     x, S, b = _kernel()
     net = rtd.RecirculatingCells(1.0, 12, r=8.0).network()
     d = np.where(x > 0.05, 1e-3, 1.0)
     feed = np.random.default_rng(12).random(S.size)
     ref = _class_loop_mpmath(S, b, feed, net, d, "discharge")
-    got = [mill_cells.solve_cells(S, b, feed, net, d, "discharge")]
-    monkeypatch.setattr(mill_cells, "_compiled", None)
-    got.append(mill_cells.solve_cells(S, b, feed, net, d, "discharge"))
+    got = [mill_cells.solve_cells(S, b, feed, net, d, "discharge", kernel=k) for k in (None, "numpy")]
     for sol in got:
         np.testing.assert_allclose(sol.holdup, ref, rtol=0, atol=1e-11 * np.abs(ref).max())
 
@@ -114,7 +109,7 @@ def test_both_loops_meet_a_high_precision_solve(monkeypatch):
 def test_numpy_fallback_closes_the_mass_balance(monkeypatch):
     x, S, b = _kernel()
     feed = np.r_[1.0, np.zeros(S.size - 1)]
-    monkeypatch.setattr(mill_cells, "_compiled", None)
+    monkeypatch.setenv("MILLFLOW_KERNEL", "numpy")  # the environment picks the kernel for whole solves
     ds = steady_mill(S, b, feed, rtd.RecirculatingCells(60.0, 6, r=2.0), np.where(x > 0.1, 0.01, 1.0))
     assert ds.attrs["kernel"] == "numpy"
     assert ds.attrs["mass_balance_error"] < 1e-12
@@ -128,13 +123,13 @@ def test_compiled_loop_rejects_wrong_buffers():
     bad = list(args)
     bad[1] = np.ones((N, n), dtype=np.float32)
     with pytest.raises(ValueError, match="diag"):
-        mill_cells._compiled.tridiagonal_classes(*bad, N, n, 1)
+        CELLS.tridiagonal_classes(*bad, N, n, 1)
     bad = list(args)
     bad[5] = np.empty((N, n + 1))
     with pytest.raises(ValueError, match="holdup"):
-        mill_cells._compiled.tridiagonal_classes(*bad, N, n, 1)
+        CELLS.tridiagonal_classes(*bad, N, n, 1)
     with pytest.raises(ValueError, match="cells"):
-        mill_cells._compiled.tridiagonal_classes(*args, N, 0, 1)
+        CELLS.tridiagonal_classes(*args, N, 0, 1)
 
 
 @compiled
@@ -142,6 +137,6 @@ def test_compiled_loop_reports_a_zero_pivot():
     N, n = 2, 3
     diag = np.ones((N, n))
     diag[1, 0] = 0.0
-    got = mill_cells._compiled.tridiagonal_classes(np.zeros((N, n - 1)), diag, np.zeros((N, n - 1)),
+    got = CELLS.tridiagonal_classes(np.zeros((N, n - 1)), diag, np.zeros((N, n - 1)),
                                                    np.zeros((N, N)), np.ones((N, n)), np.empty((N, n)), N, n, 1)
     assert got == 2

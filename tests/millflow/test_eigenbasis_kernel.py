@@ -17,9 +17,11 @@ from hypothesis import strategies as st
 
 from millflow import linalg
 from millflow.batch import batch_solve
+from millflow.compiled import kernel as load_kernel
 
 DATA = Path(__file__).parent.parent / "data"
-compiled = pytest.mark.skipif(linalg._compiled is None, reason="compiled kernel not built")
+EIGEN = load_kernel("eigenbasis")  # the built kernel (None where it was not built)
+compiled = pytest.mark.skipif(EIGEN is None, reason="compiled kernel not built")
 
 
 def test_kernel_is_compiled_where_required():
@@ -61,24 +63,23 @@ def test_compiled_basis_equals_numpy_basis(kernel, gap):
     labels = linalg.cluster_rates(S, gap) if np.isfinite(gap) else np.zeros(S.size, dtype=int)
     if np.all(np.bincount(labels) == 1):
         X0 = linalg._eigenvectors_distinct_numpy(A, S)
-        X1 = linalg._eigenvectors_distinct(A, S)
+        X1 = linalg._eigenvectors_distinct(A, S, EIGEN)
         np.testing.assert_allclose(X1, X0, rtol=0, atol=1e-12 * _scale(X0))
     else:
         X0, cc0, D0 = linalg._block_basis_numpy(A, S, labels)
-        X1, cc1, D1 = linalg._block_basis(A, S, labels)
+        X1, cc1, D1 = linalg._block_basis(A, S, labels, EIGEN)
         np.testing.assert_array_equal(cc1, cc0)
         np.testing.assert_allclose(X1, X0, rtol=0, atol=1e-12 * _scale(X0))
         np.testing.assert_allclose(D1, D0, rtol=0, atol=1e-12 * _scale(D0))
 
 
 @pytest.mark.parametrize("case", ["baseline", "stiff", "degenerate"])
-def test_numpy_fallback_meets_the_references(monkeypatch, case):
+def test_numpy_fallback_meets_the_references(case):
     path = DATA / "batch_reference.json"
     if not path.exists():
         pytest.skip("tests/data/batch_reference.json missing")
     ref = json.loads(path.read_text())[case]
-    monkeypatch.setattr(linalg, "_compiled", None)
-    res = batch_solve(ref["S"], ref["b"], ref["feed"], ref["t"])
+    res = batch_solve(ref["S"], ref["b"], ref["feed"], ref["t"], kernel="numpy")
     assert res.info["kernel"] == "numpy"
     np.testing.assert_allclose(res.M, np.array(ref["M"]), rtol=0, atol=1e-13)
     assert res.M.min() >= -1e-15
@@ -96,7 +97,7 @@ def test_numpy_fallback_meets_the_references(monkeypatch, case):
 )
 def test_compiled_kernel_rejects_wrong_buffers(args, match):
     with pytest.raises((ValueError, BufferError), match=match):
-        linalg._compiled.distinct(*args)
+        EIGEN.distinct(*args)
 
 
 @compiled
@@ -104,7 +105,7 @@ def test_compiled_kernel_rejects_read_only_output():
     X = np.eye(3)
     X.flags.writeable = False
     with pytest.raises((ValueError, BufferError)):
-        linalg._compiled.distinct(np.eye(3), np.array([3.0, 2.0, 0.0]), X)
+        EIGEN.distinct(np.eye(3), np.array([3.0, 2.0, 0.0]), X)
 
 
 @compiled
@@ -113,4 +114,13 @@ def test_compiled_clustered_kernel_rejects_unsorted_cluster_indices():
     A = linalg._minus_breakage_matrix(S, np.tril(np.ones((4, 4)), -1) / [3, 2, 1, 1])
     cc = np.array([2, 0, 1], dtype=np.int64)
     with pytest.raises(ValueError, match="cc"):
-        linalg._compiled.clustered(A, S, np.eye(4), cc, np.array([0, 0, 0, 1]), np.eye(3))
+        EIGEN.clustered(A, S, np.eye(4), cc, np.array([0, 0, 0, 1]), np.eye(3))
+
+
+def test_kernel_choice_is_an_argument_checked_by_name():
+    from millflow.errors import InputError
+
+    with pytest.raises(InputError, match="kernel = 'fast'"):
+        batch_solve([1.0, 0.0], [[0, 0], [1, 0]], [1.0, 0.0], [1.0], kernel="fast")
+    res = batch_solve([1.0, 0.0], [[0, 0], [1, 0]], [1.0, 0.0], [1.0], kernel="numpy")
+    assert res.info["kernel"] == "numpy"
