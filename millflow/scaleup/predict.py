@@ -1,0 +1,169 @@
+"""Lab fit -> plant prediction: rates at scale, circuit product, throughput at a target P80.
+
+:class:`ScaleUp` binds a :class:`~millflow.scaleup.fitted.FittedBreakage` (the lab fit,
+evaluated at the lab's process conditions, eq. 10), the lab mill it was measured in, the
+plant circuit and its feed, and a scaling rule:
+
+- ``"herbst_fuerstenau"``: S_plant = S_lab (P_plant / H_plant) / (P_lab / H_lab)
+  (S^E = S_lab H_lab / P_lab carried unchanged, :func:`.scaling.herbst_fuerstenau_rates`);
+- ``"austin"``: A and mu of eq. 7 multiplied by :func:`.scaling.austin_factors`.
+
+B (normalised, eq. 6) is carried unchanged. Every method takes a full parameter vector,
+so that :mod:`.uncertainty` can propagate the fit's covariance through it.
+"""
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from millflow.errors import GridError, InputError, SolverError
+from millflow.psd import percentile_size
+from millflow.scaleup.fitted import FittedBreakage
+from millflow.scaleup.plant import Circuit, MillDesign
+from millflow.scaleup.scaling import austin_factors
+
+__all__ = ["ScaleUp", "SCALINGS"]
+
+SCALINGS = ("herbst_fuerstenau", "austin")
+
+
+@dataclass(frozen=True)
+class ScaleUp:
+    """Everything a plant prediction needs; see the module docstring.
+
+    feed : (N,) fresh-feed mass fractions on ``x`` (the fit's grid unless given).
+    feed_tph : fresh feed rate [t/h] of the predicted operating point.
+    throughput_range_tph : search interval of the throughput root (target P80).
+    """
+
+    fit: FittedBreakage
+    lab: MillDesign
+    lab_process: dict
+    circuit: Circuit
+    feed: np.ndarray
+    feed_tph: float
+    scaling: str = "herbst_fuerstenau"
+    austin_overrides: dict = field(default_factory=dict)
+    x: np.ndarray | None = None
+    throughput_range_tph: tuple = (None, None)
+
+    def __post_init__(self):
+        if self.scaling not in SCALINGS:
+            raise InputError(f"scaling = {self.scaling!r}: expected one of {list(SCALINGS)}")
+        x = self.fit.x if self.x is None else np.asarray(self.x, float)
+        object.__setattr__(self, "x", x)
+        f = np.asarray(self.feed, float)
+        if f.shape != x.shape or np.any(f < 0) or abs(f.sum() - 1) > 1e-9:
+            raise GridError(f"feed: {f.shape} fractions summing to {float(f.sum())!r}; expected {x.shape} "
+                            "non-negative fractions summing to 1 on the prediction grid")
+        object.__setattr__(self, "feed", f)
+        if not (math.isfinite(self.feed_tph) and self.feed_tph > 0):
+            raise InputError(f"plant.feed_tph = {float(self.feed_tph)!r}: expected a number > 0")
+        object.__setattr__(self, "lab_process", self.fit.check_process(self.lab_process, "lab.process"))
+        lo, hi = self.throughput_range_tph
+        lo = self.feed_tph / 20 if lo is None else float(lo)
+        hi = self.feed_tph * 20 if hi is None else float(hi)
+        if not (0 < lo < hi):
+            raise InputError(f"throughput_range_tph = [{lo!r}, {hi!r}]: expected 0 < low < high")
+        object.__setattr__(self, "throughput_range_tph", (lo, hi))
+        if self.scaling == "austin":
+            self._austin()
+
+    # ------------------------------------------------------------------ scaling
+    def _austin(self):
+        return austin_factors(self.lab.as_dict(), self.circuit.mill.as_dict(), **self.austin_overrides)
+
+    def factors(self) -> dict:
+        """Scale-up factors on A and mu (plant / lab) and the powers and hold-ups used."""
+        pl, pp = self.lab.power(), self.circuit.mill.power()
+        Hl, Hp = self.lab.holdup(), self.circuit.mill.holdup()
+        out = {"lab_power_kW": pl["net_kW"], "plant_power_kW": pp["net_kW"], "lab_holdup_kg": Hl,
+               "plant_holdup_kg": Hp, "plant_gross_kW": pp["gross_kW"], "power_model": pp["model"],
+               "plant_kw_per_t_balls": pp["kw_per_t_balls"], "plant_ball_mass_t": pp["ball_mass_t"]}
+        if self.scaling == "herbst_fuerstenau":
+            out.update(A=(pp["net_kW"] / Hp) / (pl["net_kW"] / Hl), mu=1.0)
+        else:
+            a = self._austin()
+            out.update(A=a["A"], mu=a["mu"], terms=a["terms"])
+        return out
+
+    def plant_rates(self, theta):
+        """S [1/s] and b of the plant mill for full parameter vector(s) theta."""
+        f = self._cached_factors()
+        S = self.fit.rates(theta, self.x, self.lab_process, f["A"], f["mu"])
+        return S, self.fit.frac_b(theta, self.x)
+
+    def _cached_factors(self):
+        c = self.__dict__.get("_factors")
+        if c is None:
+            c = self.factors()
+            object.__setattr__(self, "_factors", c)
+        return c
+
+    # -------------------------------------------------------------- predictions
+    @property
+    def power_kW(self) -> float:
+        return self._cached_factors()["plant_power_kW"]
+
+    def _p80(self, p):
+        return percentile_size(self.x, np.clip(p, 0.0, None) / p.sum(), 80)
+
+    def operate(self, theta, feed_tph=None) -> dict:
+        """Circuit at the fresh feed rate (default ``feed_tph``): product fractions,
+        p80_m, tau_s, circulating_load, specific_energy_kWh_t, mass_balance."""
+        F = (self.feed_tph if feed_tph is None else float(feed_tph)) / 3.6
+        S, b = self.plant_rates(theta)
+        c = self.circuit.partition(self.x)
+        r = self.circuit.at_throughput(S, b, self.feed, F, c)
+        r["p80_m"] = self._p80(r["product"])
+        r["specific_energy_kWh_t"] = self.power_kW / (F * 3.6)
+        r["feed_tph"] = F * 3.6
+        return r
+
+    def throughput_for_p80(self, theta, target_p80_m) -> dict:
+        """Fresh feed rate [t/h] whose circuit product has P80 = target: Brent's method on
+        ln F_m (mill flow), bracketed within ``throughput_range_tph``. Returns feed_tph,
+        p80_m, residual_rel (|P80 - target| / target), specific_energy_kWh_t, and the
+        circuit state. A target outside the reachable P80 range raises InputError."""
+        from scipy.optimize import brentq
+
+        t = float(target_p80_m)
+        if not (math.isfinite(t) and t > 0):
+            raise InputError(f"target_p80 = {t!r}: expected a size > 0")
+        S, b = self.plant_rates(theta)
+        c = self.circuit.partition(self.x)
+        lo_tph, hi_tph = self.throughput_range_tph
+        # bracket in ln(mill flow): the low end carries lo_tph of fresh feed; the high end
+        # carries hi_tph, or (closed circuit) as much as the circuit can pass below that
+        r_lo = self.circuit.at_throughput(S, b, self.feed, lo_tph / 3.6, c)
+        u_lo = math.log(r_lo["fresh_kg_s"] * (1 + r_lo["circulating_load"]))
+        u_hi = math.log(hi_tph / 3.6)
+        if c is not None:
+            for _ in range(30):
+                if self.circuit.at_mill_flow(S, b, self.feed, math.exp(u_hi), c)["fresh_kg_s"] * 3.6 >= hi_tph:
+                    break
+                u_hi += math.log(2.0)
+            else:
+                hi_tph = self.circuit.at_mill_flow(S, b, self.feed, math.exp(u_hi), c)["fresh_kg_s"] * 3.6
+
+        def h(u):
+            return math.log(self._p80(self.circuit.at_mill_flow(S, b, self.feed, math.exp(u), c)["product"]) / t)
+        h_lo, h_hi = h(u_lo), h(u_hi)
+        if h_lo > 0:
+            raise InputError(f"target P80 {t * 1e6:.6g} um is not reachable: the finest product in the "
+                             f"throughput range, at {lo_tph:.6g} t/h, has P80 {t * math.exp(h_lo) * 1e6:.6g} um")
+        if h_hi < 0:
+            raise InputError(f"target P80 {t * 1e6:.6g} um is not reachable: even at {hi_tph:.6g} t/h (top of "
+                             f"throughput_range_tph) the product has P80 {t * math.exp(h_hi) * 1e6:.6g} um")
+        u = brentq(h, u_lo, u_hi, xtol=1e-13, rtol=4 * np.finfo(float).eps)
+        r = self.circuit.at_mill_flow(S, b, self.feed, math.exp(u), c)
+        r["p80_m"] = self._p80(r["product"])
+        r["residual_rel"] = abs(r["p80_m"] - t) / t
+        if r["residual_rel"] > 1e-8:
+            raise SolverError(f"throughput root: P80 residual {r['residual_rel']:.3g} (relative) above 1e-8")
+        r["feed_tph"] = r["fresh_kg_s"] * 3.6
+        r["specific_energy_kWh_t"] = self.power_kW / r["feed_tph"]
+        r["bracket_tph"] = (lo_tph, hi_tph)
+        return r
