@@ -400,7 +400,7 @@ class ForwardModel:
                 "grid_upper_m": [float(v) for v in self.x], "process_ref": dict(self._ref),
                 "process": {str(c): {str(k): float(v) for k, v in proc.loc[c].items()
                                      if isinstance(v, (int, float, np.floating, np.integer))}
-                            for c in self.conditions}}
+                            for c in self.conditions if c in proc.index}}
 
     # ------------------------------------------------------------------- evaluation
     @property

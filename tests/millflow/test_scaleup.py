@@ -186,3 +186,62 @@ def test_wide_covariance_is_reported_as_nonlinear():
     res = predict_plant(su, 150e-6, n_draws=400, seed=1)
     assert res.summary["disagreement"]["specific_energy_kWh_t"]["nonlinear"]
     assert res.summary["throughput_residual_rel"] < 1e-10
+
+
+# ------------------------------------------------------ coverage from real fits
+def _synthetic_lab_fit(rng, noise=0.004):
+    """Batch tests at 1, 3, 9 min on a 12-sieve root-2 series, generated from THETA on a
+    2^(1/4) grid, Gaussian noise of sd ``noise`` on cumulative passing; local eq. 9 fit."""
+    import pandas as pd
+
+    from millflow.fitting.data import psd_data_from_frames
+    from millflow.fitting.estimate import fit
+    from millflow.fitting.models import ForwardModel, ModelSpec, default_parameters
+    from millflow.scaleup import fit_from_dict
+
+    sieves = 4.0 * 2 ** (-0.5 * np.arange(12))
+    rows = [pd.DataFrame({"condition": "*", "location": "feed", "time_min": 0.0, "size_mm": sieves[:4],
+                          "passing": [1.0, 2 / 3, 1 / 3, 0.0]})]
+    for t in (1.0, 3.0, 9.0):
+        rows.append(pd.DataFrame({"condition": "lab", "location": "mill", "time_min": t, "size_mm": sieves,
+                                  "passing": np.linspace(1, 0, 12)}))
+    spec = ModelSpec(mode="batch", breakage="normalized")
+    grid = SizeGrid.between(4e-3, 4e-3 / 2 ** 6, 2 ** 0.25)
+    model = ForwardModel(spec, psd_data_from_frames(pd.concat(rows), strict=False), grid)
+    y = model.predict(THETA) + rng.normal(0, noise, model.n_data)
+    k = 0
+    for r in rows[1:]:
+        r["passing"] = y[k:k + 12]
+        k += 12
+    model = ForwardModel(spec, psd_data_from_frames(pd.concat(rows), strict=False), grid)
+    params = default_parameters(spec, {n: {"value": float(v)} for n, v in zip(NAMES, THETA)})
+    res = fit(model, params, global_search=False, starts=1, grid_check=False)
+    d = res.to_dict()
+    return fit_from_dict(d, "synthetic lab fit"), model
+
+
+def _coverage(n_rep, seed):
+    rng = np.random.default_rng(seed)
+    hits, n = 0, 0
+    for _ in range(n_rep):
+        fitted, model = _synthetic_lab_fit(rng)
+        feed = np.zeros(fitted.x.size)
+        feed[:3] = 1 / 3
+        su = ScaleUp(fitted, LAB, {}, Circuit(PLANT, "tis", {"n": 3}, CYCLONE), feed, 100.0)
+        truth = su.operate(THETA)["p80_m"] * 1e6
+        b = predict_plant(su, None, methods=("delta",)).summary["bands"]["p80_um"]["delta"]
+        hits += b["lo"] <= truth <= b["hi"]
+        n += 1
+    return hits / n
+
+
+def test_band_coverage_quick():
+    """Plant P80 from the true parameters inside the delta band of fits to noisy
+    synthetic lab data: nominal 95 %; 20 replicates, >= 90 % required (fixed seed; the
+    slow test below uses 200 replicates)."""
+    assert _coverage(20, 11) >= 0.9
+
+
+@pytest.mark.slow
+def test_band_coverage_200_replicates():
+    assert _coverage(200, 12) >= 0.9
