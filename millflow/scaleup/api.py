@@ -22,7 +22,7 @@ __all__ = ["ScaleupResult", "predict_plant"]
 @dataclass(frozen=True)
 class ScaleupResult:
     """``dataset``: product band over ``size`` and the scalar predictions with bands
-    (variables ``<q>``, ``<q>_lo``, ``<q>_hi`` per method on dim ``method``); ``summary``:
+    (variables ``<q>``, ``<q>_lo``, ``<q>_hi`` per method on dim ``estimator``); ``summary``:
     the same as plain numbers (JSON-able); ``scale``: the factors, powers, hold-ups."""
 
     dataset: xr.Dataset
@@ -69,13 +69,13 @@ def predict_plant(su, target_p80_m=None, methods=("delta", "mc"), n_draws: int =
     mlist = list(res)
     ds = xr.Dataset(coords={"size": ("size", np.arange(1, N + 1), {"long_name": "size class (1 = coarsest)"}),
                             "x": ("size", su.x, {"units": "m", "long_name": "upper size of the class"}),
-                            "method": ("method", mlist)})
+                            "estimator": ("estimator", mlist, {"long_name": "band method (delta method or Monte Carlo); not named method: DataArray.sel has a method argument"})})
     P0 = np.cumsum(point["product"][::-1])[::-1]
     ds["passing"] = ("size", P0, {"units": "1", "long_name": "product cumulative passing at the estimate"})
     ds["feed_passing"] = ("size", np.cumsum(su.feed[::-1])[::-1], {"units": "1", "long_name": "fresh feed passing"})
     for key, sl, unit in (("passing", slice(0, N), "1"),):
         for bound in ("lo", "hi"):
-            ds[f"{key}_{bound}"] = (("method", "size"), np.array([res[m][bound][sl] for m in mlist]),
+            ds[f"{key}_{bound}"] = (("estimator", "size"), np.array([res[m][bound][sl] for m in mlist]),
                                     {"units": unit, "long_name": f"95 % band ({bound}) of product passing"})
     summary = {"p80_um": point["p80_m"] * 1e6, "feed_tph": su.feed_tph, "tau_s": point["tau_s"],
                "circulating_load": point["circulating_load"], "mass_balance": point["mass_balance"],
@@ -85,8 +85,8 @@ def predict_plant(su, target_p80_m=None, methods=("delta", "mc"), n_draws: int =
         q = N + k
         unit = {"p80_um": "um", "throughput_tph": "t/h", "specific_energy_kWh_t": "kWh/t"}[name]
         vals = {m: {"lo": float(res[m]["lo"][q]), "hi": float(res[m]["hi"][q])} for m in mlist}
-        ds[f"{name}_lo"] = ("method", [vals[m]["lo"] for m in mlist], {"units": unit})
-        ds[f"{name}_hi"] = ("method", [vals[m]["hi"] for m in mlist], {"units": unit})
+        ds[f"{name}_lo"] = ("estimator", [vals[m]["lo"] for m in mlist], {"units": unit})
+        ds[f"{name}_hi"] = ("estimator", [vals[m]["hi"] for m in mlist], {"units": unit})
         summary["bands"][name] = vals
     if target_p80_m is not None:
         tr = su.throughput_for_p80(fit.theta, target_p80_m)
@@ -104,6 +104,7 @@ def predict_plant(su, target_p80_m=None, methods=("delta", "mc"), n_draws: int =
                                           "nonlinear": bool(cmp["nonlinear"][N + k])}
                                    for k, name in enumerate(names)}
         summary["disagreement"]["passing_max_width_rel_diff"] = float(np.max(cmp["width_rel_diff"][:N]))
+    if "mc" in res:
         summary["mc"] = {"n": res["mc"]["n"], "rejected": res["mc"]["rejected"], "failed": res["mc"]["failed"]}
     if "delta" in res:
         summary["delta_step"] = {n: float(h) for n, h in zip(fit.varying, res["delta"]["step"])}

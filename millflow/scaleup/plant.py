@@ -153,8 +153,25 @@ class Circuit:
 
     # --------------------------------------------------------------------- solves
     def _mill_matrix(self, S, b, F_m):
-        from millflow.mill import transfer_matrix
         tau = self.mill.holdup() / F_m
+        n = {"cstr": 1.0, "tis": float(dict(self.transport_params).get("n", 0))}.get(self.transport, 0.0)
+        if n >= 1 and n == int(n) and n <= 20:
+            # equal well-mixed tanks: T = (I + tau/n A)^-n, A = (I - b) diag(S) lower
+            # triangular, so one triangular solve and n-1 products (what
+            # millflow.transfer_matrix does, without its per-call validation, which
+            # dominates inside root and Monte Carlo loops)
+            from scipy.linalg import solve_triangular
+            M = (np.eye(S.size) - b) * (tau / n * S)[None, :]
+            M[np.diag_indices_from(M)] += 1.0
+            Ti = solve_triangular(M, np.eye(S.size), lower=True, check_finite=False)
+            T = Ti
+            for _ in range(int(n) - 1):
+                T = Ti @ T
+            return T, tau
+        if self.transport == "plug":
+            from scipy.linalg import expm
+            return expm(-tau * (np.eye(S.size) - b) * S[None, :]), tau
+        from millflow.mill import transfer_matrix
         return transfer_matrix(S, b, make_transport(self.transport, tau, dict(self.transport_params))), tau
 
     def at_mill_flow(self, S, b, feed, F_m, c=None):
@@ -172,19 +189,30 @@ class Circuit:
         return {"product": p, "fresh_kg_s": F_m / s, "tau_s": tau, "circulating_load": s - 1.0,
                 "mass_balance": abs(1.0 - p.sum())}
 
-    def at_throughput(self, S, b, feed, F, c=None):
-        """Circuit at fresh feed F [kg/s]; closed circuits solve F_m / sum(m_hat(F_m)) = F."""
+    def at_throughput(self, S, b, feed, F, c=None, guess_load=None):
+        """Circuit at fresh feed F [kg/s]; closed circuits solve F_m / sum(m_hat(F_m)) = F
+        by Brent's method on u = ln F_m. ``guess_load``: a circulating load near the answer
+        (e.g. of the point estimate) to start a narrow bracket from."""
         if c is None:
             return self.at_mill_flow(S, b, feed, F)
         from scipy.optimize import brentq
 
         def g(u):
             return math.log(self.at_mill_flow(S, b, feed, math.exp(u), c)["fresh_kg_s"] / F)
-        lo = math.log(F)
-        hi = lo + math.log(4.0)
+        lo = math.log(F)  # F_m >= F: g(lo) <= 0
+        if guess_load is not None:
+            u0 = lo + math.log1p(guess_load)
+            lo2, hi = u0 - 0.1, u0 + 0.1
+            if lo2 > lo and g(lo2) < 0:
+                lo = lo2
+            g_hi = g(hi)
+        else:
+            hi = lo + math.log(4.0)
+            g_hi = g(hi)
         k = 0
-        while g(hi) < 0:
-            hi += math.log(4.0)
+        while g_hi < 0:
+            lo, hi = hi, hi + math.log(4.0)
+            g_hi = g(hi)
             k += 1
             if k > 20:
                 raise SolverError(f"circuit cannot pass a fresh feed of {F * 3.6:.6g} t/h: the recycle grows "

@@ -177,8 +177,8 @@ def test_delta_and_monte_carlo_agree_on_a_near_linear_case():
     b = res.summary["bands"]["p80_um"]
     assert b["delta"]["lo"] < res.summary["p80_um"] < b["delta"]["hi"]
     ds = res.dataset
-    assert ds["passing_lo"].dims == ("method", "size") and ds.x.attrs["units"] == "m"
-    assert np.all(ds["passing_lo"].sel(method="delta") <= ds["passing"] + 1e-15)
+    assert ds["passing_lo"].dims == ("estimator", "size") and ds.x.attrs["units"] == "m"
+    assert np.all(ds["passing_lo"].sel(estimator="delta") <= ds["passing"] + 1e-15)
 
 
 def test_wide_covariance_is_reported_as_nonlinear():
