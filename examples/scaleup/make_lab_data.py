@@ -17,7 +17,7 @@ from millflow.fitting.data import psd_data_from_frames
 from millflow.fitting.models import ForwardModel, ModelSpec
 from millflow.grid import SizeGrid
 
-TRUTH = {"ln_A0": math.log(1 / 600), "a_speed": 1.5, "alpha": 1.1, "phi": 0.45, "gamma": 0.9, "beta": 3.8}
+TRUTH = {"ln_A0": math.log(1 / 240), "a_speed": 1.5, "alpha": 1.1, "phi": 0.45, "gamma": 0.9, "beta": 3.8}
 SIEVES_MM = 4.0 * 2 ** (-0.5 * np.arange(14))
 SPEEDS = {"lab_065": 0.65, "lab_080": 0.80}
 TIMES_MIN = (1.0, 3.0, 9.0)

@@ -245,3 +245,17 @@ def test_band_coverage_quick():
 @pytest.mark.slow
 def test_band_coverage_200_replicates():
     assert _coverage(200, 12) >= 0.9
+
+
+def test_p80_fast_equals_percentile_size():
+    """The loop-friendly P80 is the same PCHIP as millflow.psd.percentile_size, solved on
+    the bracketing interval only: agreement to root-solver precision (1e-12 relative)."""
+    from millflow.psd import percentile_size
+    from millflow.scaleup.predict import p80_fast
+
+    rng = np.random.default_rng(4)
+    for _ in range(50):
+        f = rng.random(GRID.n) ** 3
+        f /= f.sum()
+        for pct in (50, 80, 95):
+            assert p80_fast(GRID.x, f, pct) == pytest.approx(percentile_size(GRID, f, pct), rel=1e-12)
