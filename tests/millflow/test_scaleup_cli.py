@@ -75,7 +75,7 @@ def test_example_end_to_end_json_and_files(tmp_path, fit_json, capsys):
     (("ball_filling = 0.35\ncritical_speed_fraction = 0.75", "ball_filling = 0.7\ncritical_speed_fraction = 0.75"),
      "mill.ball_filling = 0.7"),
     (("diameter_m = 4.0", "diameter = 4.0"), "mill.diameter: units missing from the key; expected 'diameter_m'"),
-    (("d50c_um = 150", "d50c = 150"), "classifier.d50c: units missing from the key; expected 'd50c_um'"),
+    (("d50c_um = 200", "d50c = 200"), "classifier.d50c: units missing from the key; expected 'd50c_um'"),
     (("feed_tph = 100", "feed = 100"), "feed.feed: units missing|feed.feed: unknown key"),
     (("speed = 0.80", "sped = 0.80"), r"lab.process: missing process values \['speed'\]"),
     (("top_um = 4000", "top_um = 2000"), "feed:.*give a \\[grid\\] with top_um"),
