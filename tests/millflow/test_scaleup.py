@@ -259,3 +259,14 @@ def test_p80_fast_equals_percentile_size():
         f /= f.sum()
         for pct in (50, 80, 95):
             assert p80_fast(GRID.x, f, pct) == pytest.approx(percentile_size(GRID, f, pct), rel=1e-12)
+
+
+def test_bench_suite_runs_quick():
+    """The benchmark suite's rows (no timing asserted: budgets are checked by the bench)."""
+    from millflow.bench import scaleup as bench
+
+    rows = bench.run(quick=True)
+    assert [r["method"] for r in rows] == ["delta", "mc(200 draws)"]
+    for r in rows:
+        lo, hi = r["p80_band_um"]
+        assert 0 < lo < hi and r["throughput_band_tph"][0] < r["throughput_band_tph"][1]
