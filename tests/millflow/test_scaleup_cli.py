@@ -124,3 +124,23 @@ def test_rtd_fit_json_gives_the_transport_shape(tmp_path, fit_json, capsys):
     s = json.loads(capsys.readouterr().out)
     assert s["transport"] == "tis" and s["transport_params"] == {"n": 2.5}
     assert "shape only" in s["transport_source"]
+
+
+def test_fit_json_carries_eq9_covariance(fit_json):
+    d = json.loads(fit_json.read_text())
+    C = np.array(d["covariance"]["matrix"])
+    names = d["covariance"]["names"]
+    se = np.array([d["params"][n]["se"] for n in names])
+    np.testing.assert_allclose(np.sqrt(np.diag(C)), se, rtol=1e-12)  # same eq. 9 numbers, JSON round trip
+    assert d["model_spec"]["param_names"][0] == "ln_A0" and d["model_spec"]["process_ref"]["speed"] > 0
+
+
+def test_austin_scaling_from_the_plant_file(tmp_path, fit_json, capsys):
+    from millflow.scaleup import austin_factors
+    plant = _plant(tmp_path, ('scaling = "herbst_fuerstenau"', 'scaling = "austin"'))
+    assert main(["scaleup", str(fit_json), "--to", str(plant), "--method", "delta", "--json",
+                 "--out", str(tmp_path / "o")]) == 0
+    s = json.loads(capsys.readouterr().out)
+    lab = dict(diameter_m=0.2, ball_size_mm=25, ball_filling=0.35, critical_speed_fraction=0.80, powder_filling=1.0)
+    pl = dict(diameter_m=4.0, ball_size_mm=50, ball_filling=0.35, critical_speed_fraction=0.75, powder_filling=1.0)
+    assert s["A_factor"] == pytest.approx(austin_factors(lab, pl)["A"], rel=1e-14)
