@@ -270,3 +270,27 @@ def test_bench_suite_runs_quick():
     for r in rows:
         lo, hi = r["p80_band_um"]
         assert 0 < lo < hi and r["throughput_band_tph"][0] < r["throughput_band_tph"][1]
+
+
+from hypothesis import given, settings
+from hypothesis import strategies as st
+
+
+@settings(max_examples=40, deadline=None)
+@given(D=st.floats(0.2, 8.0), L=st.floats(0.2, 15.0), J=st.floats(0.05, 0.45), phi=st.floats(0.5, 0.9),
+       F=st.floats(5.0, 500.0))
+def test_power_and_hf_invariance_properties(D, L, J, phi, F):
+    """Over random valid mills: every power model positive and finite, kW/t balls =
+    kW / ball mass, and Herbst-Fuerstenau plug flow depends on P/F only (a mill twice as
+    long at twice the feed rate gives the same product: P and H both double)."""
+    for f in (austin_power, hogg_fuerstenau_power):
+        r = f(D, L, J, phi)
+        assert r["net_kW"] > 0 and math.isfinite(r["net_kW"])
+        assert r["kw_per_t_balls"] == pytest.approx(r["net_kW"] / r["ball_mass_t"], rel=1e-12)
+    fit = make_fit()
+    m1 = MillDesign(D, L, J, phi, min(50.0, 100 * D), name="m1")
+    m2 = MillDesign(D, 2 * L, J, phi, min(50.0, 100 * D), name="m2")
+    p1 = ScaleUp(fit, LAB, {}, Circuit(m1, "plug", {}), FEED, F).operate(fit.theta)["product"]
+    p2 = ScaleUp(fit, LAB, {}, Circuit(m2, "plug", {}), FEED, 2 * F).operate(fit.theta)["product"]
+    # same matrix exponential up to the rounding of P/H and H/F (a few ulp, amplified by expm)
+    np.testing.assert_allclose(p2, p1, rtol=1e-9, atol=1e-13)
