@@ -101,6 +101,11 @@ class FitResult:
             "solutions": [{"ssr": s, "params": p} for s, p in self.solutions[:10]],
             "rmse_by_condition": self.rmse_by_condition(),
             "nfev": self.nfev, "runtime_s": self.runtime_s,
+            # eq. 9 covariance at full precision and what is needed to evaluate the fitted
+            # model in another mill (millflow scaleup)
+            "covariance": {"names": list(self.stats["params"]),
+                           "matrix": _jsonable(np.asarray(self.stats["covariance"]).tolist())},
+            "model_spec": self.model.describe(),
         })
         return out
 

@@ -388,6 +388,20 @@ class ForwardModel:
         out[:, starts] += 1.0
         return out
 
+    def describe(self) -> dict:
+        """The spec, grid and eq. 10 reference values as plain JSON-able data (for the fit
+        JSON: what another program needs to evaluate S and B of this model elsewhere)."""
+        s = self.spec
+        proc = self.data.process
+        return {"mode": s.mode, "rate": s.rate, "breakage": s.breakage, "classification": s.classification,
+                "rate_process": list(s.rate_process), "param_process": [list(p) for p in s.param_process],
+                "tau_column": s.tau_column, "x0_m": s.x0_m, "n_tanks": s.n_tanks, "transport": s.transport,
+                "transport_params": dict(s.transport_params), "param_names": list(s.param_names),
+                "grid_upper_m": [float(v) for v in self.x], "process_ref": dict(self._ref),
+                "process": {str(c): {str(k): float(v) for k, v in proc.loc[c].items()
+                                     if isinstance(v, (int, float, np.floating, np.integer))}
+                            for c in self.conditions if c in proc.index}}
+
     # ------------------------------------------------------------------- evaluation
     @property
     def param_names(self):

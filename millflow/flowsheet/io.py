@@ -291,18 +291,33 @@ def _mill(name: str, t: _Table, materials: dict) -> Mill:
             if tparams[k] <= 0:
                 raise InputError(f"{tr.where}.{k} = {tparams[k]!r}: expected > 0")
         tr.finish(", ".join(["model"] + list(tparams)))
+    design = None
+    from millflow.scaleup.flowsheet import ScaledRate, design_from_table, is_design
+    if is_design(t.data):  # a mill by dimensions and operation: hold-up, power (and rate) computed
+        design = design_from_table(f"units.{name}", t.data)
+        t.used.update(design["keys"])
+        if design["rate_factor"] != 1.0:
+            rate = ScaledRate(rate, design["rate_factor"])
     tau = t.quantity("tau", "time", None)
     holdup = t.quantity("holdup", "mass", None)
+    if design is not None and tau is None and holdup is None:
+        holdup = design["holdup_kg"]
     if tau is None and holdup is None:
         raise InputError(f"units.{name}: missing parameter tau_<unit> (time: {_suffixes('time')}) "
                          f"or holdup_<unit> (mass: {_suffixes('mass')})")
-    power = t.quantity("power", "power", None, allow_zero=True)
+    # (power_model of a mill by dimensions is not a power with an unknown unit)
+    given = design is None or any(k.startswith("power_") and k != "power_model" for k in t.data)
+    power = t.quantity("power", "power", None, allow_zero=True) if given else None
+    if design is not None and power is None:
+        power = design["power_W"]
     cls = None
     if "classification" in t.data:
         ct = t.sub("classification")
         curve = ct.plain("curve", kind=str)
         cls = {"curve": curve, **_curve_params(ct, curve)}
-    t.finish("type, material, rate, breakage, transport, tau_min, holdup_t, power_kW, classification")
+    t.finish("type, material, rate, breakage, transport, tau_min, holdup_t, power_kW, classification, "
+             "or by dimensions: diameter_m, length_m, ball_filling, critical_speed_fraction, ball_size_mm, ... "
+             "(docs/scaleup.md)")
     unit = _wrap(f"units.{name}", Mill, name, rate, brk, model, tparams, tau, holdup, cls, power)
     _wrap(f"units.{name}", TRANSPORTS[model], tau or 1.0, **tparams)
     return unit

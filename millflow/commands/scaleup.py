@@ -1,0 +1,129 @@
+"""``millflow scaleup FIT.json --to PLANT.toml [--target-p80-um X] [--json] [--out DIR]``:
+carry a lab breakage fit to a plant mill and circuit, with 95 % bands from the fit's
+covariance (eq. 9).
+
+Prints the predicted plant product P80 with its band (delta method and Monte Carlo),
+the mill power and specific energy, and, with a target P80, the fresh-feed throughput
+that meets it (a bracketed root through the whole circuit, with its residual and band).
+Writes scaleup.nc, scaleup_psd.csv, scaleup.json and scaleup.png into the output folder
+(default ``<plant stem>-scaleup``). Bad input: exit 2; a failed solve: exit 1.
+"""
+from __future__ import annotations
+
+import json
+import sys
+from pathlib import Path
+
+
+def add_parser(subparsers) -> None:
+    p = subparsers.add_parser("scaleup", help="predict a plant mill/circuit from a lab fit, with uncertainty",
+                              description=__doc__.split("\n\n")[0])
+    p.add_argument("fit", help="result of 'millflow fit --json' (JSON file)")
+    p.add_argument("--to", required=True, dest="plant", help="plant file (TOML, see docs/scaleup.md)")
+    p.add_argument("--target-p80-um", type=float, default=None, help="target product P80 [um]: solve for throughput")
+    p.add_argument("--json", action="store_true", help="print one JSON object instead of the text summary")
+    p.add_argument("--out", default=None, help="output folder (default: <plant stem>-scaleup)")
+    p.add_argument("--draws", type=int, default=1000, help="Monte Carlo draws (default 1000)")
+    p.add_argument("--method", choices=["both", "delta", "mc"], default="both", help="band method(s)")
+    p.add_argument("--no-plots", action="store_true", help="do not write scaleup.png")
+    p.set_defaults(func=run)
+
+
+def _band(b, unit, fmt="{:.4g}"):
+    return ", ".join(f"{m} [{fmt.format(v['lo'])}, {fmt.format(v['hi'])}] {unit}" for m, v in b.items())
+
+
+def format_summary(s: dict) -> str:
+    lines = [f"{s['title']}: scale-up of {s['fit']} ({s['scaling']}, power model {s['power_model']})",
+             f"plant mill: net power {s['power_net_kW']:.4g} kW"
+             + (f", gross {s['power_gross_kW']:.4g} kW" if s.get("power_gross_kW") else "")
+             + f", hold-up {s['holdup_kg']:.4g} kg, A factor {s['A_factor']:.4g}",
+             f"at {s['feed_tph']:.4g} t/h: P80 {s['p80_um']:.4g} um (95 %: {_band(s['bands']['p80_um'], 'um')}), "
+             f"specific energy {s['specific_energy_kWh_t']:.4g} kWh/t, tau {s['tau_s']:.4g} s, "
+             f"circulating load {100 * s['circulating_load']:.1f} %"]
+    if "throughput_tph" in s:
+        lines.append(f"target P80 {s['target_p80_um']:.4g} um: throughput {s['throughput_tph']:.4g} t/h "
+                     f"(95 %: {_band(s['bands']['throughput_tph'], 't/h')}; residual {s['throughput_residual_rel']:.1e}), "
+                     f"specific energy {s['specific_energy_at_target_kWh_t']:.4g} kWh/t "
+                     f"(95 %: {_band(s['bands']['specific_energy_kWh_t'], 'kWh/t', '{:.3g}')})")
+    for q, d in s.get("disagreement", {}).items():
+        if isinstance(d, dict) and d["nonlinear"]:
+            lines.append(f"note: {q}: delta method and Monte Carlo disagree (band widths differ by "
+                         f"{100 * d['width_rel_diff']:.0f} %, centre shift {100 * d['centre_shift']:.0f} % of the "
+                         "half-width): the prediction is non-linear over the parameter spread; prefer Monte Carlo")
+    lines.append(f"mass balance {s['mass_balance']:.1e}; run time {s['runtime_s']:.2f} s")
+    return "\n".join(lines)
+
+
+def run(args) -> int:
+    from millflow.errors import SolverError
+    from millflow.scaleup.api import predict_plant
+    from millflow.scaleup.fitted import load_fit
+    from millflow.scaleup.plantfile import load_plant
+
+    fit = load_fit(args.fit)
+    su, notes = load_plant(args.plant, fit)
+    target = None if args.target_p80_um is None else args.target_p80_um * 1e-6
+    if args.draws < 10:
+        from millflow.errors import InputError
+        raise InputError(f"--draws {args.draws}: expected >= 10")
+    methods = {"both": ("delta", "mc"), "delta": ("delta",), "mc": ("mc",)}[args.method]
+    try:
+        res = predict_plant(su, target, methods=methods, n_draws=args.draws)
+    except SolverError as exc:
+        print(f"millflow scaleup: solve failed: {exc}", file=sys.stderr)
+        return 1
+    s = dict(res.summary)
+    sc = res.scale
+    s.update(title=notes["title"], fit=Path(args.fit).name, scaling=su.scaling, power_model=sc["power_model"],
+             power_gross_kW=sc["plant_gross_kW"], holdup_kg=sc["plant_holdup_kg"], A_factor=sc["A"],
+             mu_factor=sc["mu"], transport=notes["transport"], transport_params=notes["transport_params"],
+             transport_source=notes["transport_source"])
+    out = Path(args.out) if args.out else Path.cwd() / f"{Path(args.plant).stem}-scaleup"
+    out.mkdir(parents=True, exist_ok=True)
+    files = _write(res, s, out, plots=not args.no_plots)
+    s["files_written"] = [f.name for f in files]
+    if args.json:
+        print(json.dumps(s, default=float))
+    else:
+        print(format_summary(s))
+        print(f"wrote {out}/ ({', '.join(s['files_written'])})")
+    return 0
+
+
+def _write(res, s, out: Path, plots: bool):
+    import numpy as np
+    import pandas as pd
+
+    files = [out / "scaleup.nc", out / "scaleup_psd.csv", out / "scaleup.json"]
+    ds = res.dataset
+    ds.to_netcdf(files[0])
+    cols = {"size_um": ds.x.values * 1e6, "passing": ds.passing.values, "feed_passing": ds.feed_passing.values}
+    for m in ds.estimator.values:
+        cols[f"passing_lo_{m}"] = ds.passing_lo.sel(estimator=m).values
+        cols[f"passing_hi_{m}"] = ds.passing_hi.sel(estimator=m).values
+    pd.DataFrame(cols).to_csv(files[1], index=False)
+    files[2].write_text(json.dumps(s, indent=1, default=float))
+    if plots:
+        import matplotlib
+        matplotlib.use("Agg")
+        import matplotlib.pyplot as plt
+
+        fig, ax = plt.subplots(figsize=(6, 4))
+        x = ds.x.values * 1e6
+        ax.semilogx(x, ds.feed_passing, "k:", lw=1, label="fresh feed")
+        ax.semilogx(x, ds.passing, "C0-", lw=1.5, label=f"plant product, P80 {s['p80_um']:.0f} um")
+        for k, m in enumerate(ds.estimator.values):
+            ax.fill_between(x, ds.passing_lo.sel(estimator=m), ds.passing_hi.sel(estimator=m), alpha=0.25,
+                            color=f"C{k + 1}", label=f"95 % band ({m})")
+        ax.axhline(0.8, color="0.6", lw=0.6)
+        ax.set_xlabel("size [um]")
+        ax.set_ylabel("cumulative passing [-]")
+        ax.set_title(s["title"], fontsize=9)
+        ax.legend(fontsize=7)
+        fig.tight_layout()
+        p = out / "scaleup.png"
+        fig.savefig(p, dpi=110)
+        plt.close(fig)
+        files.append(p)
+    return files

@@ -1,0 +1,221 @@
+"""A mill given by dimensions and operation, and the circuit it works in.
+
+:class:`MillDesign` turns dimensions and operation into net power (a model of
+:mod:`millflow.scaleup.power`, or a given power) and hold-up; :class:`Circuit` is the
+mill with its transport (any rtd model, tau = H / F set by the mill's flow) and an
+optional closing classifier whose coarse stream returns to the mill feed.
+
+Hold-up (powder or dry solids): H = rho_s (1 - eps) U eps J V  [kg],
+V = pi D^2 L / 4 inside liners, J the ball-bed fraction of V, eps = 0.4 the porosity of
+the ball bed and of the powder bed, U the fraction of the ball-bed voids filled by
+powder (Austin, Klimpel & Luckie 1984, ch. 10 definitions). Wet mills hold slurry
+whose volume depends on discharge design: give ``holdup_kg`` directly there.
+
+Closed circuit, steady state (all linear in the flows for a fixed mill flow F_m):
+mill feed m = f + C T(tau) m, tau = H / F_m, product = (I - C) T m, with C = diag(c_i)
+the classifier's fraction to the coarse (recycle) stream and T the mill's transfer
+matrix (:func:`millflow.transfer_matrix`). Per unit fresh feed m_hat = (I - C T)^-1 f_hat,
+and the fresh feed rate that a mill flow F_m carries is F = F_m / sum(m_hat): one scalar
+equation in F_m, solved by Brent's method on ln F_m.
+"""
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from millflow.errors import InputError, SolverError
+from millflow.scaleup import power as _power
+
+__all__ = ["MillDesign", "Circuit", "TRANSPORTS"]
+
+#: transport names (as in ``millflow fit-rtd --model``) -> rtd class and its shape parameters
+TRANSPORTS = {"cstr": ("PerfectMixing", ()), "plug": ("PlugFlow", ()), "tis": ("TanksInSeries", ("n",)),
+              "ad-closed": ("AxialDispersion", ("pe",)), "ad-open": ("AxialDispersion", ("pe",)),
+              "cells": ("RecirculatingCells", ("n", "r"))}
+
+
+@dataclass(frozen=True)
+class MillDesign:
+    """A tumbling ball mill by dimensions and operation (SI; ball size in mm as in the
+    sources of the power models).
+
+    power_kW / holdup_kg, when given, replace the computed values (measured ones are better).
+    """
+
+    diameter_m: float
+    length_m: float
+    ball_filling: float
+    critical_speed_fraction: float
+    ball_size_mm: float
+    powder_filling: float = 1.0
+    solid_density_kg_m3: float = 2700.0
+    ball_density_kg_m3: float = 7800.0
+    bed_porosity: float = 0.4
+    power_model: str = "austin"
+    power_kW: float | None = None
+    holdup_kg: float | None = None
+    drive_efficiency: float | None = None
+    name: str = "mill"
+
+    def __post_init__(self):
+        w = self.name
+        for key in ("diameter_m", "length_m", "ball_size_mm", "solid_density_kg_m3", "ball_density_kg_m3"):
+            _power._positive(getattr(self, key), f"{w}.{key}")
+        _power.check_operation(self.critical_speed_fraction, self.ball_filling, self.powder_filling, w)
+        if not (0 < float(self.bed_porosity) < 1):
+            raise InputError(f"{w}.bed_porosity = {float(self.bed_porosity)!r}: expected 0 < eps < 1")
+        if self.ball_size_mm * 1e-3 >= self.diameter_m:
+            raise InputError(f"{w}.ball_size_mm = {float(self.ball_size_mm)!r}: larger than the mill diameter")
+        if self.power_model not in _power.POWER_MODELS:
+            raise InputError(f"{w}.power_model = {self.power_model!r}: expected one of {list(_power.POWER_MODELS)}")
+        for key in ("power_kW", "holdup_kg"):
+            if getattr(self, key) is not None:
+                _power._positive(getattr(self, key), f"{w}.{key}")
+        if self.drive_efficiency is not None:
+            _power.gross_power(1.0, self.drive_efficiency)
+
+    @property
+    def volume_m3(self) -> float:
+        return math.pi * self.diameter_m ** 2 * self.length_m / 4
+
+    def power(self) -> dict:
+        """net_kW (computed by ``power_model`` unless power_kW is given), gross_kW (if a
+        drive efficiency is given), kw_per_t_balls, ball_mass_t, model."""
+        kw = dict(diameter_m=self.diameter_m, length_m=self.length_m, ball_filling=self.ball_filling,
+                  critical_speed_fraction=self.critical_speed_fraction, ball_size_mm=self.ball_size_mm,
+                  ball_density_kg_m3=self.ball_density_kg_m3, ball_density_t_m3=self.ball_density_kg_m3 / 1000,
+                  bed_porosity=self.bed_porosity)
+        out = dict(_power.mill_power(self.power_model, **kw))
+        out["model"] = self.power_model
+        if self.power_kW is not None:
+            out.update(net_kW=float(self.power_kW), kw_per_t_balls=float(self.power_kW) / out["ball_mass_t"],
+                       model="given")
+        out["gross_kW"] = (None if self.drive_efficiency is None
+                           else _power.gross_power(out["net_kW"], self.drive_efficiency))
+        return out
+
+    def holdup(self) -> float:
+        """Solids hold-up H [kg] (given, or rho_s (1 - eps) U eps J V)."""
+        if self.holdup_kg is not None:
+            return float(self.holdup_kg)
+        eps = float(self.bed_porosity)
+        H = self.solid_density_kg_m3 * (1 - eps) * self.powder_filling * eps * self.ball_filling * self.volume_m3
+        if H <= 0:
+            raise InputError(f"{self.name}: hold-up is 0 (powder_filling = 0); give holdup_kg")
+        return H
+
+    def as_dict(self) -> dict:
+        return {k: getattr(self, k) for k in self.__dataclass_fields__}
+
+
+def make_transport(name: str, tau: float, params: dict):
+    import rtd
+    cls_name, _ = TRANSPORTS[name]
+    extra = {"bc": "open"} if name == "ad-open" else ({"bc": "closed"} if name == "ad-closed" else {})
+    return getattr(rtd, cls_name)(float(tau), **params, **extra)
+
+
+@dataclass(frozen=True)
+class Circuit:
+    """A mill (transport ``transport`` with shape parameters ``transport_params``; tau
+    from the hold-up and the mill flow) with an optional closing classifier: ``classifier``
+    None (open circuit) or a dict with ``curve`` (a name of :mod:`millflow.classifiers`)
+    and its parameters in SI (sizes [m])."""
+
+    mill: MillDesign
+    transport: str = "tis"
+    transport_params: dict = field(default_factory=lambda: {"n": 3})
+    classifier: dict | None = None
+
+    def __post_init__(self):
+        if self.transport not in TRANSPORTS:
+            raise InputError(f"transport = {self.transport!r}: expected one of {list(TRANSPORTS)}")
+        need = TRANSPORTS[self.transport][1]
+        got = dict(self.transport_params)
+        if sorted(got) != sorted(need) and not (self.transport == "cells" and set(got) <= set(need) and "n" in got):
+            raise InputError(f"transport_params for {self.transport!r} = {got}: expected keys {list(need)}")
+        try:
+            make_transport(self.transport, 1.0, got)
+        except Exception as exc:  # rtd's own validation
+            raise InputError(f"transport {self.transport!r} with {got}: {exc}") from None
+        if self.classifier is not None and "curve" not in self.classifier:
+            raise InputError(f"classifier = {self.classifier!r}: expected a table with 'curve' and its parameters")
+
+    def partition(self, x) -> np.ndarray | None:
+        """Fraction of each class to the coarse (recycle) stream, or None (open circuit)."""
+        if self.classifier is None:
+            return None
+        from millflow.classifiers import efficiency
+        params = {k: v for k, v in self.classifier.items() if k != "curve"}
+        return efficiency(self.classifier["curve"], x, **params)
+
+    # --------------------------------------------------------------------- solves
+    def _mill_matrix(self, S, b, F_m):
+        tau = self.mill.holdup() / F_m
+        n = {"cstr": 1.0, "tis": float(dict(self.transport_params).get("n", 0))}.get(self.transport, 0.0)
+        if n >= 1 and n == int(n) and n <= 20:
+            # equal well-mixed tanks: T = (I + tau/n A)^-n, A = (I - b) diag(S) lower
+            # triangular, so one triangular solve and n-1 products (what
+            # millflow.transfer_matrix does, without its per-call validation, which
+            # dominates inside root and Monte Carlo loops)
+            from scipy.linalg import solve_triangular
+            M = (np.eye(S.size) - b) * (tau / n * S)[None, :]
+            M[np.diag_indices_from(M)] += 1.0
+            Ti = solve_triangular(M, np.eye(S.size), lower=True, check_finite=False)
+            T = Ti
+            for _ in range(int(n) - 1):
+                T = Ti @ T
+            return T, tau
+        if self.transport == "plug":
+            from scipy.linalg import expm
+            return expm(-tau * (np.eye(S.size) - b) * S[None, :]), tau
+        from millflow.mill import transfer_matrix
+        return transfer_matrix(S, b, make_transport(self.transport, tau, dict(self.transport_params))), tau
+
+    def at_mill_flow(self, S, b, feed, F_m, c=None):
+        """Circuit at mill flow F_m [kg/s]: dict product (fractions), fresh_kg_s, tau_s,
+        circulating_load (recycle / fresh), mass_balance (|1 - sum(product)|)."""
+        T, tau = self._mill_matrix(S, b, F_m)
+        if c is None:
+            p = T @ feed
+            return {"product": p, "fresh_kg_s": F_m, "tau_s": tau, "circulating_load": 0.0,
+                    "mass_balance": abs(1.0 - p.sum())}
+        A = np.eye(feed.size) - c[:, None] * T
+        m = np.linalg.solve(A, feed)
+        s = m.sum()
+        p = (1 - c) * (T @ m)
+        return {"product": p, "fresh_kg_s": F_m / s, "tau_s": tau, "circulating_load": s - 1.0,
+                "mass_balance": abs(1.0 - p.sum())}
+
+    def at_throughput(self, S, b, feed, F, c=None, guess_load=None):
+        """Circuit at fresh feed F [kg/s]; closed circuits solve F_m / sum(m_hat(F_m)) = F
+        by Brent's method on u = ln F_m. ``guess_load``: a circulating load near the answer
+        (e.g. of the point estimate) to start a narrow bracket from."""
+        if c is None:
+            return self.at_mill_flow(S, b, feed, F)
+        from scipy.optimize import brentq
+
+        def g(u):
+            return math.log(self.at_mill_flow(S, b, feed, math.exp(u), c)["fresh_kg_s"] / F)
+        lo = math.log(F)  # F_m >= F: g(lo) <= 0
+        if guess_load is not None:
+            u0 = lo + math.log1p(guess_load)
+            lo2, hi = u0 - 0.1, u0 + 0.1
+            if lo2 > lo and g(lo2) < 0:
+                lo = lo2
+            g_hi = g(hi)
+        else:
+            hi = lo + math.log(4.0)
+            g_hi = g(hi)
+        k = 0
+        while g_hi < 0:
+            lo, hi = hi, hi + math.log(4.0)
+            g_hi = g(hi)
+            k += 1
+            if k > 20:
+                raise SolverError(f"circuit cannot pass a fresh feed of {F * 3.6:.6g} t/h: the recycle grows "
+                                  "without bound (mill capacity exceeded)")
+        u = brentq(g, lo, hi, xtol=1e-13, rtol=4 * np.finfo(float).eps)
+        return self.at_mill_flow(S, b, feed, math.exp(u), c)

@@ -1,0 +1,249 @@
+"""Lab fit -> plant prediction: rates at scale, circuit product, throughput at a target P80.
+
+:class:`ScaleUp` binds a :class:`~millflow.scaleup.fitted.FittedBreakage` (the lab fit,
+evaluated at the lab's process conditions, eq. 10), the lab mill it was measured in, the
+plant circuit and its feed, and a scaling rule:
+
+- ``"herbst_fuerstenau"``: S_plant = S_lab (P_plant / H_plant) / (P_lab / H_lab)
+  (S^E = S_lab H_lab / P_lab carried unchanged, :func:`.scaling.herbst_fuerstenau_rates`);
+- ``"austin"``: A and mu of eq. 7 multiplied by :func:`.scaling.austin_factors`.
+
+B (normalised, eq. 6) is carried unchanged. Every method takes a full parameter vector,
+so that :mod:`.uncertainty` can propagate the fit's covariance through it.
+"""
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from millflow.errors import GridError, InputError, SolverError
+from millflow.psd import percentile_size
+from millflow.scaleup.fitted import FittedBreakage
+from millflow.scaleup.plant import Circuit, MillDesign
+from millflow.scaleup.scaling import austin_factors
+
+__all__ = ["ScaleUp", "SCALINGS", "p80_fast"]
+
+SCALINGS = ("herbst_fuerstenau", "austin")
+
+
+def _pchip_slope(h0, h1, m0, m1):
+    """scipy's PCHIP derivative at an interior node (weighted harmonic mean of the
+    neighbouring secants m0, m1 over intervals h0, h1; 0 at a local extremum)."""
+    if m0 * m1 <= 0:
+        return 0.0
+    w1, w2 = 2 * h1 + h0, h1 + 2 * h0
+    return (w1 + w2) / (w1 / m0 + w2 / m1)
+
+
+def p80_fast(x, frac, percent=80.0):
+    """:func:`millflow.psd.percentile_size` for a valid PSD, without re-validating it and
+    without building the whole interpolant: the same PCHIP in ln x (the two node slopes
+    of the bracketing interval by scipy's formula, which depends only on neighbouring
+    secants), solved on the one interval. Falls back to percentile_size near the grid ends
+    (edge slopes) or for degenerate input. Used inside root and Monte Carlo loops."""
+    q = percent / 100.0
+    f = np.asarray(frac, float)
+    P = np.cumsum(f[::-1])[::-1] / f.sum()
+    P[0] = 1.0
+    n = P.size
+    above = np.flatnonzero(P >= q)
+    k = int(above[-1]) if above.size else -1
+    if k < 2 or k + 3 > n - 1 or P[k] == q or P[-1] >= q:
+        return percentile_size(x, np.clip(f, 0.0, None) / f.sum(), percent)
+    # ascending in u = ln x: nodes a = k+1 (finer, P < q) and b = k (coarser, P >= q)
+    u = np.log(x[k - 1:k + 3][::-1])  # x_{k+2}, x_{k+1}, x_k, x_{k-1}
+    y = P[k - 1:k + 3][::-1]
+    h = np.diff(u)
+    m = np.diff(y) / h
+    d1 = _pchip_slope(h[0], h[1], m[0], m[1])
+    d2 = _pchip_slope(h[1], h[2], m[1], m[2])
+    H, y1, y2 = h[1], y[1], y[2]
+
+    def herm(t):  # cubic Hermite on [u1, u2], t in [0, 1]
+        t2, t3 = t * t, t * t * t
+        return ((2 * t3 - 3 * t2 + 1) * y1 + (t3 - 2 * t2 + t) * H * d1 + (-2 * t3 + 3 * t2) * y2
+                + (t3 - t2) * H * d2) - q
+    from scipy.optimize import brentq
+    t = brentq(herm, 0.0, 1.0, xtol=1e-15, rtol=4 * np.finfo(float).eps)
+    return float(math.exp(u[1] + t * H))
+
+
+@dataclass(frozen=True)
+class ScaleUp:
+    """Everything a plant prediction needs; see the module docstring.
+
+    feed : (N,) fresh-feed mass fractions on ``x`` (the fit's grid unless given).
+    feed_tph : fresh feed rate [t/h] of the predicted operating point.
+    throughput_range_tph : search interval of the throughput root (target P80).
+    """
+
+    fit: FittedBreakage
+    lab: MillDesign
+    lab_process: dict
+    circuit: Circuit
+    feed: np.ndarray
+    feed_tph: float
+    scaling: str = "herbst_fuerstenau"
+    austin_overrides: dict = field(default_factory=dict)
+    x: np.ndarray | None = None
+    throughput_range_tph: tuple = (None, None)
+
+    def __post_init__(self):
+        if self.scaling not in SCALINGS:
+            raise InputError(f"scaling = {self.scaling!r}: expected one of {list(SCALINGS)}")
+        x = self.fit.x if self.x is None else np.asarray(self.x, float)
+        object.__setattr__(self, "x", x)
+        f = np.asarray(self.feed, float)
+        if f.shape != x.shape or np.any(f < 0) or abs(f.sum() - 1) > 1e-9:
+            raise GridError(f"feed: {f.shape} fractions summing to {float(f.sum())!r}; expected {x.shape} "
+                            "non-negative fractions summing to 1 on the prediction grid")
+        object.__setattr__(self, "feed", f)
+        if not (math.isfinite(self.feed_tph) and self.feed_tph > 0):
+            raise InputError(f"plant.feed_tph = {float(self.feed_tph)!r}: expected a number > 0")
+        object.__setattr__(self, "lab_process", self.fit.check_process(self.lab_process, "lab.process"))
+        lo, hi = self.throughput_range_tph
+        lo = self.feed_tph / 20 if lo is None else float(lo)
+        hi = self.feed_tph * 20 if hi is None else float(hi)
+        if not (0 < lo < hi):
+            raise InputError(f"throughput_range_tph = [{lo!r}, {hi!r}]: expected 0 < low < high")
+        object.__setattr__(self, "throughput_range_tph", (lo, hi))
+        if self.scaling == "austin":
+            self._austin()
+
+    # ------------------------------------------------------------------ scaling
+    def _austin(self):
+        return austin_factors(self.lab.as_dict(), self.circuit.mill.as_dict(), **self.austin_overrides)
+
+    def factors(self) -> dict:
+        """Scale-up factors on A and mu (plant / lab) and the powers and hold-ups used."""
+        pl, pp = self.lab.power(), self.circuit.mill.power()
+        Hl, Hp = self.lab.holdup(), self.circuit.mill.holdup()
+        out = {"lab_power_kW": pl["net_kW"], "plant_power_kW": pp["net_kW"], "lab_holdup_kg": Hl,
+               "plant_holdup_kg": Hp, "plant_gross_kW": pp["gross_kW"], "power_model": pp["model"],
+               "plant_kw_per_t_balls": pp["kw_per_t_balls"], "plant_ball_mass_t": pp["ball_mass_t"]}
+        if self.scaling == "herbst_fuerstenau":
+            out.update(A=(pp["net_kW"] / Hp) / (pl["net_kW"] / Hl), mu=1.0)
+        else:
+            a = self._austin()
+            out.update(A=a["A"], mu=a["mu"], terms=a["terms"])
+        return out
+
+    def plant_rates(self, theta):
+        """S [1/s] and b of the plant mill for full parameter vector(s) theta."""
+        f = self._cached_factors()
+        S = self.fit.rates(theta, self.x, self.lab_process, f["A"], f["mu"])
+        return S, self.fit.frac_b(theta, self.x)
+
+    def _cached_factors(self):
+        c = self.__dict__.get("_factors")
+        if c is None:
+            c = self.factors()
+            object.__setattr__(self, "_factors", c)
+        return c
+
+    # -------------------------------------------------------------- predictions
+    @property
+    def power_kW(self) -> float:
+        return self._cached_factors()["plant_power_kW"]
+
+    def _p80(self, p):
+        return p80_fast(self.x, p)
+
+    def operate(self, theta, feed_tph=None) -> dict:
+        """Circuit at the fresh feed rate (default ``feed_tph``): product fractions,
+        p80_m, tau_s, circulating_load, specific_energy_kWh_t, mass_balance."""
+        F = (self.feed_tph if feed_tph is None else float(feed_tph)) / 3.6
+        S, b = self.plant_rates(theta)
+        c = self.circuit.partition(self.x)
+        guess = self.__dict__.get("_guess_load", {}).get(round(F, 12))
+        r = self.circuit.at_throughput(S, b, self.feed, F, c, guess_load=guess)
+        if c is not None and guess is None and np.array_equal(theta, self.fit.theta):
+            self.__dict__.setdefault("_guess_load", {})[round(F, 12)] = r["circulating_load"]
+        r["p80_m"] = self._p80(r["product"])
+        r["specific_energy_kWh_t"] = self.power_kW / (F * 3.6)
+        r["feed_tph"] = F * 3.6
+        return r
+
+    def throughput_for_p80(self, theta, target_p80_m) -> dict:
+        """Fresh feed rate [t/h] whose circuit product has P80 = target: Brent's method on
+        ln F_m (mill flow), bracketed within ``throughput_range_tph``. Returns feed_tph,
+        p80_m, residual_rel (|P80 - target| / target), specific_energy_kWh_t, and the
+        circuit state. A target outside the reachable P80 range raises InputError."""
+        from scipy.optimize import brentq
+
+        t = float(target_p80_m)
+        if not (math.isfinite(t) and t > 0):
+            raise InputError(f"target_p80 = {t!r}: expected a size > 0")
+        S, b = self.plant_rates(theta)
+        c = self.circuit.partition(self.x)
+
+        def h(u):
+            return math.log(self._p80(self.circuit.at_mill_flow(S, b, self.feed, math.exp(u), c)["product"]) / t)
+        # near the point estimate's root (Monte Carlo draws, finite differences): a narrow
+        # bracket around it, widened until the sign changes; otherwise the full range
+        u0 = self.__dict__.get("_guess_u", {}).get(t)
+        bracket = self._narrow_bracket(h, u0) if u0 is not None else None
+        if bracket is None:
+            bracket = self._full_bracket(S, b, c, h, t)
+        u = brentq(h, *bracket, xtol=1e-13, rtol=4 * np.finfo(float).eps)
+        if np.array_equal(theta, self.fit.theta):
+            self.__dict__.setdefault("_guess_u", {})[t] = u
+        r = self.circuit.at_mill_flow(S, b, self.feed, math.exp(u), c)
+        r["p80_m"] = self._p80(r["product"])
+        r["residual_rel"] = abs(r["p80_m"] - t) / t
+        if r["residual_rel"] > 1e-8:
+            raise SolverError(f"throughput root: P80 residual {r['residual_rel']:.3g} (relative) above 1e-8")
+        r["feed_tph"] = r["fresh_kg_s"] * 3.6
+        lo_tph, hi_tph = self.throughput_range_tph
+        if not (lo_tph * (1 - 1e-9) <= r["feed_tph"] <= hi_tph * (1 + 1e-9)):
+            raise InputError(f"target P80 {t * 1e6:.6g} um is not reachable within throughput_range_tph "
+                             f"[{lo_tph:.6g}, {hi_tph:.6g}] (root at {r['feed_tph']:.6g} t/h)")
+        r["specific_energy_kWh_t"] = self.power_kW / r["feed_tph"]
+        r["bracket_tph"] = (lo_tph, hi_tph)
+        return r
+
+    @staticmethod
+    def _narrow_bracket(h, u0, width=0.05, limit=8):
+        a, b = u0 - width, u0 + width
+        ha, hb = h(a), h(b)
+        for _ in range(limit):
+            if ha <= 0 <= hb:
+                return a, b
+            if ha > 0:
+                b, hb = a, ha
+                width *= 2
+                a = a - width
+                ha = h(a)
+            else:
+                a, ha = b, hb
+                width *= 2
+                b = b + width
+                hb = h(b)
+        return None
+
+    def _full_bracket(self, S, b, c, h, t):
+        lo_tph, hi_tph = self.throughput_range_tph
+        # bracket in ln(mill flow): the low end carries lo_tph of fresh feed; the high end
+        # carries hi_tph, or (closed circuit) as much as the circuit can pass below that
+        r_lo = self.circuit.at_throughput(S, b, self.feed, lo_tph / 3.6, c)
+        u_lo = math.log(r_lo["fresh_kg_s"] * (1 + r_lo["circulating_load"]))
+        u_hi = math.log(hi_tph / 3.6)
+        if c is not None:
+            for _ in range(30):
+                if self.circuit.at_mill_flow(S, b, self.feed, math.exp(u_hi), c)["fresh_kg_s"] * 3.6 >= hi_tph:
+                    break
+                u_hi += math.log(2.0)
+            else:
+                hi_tph = self.circuit.at_mill_flow(S, b, self.feed, math.exp(u_hi), c)["fresh_kg_s"] * 3.6
+
+        h_lo, h_hi = h(u_lo), h(u_hi)
+        if h_lo > 0:
+            raise InputError(f"target P80 {t * 1e6:.6g} um is not reachable: the finest product in the "
+                             f"throughput range, at {lo_tph:.6g} t/h, has P80 {t * math.exp(h_lo) * 1e6:.6g} um")
+        if h_hi < 0:
+            raise InputError(f"target P80 {t * 1e6:.6g} um is not reachable: even at {hi_tph:.6g} t/h (top of "
+                             f"throughput_range_tph) the product has P80 {t * math.exp(h_hi) * 1e6:.6g} um")
+        return u_lo, u_hi

@@ -1,0 +1,146 @@
+"""``millflow scaleup``: the worked example's inputs end to end, and bad input (exit 2,
+one line naming the key and value)."""
+import json
+import os
+import shutil
+import sys
+
+import numpy as np
+import pytest
+
+from millflow.cli import main
+
+REPO = os.path.dirname(os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
+EXAMPLE = os.path.join(REPO, "examples", "scaleup")
+
+
+@pytest.fixture(scope="module")
+def fit_json(tmp_path_factory):
+    """A local eq. 9 fit of the example's synthetic lab data (noise-free here: the test
+    is about the pipeline, not about the estimate), written as 'millflow fit --json' does."""
+    sys.path.insert(0, EXAMPLE)
+    try:
+        import make_lab_data as mk
+    finally:
+        sys.path.pop(0)
+    from millflow.fitting.data import psd_data_from_frames
+    from millflow.fitting.estimate import fit
+    from millflow.fitting.models import ForwardModel, ModelSpec, default_parameters
+    from millflow.grid import SizeGrid
+
+    psd, proc = mk.tables(np.random.default_rng(5))
+    spec = ModelSpec(mode="batch", breakage="normalized", rate_process=("speed",))
+    model = ForwardModel(spec, psd_data_from_frames(psd, proc, strict=False), SizeGrid.between(4e-3, 4e-3 / 2 ** 7.5, 2 ** 0.25))
+    params = default_parameters(spec, {n: {"value": v} for n, v in mk.TRUTH.items()})
+    res = fit(model, params, global_search=False, starts=1, grid_check=False)
+    d = tmp_path_factory.mktemp("fit")
+    p = d / "fit.json"
+    p.write_text(json.dumps(res.to_dict(), default=float))
+    return p
+
+
+def _plant(tmp_path, edit=None):
+    text = open(os.path.join(EXAMPLE, "plant.toml")).read()
+    if edit:
+        old, new = edit
+        assert old in text
+        text = text.replace(old, new)
+    p = tmp_path / "plant.toml"
+    p.write_text(text)
+    return p
+
+
+def test_example_end_to_end_json_and_files(tmp_path, fit_json, capsys):
+    plant = _plant(tmp_path)
+    rc = main(["scaleup", str(fit_json), "--to", str(plant), "--target-p80-um", "150", "--json", "--draws", "200",
+               "--out", str(tmp_path / "out")])
+    assert rc == 0
+    s = json.loads(capsys.readouterr().out)
+    for f in ("scaleup.nc", "scaleup_psd.csv", "scaleup.json", "scaleup.png"):
+        assert (tmp_path / "out" / f).is_file()
+    b = s["bands"]["p80_um"]
+    assert b["delta"]["lo"] < s["p80_um"] < b["delta"]["hi"]
+    assert b["mc"]["lo"] < s["p80_um"] < b["mc"]["hi"]
+    assert s["throughput_residual_rel"] < 1e-10  # Brent on ln(mill flow) to 1e-13
+    assert s["mass_balance"] < 1e-12
+    assert s["power_gross_kW"] == pytest.approx(s["power_net_kW"] / 0.93, rel=1e-12)
+    lo, hi = s["bands"]["throughput_tph"]["delta"].values()
+    assert lo < s["throughput_tph"] < hi
+    assert s["specific_energy_at_target_kWh_t"] == pytest.approx(s["power_net_kW"] / s["throughput_tph"], rel=1e-12)
+
+
+@pytest.mark.parametrize("edit,match", [
+    (("critical_speed_fraction = 0.75", "critical_speed_fraction = 1.05"), "mill.critical_speed_fraction = 1.05"),
+    (("critical_speed_fraction = 0.75", "critical_speed_fraction = 0.0"), "mill.critical_speed_fraction = 0.0"),
+    (("ball_filling = 0.35\ncritical_speed_fraction = 0.75", "ball_filling = 0.7\ncritical_speed_fraction = 0.75"),
+     "mill.ball_filling = 0.7"),
+    (("diameter_m = 4.0", "diameter = 4.0"), "mill.diameter: units missing from the key; expected 'diameter_m'"),
+    (("d50c_um = 200", "d50c = 200"), "classifier.d50c: units missing from the key; expected 'd50c_um'"),
+    (("feed_tph = 100", "feed = 100"), "feed.feed: units missing|feed.feed: unknown key"),
+    (("speed = 0.80", "sped = 0.80"), r"lab.process: missing process values \['speed'\]"),
+    (("top_um = 4000", "top_um = 2000"), "feed:.*give a \\[grid\\] with top_um"),
+])
+def test_bad_plant_input_exit_2(tmp_path, fit_json, capsys, edit, match):
+    plant = _plant(tmp_path, edit)
+    assert main(["scaleup", str(fit_json), "--to", str(plant), "--method", "delta"]) == 2
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and "Traceback" not in err
+    import re
+    assert re.search(match, err), err
+
+
+def test_fit_without_covariance_or_other_family_exit_2(tmp_path, fit_json, capsys):
+    plant = _plant(tmp_path)
+    d = json.loads(fit_json.read_text())
+    d.pop("covariance")
+    (tmp_path / "old.json").write_text(json.dumps(d))
+    assert main(["scaleup", str(tmp_path / "old.json"), "--to", str(plant)]) == 2
+    assert "has no 'covariance'" in capsys.readouterr().err
+    d = json.loads(fit_json.read_text())
+    d["model_spec"]["classification"] = "screen"
+    (tmp_path / "screen.json").write_text(json.dumps(d))
+    assert main(["scaleup", str(tmp_path / "screen.json"), "--to", str(plant)]) == 2
+    assert "classification = 'screen'" in capsys.readouterr().err
+    d = json.loads(fit_json.read_text())
+    d["model_spec"]["mode"] = "well_mixed"
+    (tmp_path / "wm.json").write_text(json.dumps(d))
+    assert main(["scaleup", str(tmp_path / "wm.json"), "--to", str(plant)]) == 2
+    assert "without tau_column" in capsys.readouterr().err
+
+
+def test_unreachable_target_exit_2(tmp_path, fit_json, capsys):
+    plant = _plant(tmp_path)
+    assert main(["scaleup", str(fit_json), "--to", str(plant), "--target-p80-um", "12", "--method", "delta",
+                 "--out", str(tmp_path / "o")]) == 2
+    assert "not reachable" in capsys.readouterr().err
+
+
+def test_rtd_fit_json_gives_the_transport_shape(tmp_path, fit_json, capsys):
+    (tmp_path / "tracer.json").write_text(json.dumps({"model": "tis", "params": {"tau": {"value": 240.0, "se": 5.0},
+                                                                                  "n": {"value": 2.5, "se": 0.2}}}))
+    plant = _plant(tmp_path, ('model = "tis"\nn = 3', 'rtd_fit = "tracer.json"'))
+    assert main(["scaleup", str(fit_json), "--to", str(plant), "--method", "delta", "--json",
+                 "--out", str(tmp_path / "o")]) == 0
+    s = json.loads(capsys.readouterr().out)
+    assert s["transport"] == "tis" and s["transport_params"] == {"n": 2.5}
+    assert "shape only" in s["transport_source"]
+
+
+def test_fit_json_carries_eq9_covariance(fit_json):
+    d = json.loads(fit_json.read_text())
+    C = np.array(d["covariance"]["matrix"])
+    names = d["covariance"]["names"]
+    se = np.array([d["params"][n]["se"] for n in names])
+    np.testing.assert_allclose(np.sqrt(np.diag(C)), se, rtol=1e-12)  # same eq. 9 numbers, JSON round trip
+    assert d["model_spec"]["param_names"][0] == "ln_A0" and d["model_spec"]["process_ref"]["speed"] > 0
+
+
+def test_austin_scaling_from_the_plant_file(tmp_path, fit_json, capsys):
+    from millflow.scaleup import austin_factors
+    plant = _plant(tmp_path, ('scaling = "herbst_fuerstenau"', 'scaling = "austin"'))
+    assert main(["scaleup", str(fit_json), "--to", str(plant), "--method", "delta", "--json",
+                 "--out", str(tmp_path / "o")]) == 0
+    s = json.loads(capsys.readouterr().out)
+    lab = dict(diameter_m=0.2, ball_size_mm=25, ball_filling=0.35, critical_speed_fraction=0.80, powder_filling=1.0)
+    pl = dict(diameter_m=4.0, ball_size_mm=50, ball_filling=0.35, critical_speed_fraction=0.75, powder_filling=1.0)
+    assert s["A_factor"] == pytest.approx(austin_factors(lab, pl)["A"], rel=1e-14)

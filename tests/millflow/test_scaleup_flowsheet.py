@@ -1,0 +1,50 @@
+"""Flowsheet mills given by dimensions and operation (millflow.scaleup.flowsheet)."""
+import math
+from pathlib import Path
+
+import pytest
+
+from millflow.errors import InputError
+from millflow.flowsheet import loads, solve
+from millflow.flowsheet.results import summary
+from millflow.scaleup import MillDesign
+
+CLOSED = (Path(__file__).resolve().parents[2] / "flowsheets" / "closed_circuit_ball_mill.toml").read_text()
+OLD = 'tau_min = 3.5\ntransport = {model = "tanks_in_series", n = 3}\npower_kW = 3800'
+DIMS = ('diameter_m = 4.0\nlength_m = 6.0\nball_filling = 0.35\ncritical_speed_fraction = 0.75\n'
+        'ball_size_mm = 50\nsolid_density_kg_m3 = 2700\npower_model = "austin"\n'
+        'transport = {model = "tanks_in_series", n = 3}')
+
+
+def test_mill_by_dimensions_computes_power_holdup_and_tau():
+    assert OLD in CLOSED
+    fs = loads(CLOSED.replace(OLD, DIMS))
+    mill = fs.units["ball_mill"]
+    d = MillDesign(4.0, 6.0, 0.35, 0.75, 50.0, solid_density_kg_m3=2700)
+    assert mill.holdup == pytest.approx(d.holdup(), rel=1e-14) and mill.tau is None
+    assert mill.power == pytest.approx(d.power()["net_kW"] * 1e3, rel=1e-14)
+    sol = solve(fs)
+    rep = summary(sol)["units"]["ball_mill"]
+    # the report shows the computed power and kWh/t = P / (mill throughput)
+    assert rep["power_kW"] == pytest.approx(d.power()["net_kW"], rel=1e-12)
+    assert rep["specific_energy_kWh_per_t"] > 0 and math.isfinite(rep["specific_energy_kWh_per_t"])
+    assert summary(sol)["mass_balance_error"] < 1e-10
+
+
+def test_lab_table_scales_the_rate_by_specific_power():
+    lab = '\n[units.ball_mill.lab]\npower_kW = 0.03\nholdup_kg = 1.4\n'
+    fs = loads(CLOSED.replace(OLD, DIMS + lab))
+    mill = fs.units["ball_mill"]
+    d = MillDesign(4.0, 6.0, 0.35, 0.75, 50.0, solid_density_kg_m3=2700)
+    assert mill.rate.factor == pytest.approx((d.power()["net_kW"] / d.holdup()) / (0.03 / 1.4), rel=1e-14)
+
+
+@pytest.mark.parametrize("old,new,match", [
+    ("diameter_m = 4.0", "diameter = 4.0", "units.ball_mill.diameter: units of measure missing; write diameter_m"),
+    ("critical_speed_fraction = 0.75", "critical_speed_fraction = 1.2", "critical_speed_fraction = 1.2"),
+    ("ball_filling = 0.35", "ball_filling = 0.0", "ball_filling = 0.0"),
+    ("length_m = 6.0\n", "", r"needs \['length_m'\]"),
+])
+def test_bad_dimensions_are_named(old, new, match):
+    with pytest.raises(InputError, match=match):
+        loads(CLOSED.replace(OLD, DIMS.replace(old, new)))
