@@ -41,10 +41,37 @@ from millflow.errors import InputError, MillflowError, SolverError
 from millflow.fitting.estimate import fit
 from millflow.fitting.models import ForwardModel, ModelSpec, Parameter, default_parameters
 
-__all__ = ["StudyResult", "study", "runs_test", "lag1", "FIT_DEFAULTS"]
+__all__ = ["StudyResult", "study", "study_parameters", "runs_test", "lag1", "FIT_DEFAULTS", "BOUNDS"]
 
 #: Modest global-search settings: a 5-parameter batch fit in about a second.
 FIT_DEFAULTS = {"starts": 3, "popsize": 8, "maxiter": 60, "de_tol": 1e-3}
+
+
+#: Bounds of the global search of a study (gamma < beta separates the two branches of
+#: eq. 6, so the breakage parameters are unique; ln_A0 is ln of A [1/s] at x0 = 1 mm).
+BOUNDS = {"ln_A0": (-9.0, 0.0), "alpha": (0.2, 2.5), "phi": (0.0, 1.0), "gamma": (0.1, 2.0), "beta": (2.2, 8.0),
+          "n_screen": (0.0, 6.0), "ln_mu": (-3.0, 6.0), "Lambda": (1.0, 6.0)}
+
+
+def study_parameters(spec: ModelSpec, truth_params: dict, overrides: dict | None = None) -> dict:
+    """Parameters of the assumed model: :data:`BOUNDS` (else the fitting defaults), start at the
+    truth's value where it has one, updated by ``overrides`` (name -> value/min/max/vary)."""
+    base = default_parameters(spec)
+    overrides = dict(overrides or {})
+    out = {}
+    for name, par in base.items():
+        lo, hi = BOUNDS.get(name, (par.min, par.max))
+        v = float(truth_params.get(name, par.value))
+        o = overrides.pop(name, {})
+        if not isinstance(o, dict) or set(o) - {"value", "min", "max", "vary"}:
+            raise InputError(f"assumed.params.{name}: expected a table with keys value, min, max, vary")
+        lo, hi = float(o.get("min", lo)), float(o.get("max", hi))
+        v = float(o.get("value", min(max(v, lo), hi)))
+        out[name] = Parameter(name, v, lo, hi, bool(o.get("vary", True)))
+    if overrides:
+        raise InputError(f"assumed.params: {sorted(overrides)} are not parameters of the assumed model; "
+                         f"expected {list(spec.param_names)}")
+    return out
 
 
 def runs_test(r) -> tuple[float, float]:
@@ -215,7 +242,7 @@ def study(truth, assumed: ModelSpec, design, *, noise, strengths=None, replicate
         if not callable(truth):
             raise InputError("study: with strengths, truth must be a callable strength -> truth")
         truths = [truth(s) for s in strengths]
-    params = params or default_parameters(assumed)
+    params = params or study_parameters(assumed, truths[0].params)
     names = [n for n in assumed.param_names if params[n].vary]
     fit_opts = {**FIT_DEFAULTS, **(fit_options or {})}
     keys = design.sample_keys()
