@@ -30,6 +30,7 @@ from __future__ import annotations
 import math
 import os
 import time
+import warnings
 from concurrent.futures import ProcessPoolExecutor
 from dataclasses import dataclass, field
 
@@ -287,7 +288,9 @@ def _dataset(truths, names, outs, R, noise) -> xr.Dataset:
     failed = np.array([bool(o["error"]) for o in outs]).reshape(S, R)
     truth = np.array([[float(tr.params.get(n, np.nan)) for n in names] for tr in truths])
     tv = truth[:, None, :]
-    with np.errstate(invalid="ignore", divide="ignore"):
+    with np.errstate(invalid="ignore", divide="ignore"), warnings.catch_warnings():
+        # all-NaN columns (parameters the truth lacks, failed fits) give NaN, which is the answer
+        warnings.simplefilter("ignore", RuntimeWarning)
         err = est - tv
         bias = np.nanmean(err, axis=1)
         bias_se = np.nanmean(err / se, axis=1)
@@ -300,6 +303,10 @@ def _dataset(truths, names, outs, R, noise) -> xr.Dataset:
     sigma = noise.sigma
     dims2, dims3 = ("strength", "parameter"), ("strength", "replicate", "parameter")
     strength = np.array([tr.strength for tr in truths], float)
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", RuntimeWarning)
+        scal_mean = {k: np.nanmean(v, axis=1) for k, v in scal.items()}
+        reject = np.nanmean(np.where(np.isfinite(scal["runs_p"]), scal["runs_p"] < 0.05, np.nan), axis=1)
     ds = xr.Dataset(
         {
             "truth": (dims2, truth, {"long_name": "true value (NaN: the truth has no such parameter)"}),
@@ -309,12 +316,12 @@ def _dataset(truths, names, outs, R, noise) -> xr.Dataset:
             "bias_pct": (dims2, bias_pct, {"long_name": "bias in percent (of X for ln_X)", "units": "%"}),
             "coverage": (dims2, coverage, {"long_name": "fraction of reported 95 % intervals holding the truth"}),
             "se_ratio": (dims2, se_ratio, {"long_name": "sd of estimates / mean reported SE"}),
-            "r2": ("strength", np.nanmean(scal["r2"], axis=1), {"long_name": "mean R2 of cumulative passing"}),
-            "ser": ("strength", np.nanmean(scal["ser"], axis=1), {"long_name": "mean SER", "units": "1"}),
-            "ser_over_sigma": ("strength", np.nanmean(scal["ser"], axis=1) / sigma),
-            "runs_reject": ("strength", np.nanmean(scal["runs_p"] < 0.05, axis=1),
+            "r2": ("strength", scal_mean["r2"], {"long_name": "mean R2 of cumulative passing"}),
+            "ser": ("strength", scal_mean["ser"], {"long_name": "mean SER", "units": "1"}),
+            "ser_over_sigma": ("strength", scal_mean["ser"] / sigma),
+            "runs_reject": ("strength", reject,
                             {"long_name": "fraction of replicates where the runs test rejects at 5 %"}),
-            "lag1": ("strength", np.nanmean(scal["lag1"], axis=1), {"long_name": "mean lag-1 autocorrelation"}),
+            "lag1": ("strength", scal_mean["lag1"], {"long_name": "mean lag-1 autocorrelation"}),
             "drift_pct": ("strength", _nanmean_or_nan(drift[:, :, 0]),
                           {"long_name": "A(long half) / A(short half) - 1", "units": "%"}),
             "drift_se": ("strength", _nanmean_or_nan(drift[:, :, 1]), {"units": "SE"}),
