@@ -89,3 +89,13 @@ def test_cli_writes_the_folder_and_refuses_to_overwrite(tmp_path, capsys):
     assert "not empty" in capsys.readouterr().err
     assert main(["falsify", str(p), "--quiet", "--no-plots", "--out", str(out), "--overwrite"]) == 0
     assert "bias_coverage.png" not in {f.name for f in out.iterdir()}
+
+
+@pytest.mark.parametrize("name", ["tanks.toml", "slowing.toml"])
+def test_the_documented_configs_parse(name):
+    from pathlib import Path
+
+    from millflow.falsify.config import load_config
+    path = Path(__file__).resolve().parents[3] / "docs" / "examples" / "falsify" / name
+    cfg = load_config(path)
+    assert cfg.replicates == 50 and len(cfg.strengths) >= 5
