@@ -197,7 +197,8 @@ def parse_config(raw: dict, src: str = "<config>") -> StudyConfig:
     if ttype == "slowing_down" and not design.is_batch:
         raise InputError(f"{src}: truth.type = 'slowing_down' needs a batch design (design.times_s or times_min)")
     if "n_screen" in tr:
-        design = continuous_design(list(dict(design.process)["tau_s"]), extra_process={"screen_mm": [1.0] * len(design.conditions)}, **kw)
+        screens = {"screen_mm": [1.0] * len(design.conditions)}
+        design = continuous_design(list(dict(design.process)["tau_s"]), extra_process=screens, **kw)
     truth = _truth_factory(ttype, tparams, tr, assumed, src)
     for s in strengths:  # build once here, so that bad strengths fail before any fit
         truth(s)

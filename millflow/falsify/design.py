@@ -48,12 +48,14 @@ class Design:
         s = np.asarray(self.sieves_m, float)
         f = np.asarray(self.feed_passing, float)
         if s.ndim != 1 or s.size < 2 or not np.all(np.isfinite(s)) or np.any(s <= 0) or np.any(np.diff(s) >= 0):
-            raise InputError(f"design.sieves_m: expected at least 2 positive, strictly decreasing sizes, got {s.tolist()}")
+            raise InputError(f"design.sieves_m: expected at least 2 positive, strictly decreasing sizes, "
+                             f"got {s.tolist()}")
         if f.shape != s.shape or np.any(f < 0) or np.any(f > 1) or np.any(np.diff(f) > 0):
             raise InputError("design.feed_passing: expected one cumulative passing fraction in [0, 1] per sieve, "
                              "non-increasing from coarse to fine")
         if s[0] > self.grid.x[0] * (1 + 1e-9):
-            raise InputError(f"design.sieves_m: top sieve {float(s[0])!r} m is above the grid top {float(self.grid.x[0])!r} m")
+            raise InputError(f"design.sieves_m: top sieve {float(s[0])!r} m is above the grid top "
+                             f"{float(self.grid.x[0])!r} m")
         proc = dict(self.process.items() if isinstance(self.process, dict) else self.process)
         for col, vals in proc.items():
             v = np.asarray(vals, float)

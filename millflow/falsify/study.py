@@ -28,7 +28,6 @@ has classification) have truth NaN: their bias and coverage are NaN, not zero.
 from __future__ import annotations
 
 import math
-import os
 import time
 import warnings
 from concurrent.futures import ProcessPoolExecutor
@@ -114,7 +113,8 @@ class StudyResult:
             per = {}
             for p in ds.parameter.values:
                 per[str(p)] = {v: _num(ds[v].values[k, list(ds.parameter.values).index(p)])
-                               for v in ("truth", "mean_estimate", "bias", "bias_se", "bias_pct", "coverage", "se_ratio")}
+                               for v in ("truth", "mean_estimate", "bias", "bias_se", "bias_pct", "coverage",
+                                         "se_ratio")}
             rows.append({"strength": _num(s), "parameters": per,
                          **{v: _num(ds[v].values[k]) for v in ("r2", "ser", "ser_over_sigma", "runs_reject",
                                                                "lag1", "drift_pct", "drift_se", "n_failed")}})
@@ -157,7 +157,8 @@ def _fit_one(task):
     names = [n for n in spec.param_names if params[n].vary]
     out = {"est": np.full(len(names), np.nan), "se": np.full(len(names), np.nan),
            "lo": np.full(len(names), np.nan), "hi": np.full(len(names), np.nan),
-           "r2": np.nan, "ser": np.nan, "runs_p": np.nan, "lag1": np.nan, "drift": (np.nan, np.nan, np.nan), "error": ""}
+           "r2": np.nan, "ser": np.nan, "runs_p": np.nan, "lag1": np.nan,
+           "drift": (np.nan, np.nan, np.nan), "error": ""}
     try:
         model = ForwardModel(spec, data, design.grid)
         res = fit(model, params, seed=int(seed[-1]), grid_check=False, **fit_opts)

@@ -87,11 +87,13 @@ def rtd_truth(transport: str, strength: float, params: dict | None = None, *, r:
     exponent ``n_screen`` at every cell outlet (cell transports) or along the axis."""
     key = {"tanks_in_series": "n", "recirculating_cells": "n", "axial_dispersion": "pe"}.get(transport)
     if key is None:
-        raise InputError(f"truth.type = {transport!r}: expected tanks_in_series, axial_dispersion or recirculating_cells")
+        raise InputError(f"truth.type = {transport!r}: expected tanks_in_series, axial_dispersion or "
+                         "recirculating_cells")
     val = float(strength)
     if key == "n":
         if val != int(val) or val < 1:
-            raise InputError(f"truth.strength = {strength!r}: the number of cells of {transport} must be an integer >= 1")
+            raise InputError(f"truth.strength = {strength!r}: the number of cells of {transport} must be an "
+                             "integer >= 1")
         val = int(val)
     tp = {key: val, **({"r": float(r)} if transport == "recirculating_cells" else {})}
     cls = classification if n_screen is not None else None

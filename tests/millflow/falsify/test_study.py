@@ -49,8 +49,9 @@ def test_zero_model_error_is_honest_5_parameters():
 
 def test_bias_grows_with_tanks_in_series():
     d = continuous_design([30.0, 60.0, 120.0, 240.0, 480.0], n_sieves=12)
-    res = study(lambda n: rtd_truth("tanks_in_series", n, BREAKAGE_TRUTH), ModelSpec(mode="well_mixed", tau_column="tau_s"),
-                d, noise=GaussianNoise(0.005), strengths=[1, 2, 4], replicates=3, seed=1, drift_replicates=0)
+    spec = ModelSpec(mode="well_mixed", tau_column="tau_s")
+    res = study(lambda n: rtd_truth("tanks_in_series", n, BREAKAGE_TRUTH), spec, d,
+                noise=GaussianNoise(0.005), strengths=[1, 2, 4], replicates=3, seed=1, drift_replicates=0)
     ds = res.dataset
     b = np.abs(ds.bias_pct.sel(parameter="ln_A0").values)
     assert np.all(np.diff(b) > 0), b

@@ -73,7 +73,8 @@ def test_one_tank_is_the_perfectly_mixed_mill(cdesign):
     wm = LinearTruth(ModelSpec(mode="well_mixed", tau_column="tau_s"), BREAKAGE_TRUTH).mass_fractions(cdesign)
     assert np.max(np.abs(tis - wm)) <= EXACT
     three = rtd_truth("tanks_in_series", 3, BREAKAGE_TRUTH).mass_fractions(cdesign)
-    wm3 = LinearTruth(ModelSpec(mode="well_mixed", tau_column="tau_s", n_tanks=3), BREAKAGE_TRUTH).mass_fractions(cdesign)
+    spec3 = ModelSpec(mode="well_mixed", tau_column="tau_s", n_tanks=3)
+    wm3 = LinearTruth(spec3, BREAKAGE_TRUTH).mass_fractions(cdesign)
     assert np.max(np.abs(three - wm3)) <= EXACT
     np.testing.assert_allclose(three.sum(axis=1), 1.0, rtol=0, atol=1e-12)  # mass balance to rounding
 
