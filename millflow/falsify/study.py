@@ -119,7 +119,8 @@ class StudyResult:
                          **{v: _num(ds[v].values[k]) for v in ("r2", "ser", "ser_over_sigma", "runs_reject",
                                                                "lag1", "drift_pct", "drift_se", "n_failed")}})
         return {"truth": ds.attrs["truth"], "assumed": ds.attrs["assumed"], "replicates": int(ds.sizes["replicate"]),
-                "noise": ds.attrs["noise"], "runtime_s": self.runtime_s, "strengths": rows}
+                "noise": ds.attrs["noise"], "design": ds.attrs["design"], "seed": int(ds.attrs["seed"]),
+                "fit_options": ds.attrs["fit_options"], "runtime_s": self.runtime_s, "strengths": rows}
 
     def text(self) -> str:
         s = self.summary()
