@@ -176,6 +176,9 @@ def parse_config(raw: dict, src: str = "<config>") -> StudyConfig:
     # truth
     tparams = {**BREAKAGE_TRUTH, **tr.get("params", {})}
     for k, v in tr.get("params", {}).items():
+        if k not in BREAKAGE_TRUTH:
+            raise InputError(f"{src}: unknown key truth.params.{k}; expected one of {sorted(BREAKAGE_TRUTH)} "
+                             "(eq. 5 at x0 = 1 mm, eq. 6)")
         if not isinstance(v, _NUM) or isinstance(v, bool) or not math.isfinite(v):
             raise InputError(f"{src}: truth.params.{k} = {v!r}: expected a finite number")
     if "strength" in tr and "strengths" in tr:

@@ -38,6 +38,7 @@ import xarray as xr
 from scipy.stats import norm
 
 from millflow.errors import InputError, MillflowError, SolverError
+from millflow.fitting.data import PSDData
 from millflow.fitting.estimate import fit
 from millflow.fitting.models import ForwardModel, ModelSpec, Parameter, default_parameters
 
@@ -189,7 +190,6 @@ def _drift(model, params, fit_opts, seed, split):
         if sub is None:  # batch: split by time
             t = model.data.table
             keep = (t.location == "feed") | t.time_s.isin(part)
-            from millflow.fitting.data import PSDData
             sub = PSDData(t[keep].reset_index(drop=True), model.data.process, model.data.source)
         m = ForwardModel(model.spec, sub, model.grid)
         r = fit(m, params, seed=int(seed[-1]), grid_check=False, **fit_opts)

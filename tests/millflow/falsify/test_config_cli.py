@@ -46,6 +46,7 @@ def _cfg(tmp_path, text=BASE, name="c.toml"):
     (("mode = \"well_mixed\"", "mode = \"well_mixed\"\nspeed = 3"), "unknown key assumed.speed"),
     (("n_sieves = 8", "n_sieves = 8.0"), "design.n_sieves = 8.0: expected int"),
     (("kind = \"gaussian\"", "kind = \"pink\""), "noise.kind = 'pink'"),
+    (("strengths = [1, 3]", "strengths = [1, 3]\n[truth.params]\nalfa = 1.0"), "truth.params.alfa"),
     (("starts = 2", "starts = 0"), "fit.starts = 0"),
     (("replicates = 2", "replicates = 1"), "replicates = 1"),
     (("kind = \"gaussian\"", "kind = \"gaussian\"\nrho = 0.3"), "noise.rho is only for kind = 'ar1'"),
