@@ -36,7 +36,7 @@ def run(quick: bool = False) -> list[dict]:
     rows = []
     for workers in (1, 2):
         t0 = time.perf_counter()
-        res = study(truth, spec, design, noise=noise, replicates=R, drift_replicates=10, workers=workers, seed=1)
+        res = study(truth, spec, design, noise=noise, replicates=R, drift_replicates=R // 5, workers=workers, seed=1)
         rt = time.perf_counter() - t0
         ds = res.dataset
         rows.append({"case": f"slowing_down_5p_R{R}", "method": f"{workers} worker(s)", "runtime_s": rt,
