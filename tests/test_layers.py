@@ -21,6 +21,7 @@ LAYERS = [
                   "millflow.nonlinear")),
     ("mill", ("millflow.mill",)),
     ("circuits", ("millflow.flowsheet", "millflow.fitting", "millflow.scaleup", "millflow.sweep")),
+    ("studies", ("millflow.falsify",)),
     ("commands", ("millflow.bench", "millflow.commands", "millflow.cli", "millflow.__main__", "millflow.output")),
 ]
 

@@ -1,0 +1,229 @@
+"""The TOML configuration of ``millflow falsify``; every key is checked (unknown keys are
+refused, types checked) and every error is one line naming the key.
+
+```toml
+replicates = 50          # R per strength
+seed = 0
+workers = 1              # processes
+drift_replicates = 10    # replicates refitted on short and long halves
+
+[truth]
+type = "tanks_in_series" # tanks_in_series | axial_dispersion | recirculating_cells |
+                         # classification | slowing_down | assumed (no model error)
+strengths = [1, 2, 3, 5] # or strength = 3; n cells, Pe, n_screen, slowing-down s
+r = 1.0                  # recirculating_cells back-flow ratio
+[truth.params]           # breakage parameters of the truth (default BREAKAGE_TRUTH)
+ln_A0 = -4.09
+
+[assumed]                # the fitted model: ModelSpec keys
+mode = "well_mixed"      # batch designs: "batch"
+[assumed.params.alpha]   # bounds of the global search
+min = 0.2
+max = 2.5
+
+[design]
+tau_s = [30, 60, 120, 240, 480]     # continuous (or tau_min), or times_s / times_min (batch)
+top_size_um = 4000
+n_sieves = 16
+sieve_ratio = 1.4142135623730951
+grid_per_sieve = 2
+
+[noise]
+kind = "gaussian"        # or "ar1" (with rho)
+sigma = 0.01             # on cumulative passing
+
+[fit]                    # millflow.fitting.fit settings
+starts = 3
+popsize = 8
+maxiter = 60
+```
+"""
+from __future__ import annotations
+
+import math
+import tomllib
+from dataclasses import dataclass
+
+from millflow.errors import InputError
+from millflow.falsify.design import batch_design, continuous_design
+from millflow.falsify.noise import make_noise
+from millflow.falsify.study import study_parameters
+from millflow.falsify.truths import BREAKAGE_TRUTH, LinearTruth, SlowingDownTruth, classification_truth, rtd_truth
+from millflow.fitting.models import ModelSpec
+
+__all__ = ["StudyConfig", "load_config", "parse_config", "TRUTH_TYPES"]
+
+TRUTH_TYPES = ("tanks_in_series", "axial_dispersion", "recirculating_cells", "classification", "slowing_down",
+               "assumed")
+_NUM = (int, float)
+_TOP = {"replicates": int, "seed": int, "workers": int, "drift_replicates": int,
+        "truth": dict, "assumed": dict, "design": dict, "noise": dict, "fit": dict}
+_TRUTH = {"type": str, "strength": _NUM, "strengths": list, "r": _NUM, "params": dict, "n_screen": _NUM}
+_ASSUMED = {"mode": str, "rate": str, "breakage": str, "classification": str, "n_tanks": int, "transport": str,
+            "transport_params": dict, "where": str, "params": dict}
+_DESIGN = {"tau_s": list, "tau_min": list, "times_s": list, "times_min": list, "top_size_um": _NUM,
+           "n_sieves": int, "sieve_ratio": _NUM, "grid_per_sieve": int}
+_NOISE = {"kind": str, "sigma": _NUM, "rho": _NUM}
+_FIT = {"starts": int, "popsize": int, "maxiter": int, "de_tol": _NUM, "global_search": bool}
+
+
+@dataclass
+class StudyConfig:
+    truth: object            # callable strength -> truth
+    strengths: list
+    assumed: ModelSpec
+    design: object
+    noise: object
+    params: dict
+    replicates: int
+    seed: int
+    workers: int
+    drift_replicates: int
+    fit_options: dict
+    source: str
+
+    def run(self, progress=None):
+        from millflow.falsify.study import study
+        return study(self.truth, self.assumed, self.design, noise=self.noise, strengths=self.strengths,
+                     replicates=self.replicates, seed=self.seed, params=self.params, fit_options=self.fit_options,
+                     drift_replicates=self.drift_replicates, workers=self.workers, progress=progress)
+
+
+def _check(table: dict, schema: dict, where: str, src: str) -> dict:
+    for key, val in table.items():
+        if key not in schema:
+            raise InputError(f"{src}: unknown key {where}{key}; expected one of {sorted(schema)}")
+        typ = schema[key]
+        ok = isinstance(val, typ) and not (isinstance(val, bool) and typ is not bool)
+        if not ok:
+            want = " or ".join(t.__name__ for t in (typ if isinstance(typ, tuple) else (typ,)))
+            raise InputError(f"{src}: {where}{key} = {val!r}: expected {want}")
+        if isinstance(val, float) and not math.isfinite(val):
+            raise InputError(f"{src}: {where}{key} = {val!r}: expected a finite number")
+    return table
+
+
+def _numbers(vals, key: str, src: str) -> list:
+    if not vals or not all(isinstance(v, _NUM) and not isinstance(v, bool) and math.isfinite(v) for v in vals):
+        raise InputError(f"{src}: {key} = {vals!r}: expected a non-empty list of finite numbers")
+    return [float(v) for v in vals]
+
+
+def load_config(path) -> StudyConfig:
+    try:
+        with open(path, "rb") as fh:
+            raw = tomllib.load(fh)
+    except OSError as exc:
+        raise InputError(f"{path}: cannot read the config ({exc.strerror})") from exc
+    except tomllib.TOMLDecodeError as exc:
+        raise InputError(f"{path}: not valid TOML ({exc})") from exc
+    return parse_config(raw, str(path))
+
+
+def parse_config(raw: dict, src: str = "<config>") -> StudyConfig:
+    _check(raw, _TOP, "", src)
+    for key in ("truth", "assumed", "design", "noise"):
+        if key not in raw:
+            raise InputError(f"{src}: missing table [{key}]")
+    tr = _check(raw["truth"], _TRUTH, "truth.", src)
+    asm = _check(raw["assumed"], _ASSUMED, "assumed.", src)
+    des = _check(raw["design"], _DESIGN, "design.", src)
+    noi = _check(raw["noise"], _NOISE, "noise.", src)
+    fopt = _check(raw.get("fit", {}), _FIT, "fit.", src)
+    for key in ("replicates", "workers", "drift_replicates"):
+        if key in raw and raw[key] < (2 if key == "replicates" else 0 if key == "drift_replicates" else 1):
+            raise InputError(f"{src}: {key} = {raw[key]!r}: expected an integer >= "
+                             f"{2 if key == 'replicates' else 0 if key == 'drift_replicates' else 1}")
+    for key in ("starts", "popsize", "maxiter"):
+        if key in fopt and fopt[key] < 1:
+            raise InputError(f"{src}: fit.{key} = {fopt[key]!r}: expected an integer >= 1")
+
+    # design
+    times = [k for k in ("times_s", "times_min") if k in des]
+    taus = [k for k in ("tau_s", "tau_min") if k in des]
+    if len(times) + len(taus) != 1:
+        raise InputError(f"{src}: [design] needs exactly one of times_s, times_min (batch) or tau_s, tau_min "
+                         f"(continuous); got {times + taus}")
+    kw = {"top_m": float(des.get("top_size_um", 4000.0)) * 1e-6, "n_sieves": des.get("n_sieves", 16),
+          "sieve_ratio": float(des.get("sieve_ratio", 2 ** 0.5)), "grid_per_sieve": des.get("grid_per_sieve", 2)}
+    if kw["top_m"] <= 0:
+        raise InputError(f"{src}: design.top_size_um = {des['top_size_um']!r}: expected a number > 0")
+    ttype = tr.get("type")
+    if ttype not in TRUTH_TYPES:
+        raise InputError(f"{src}: truth.type = {ttype!r}: expected one of {list(TRUTH_TYPES)}")
+    if times:
+        vals = _numbers(des[times[0]], f"design.{times[0]}", src)
+        design = batch_design([v * (60.0 if times[0] == "times_min" else 1.0) for v in vals], **kw)
+    else:
+        vals = _numbers(des[taus[0]], f"design.{taus[0]}", src)
+        extra = {"screen_mm": [1.0] * len(vals)} if ttype == "classification" else None
+        design = continuous_design([v * (60.0 if taus[0] == "tau_min" else 1.0) for v in vals],
+                                   extra_process=extra, **kw)
+
+    # assumed model
+    akw = {k: v for k, v in asm.items() if k != "params"}
+    if not design.is_batch and akw.get("mode", "batch") in ("well_mixed", "plug_flow", "mill"):
+        akw["tau_column"] = "tau_s"
+    if akw.get("mode", "batch") == "batch" and not design.is_batch:
+        raise InputError(f"{src}: assumed.mode = 'batch' needs design.times_s or times_min")
+    if design.is_batch and akw.get("mode", "batch") != "batch":
+        raise InputError(f"{src}: assumed.mode = {akw['mode']!r} needs design.tau_s or tau_min (a continuous design)")
+    if akw.get("classification") in ("screen", "screen_power") and "screen_mm" not in dict(design.process):
+        raise InputError(f"{src}: assumed.classification needs truth.type = 'classification' (which adds a "
+                         "screen_mm column to the design)")
+    assumed = ModelSpec(**akw)
+
+    # truth
+    tparams = {**BREAKAGE_TRUTH, **tr.get("params", {})}
+    for k, v in tr.get("params", {}).items():
+        if k not in BREAKAGE_TRUTH:
+            raise InputError(f"{src}: unknown key truth.params.{k}; expected one of {sorted(BREAKAGE_TRUTH)} "
+                             "(eq. 5 at x0 = 1 mm, eq. 6)")
+        if not isinstance(v, _NUM) or isinstance(v, bool) or not math.isfinite(v):
+            raise InputError(f"{src}: truth.params.{k} = {v!r}: expected a finite number")
+    if "strength" in tr and "strengths" in tr:
+        raise InputError(f"{src}: give truth.strength or truth.strengths, not both")
+    if ttype == "assumed":
+        strengths = [0.0]
+        if "strength" in tr or "strengths" in tr:
+            raise InputError(f"{src}: truth.type = 'assumed' has no strength (no model error)")
+    else:
+        if "strength" not in tr and "strengths" not in tr:
+            raise InputError(f"{src}: truth.strength or truth.strengths is required for truth.type = {ttype!r}")
+        strengths = _numbers(tr["strengths"], "truth.strengths", src) if "strengths" in tr else [float(tr["strength"])]
+    if "r" in tr and ttype != "recirculating_cells":
+        raise InputError(f"{src}: truth.r is only for truth.type = 'recirculating_cells'")
+    if "n_screen" in tr and ttype not in ("tanks_in_series", "recirculating_cells", "axial_dispersion"):
+        raise InputError(f"{src}: truth.n_screen (classification inside an RTD mill) is only for RTD truths")
+    if ttype in ("tanks_in_series", "axial_dispersion", "recirculating_cells", "classification") and design.is_batch:
+        raise InputError(f"{src}: truth.type = {ttype!r} needs a continuous design (design.tau_s or tau_min)")
+    if ttype == "slowing_down" and not design.is_batch:
+        raise InputError(f"{src}: truth.type = 'slowing_down' needs a batch design (design.times_s or times_min)")
+    if "n_screen" in tr:
+        screens = {"screen_mm": [1.0] * len(design.conditions)}
+        design = continuous_design(list(dict(design.process)["tau_s"]), extra_process=screens, **kw)
+    truth = _truth_factory(ttype, tparams, tr, assumed, src)
+    for s in strengths:  # build once here, so that bad strengths fail before any fit
+        truth(s)
+
+    noise = make_noise(noi.get("kind", "gaussian"), float(noi.get("sigma", 0.01)),
+                       float(noi["rho"]) if "rho" in noi else None)
+    params = study_parameters(assumed, tparams, asm.get("params", {}))
+    return StudyConfig(truth, strengths, assumed, design, noise, params, raw.get("replicates", 50),
+                       raw.get("seed", 0), raw.get("workers", 1), raw.get("drift_replicates", 10), fopt, src)
+
+
+def _truth_factory(ttype, tparams, tr, assumed, src):
+    if ttype in ("tanks_in_series", "axial_dispersion", "recirculating_cells"):
+        n_screen = tr.get("n_screen")
+        return lambda s: rtd_truth(ttype, s, tparams, r=float(tr.get("r", 1.0)),
+                                   classification="screen_power" if n_screen is not None else None,
+                                   n_screen=n_screen)
+    if ttype == "classification":
+        return lambda s: classification_truth(s, tparams)
+    if ttype == "slowing_down":
+        return lambda s: SlowingDownTruth(s, tparams)
+    missing = [n for n in assumed.param_names if n not in tparams]
+    if missing:
+        raise InputError(f"{src}: truth.type = 'assumed' needs truth.params {missing}")
+    return lambda s: LinearTruth(assumed, tparams, name="assumed", strength=0.0)

@@ -1,0 +1,102 @@
+"""`millflow falsify`: config validation (named one-line errors, exit 2) and the output folder."""
+import json
+
+import pytest
+
+from millflow.cli import main
+from millflow.errors import InputError
+from millflow.falsify.config import parse_config
+
+BASE = """
+replicates = 2
+drift_replicates = 0
+seed = 1
+[truth]
+type = "tanks_in_series"
+strengths = [1, 3]
+[assumed]
+mode = "well_mixed"
+breakage = "single"
+[design]
+tau_s = [30, 120, 480]
+n_sieves = 8
+[noise]
+kind = "gaussian"
+sigma = 0.01
+[fit]
+starts = 2
+popsize = 6
+maxiter = 30
+"""
+
+
+def _cfg(tmp_path, text=BASE, name="c.toml"):
+    p = tmp_path / name
+    p.write_text(text)
+    return p
+
+
+@pytest.mark.parametrize("edit, match", [
+    (("replicates = 2", "replicates = 2\ncolour = 1"), "unknown key colour"),
+    (("sigma = 0.01", "sigma = \"0.01\""), r"noise.sigma = '0.01': expected int or float"),
+    (("type = \"tanks_in_series\"", "type = \"aggregation\""), "truth.type = 'aggregation'"),
+    (("strengths = [1, 3]", "strengths = [1, 2.5]"), "integer >= 1"),
+    (("strengths = [1, 3]", "strength = 1\nstrengths = [1, 3]"), "not both"),
+    (("tau_s = [30, 120, 480]", "times_s = [30, 120, 480]"), "assumed.mode = 'well_mixed' needs design.tau_s"),
+    (("mode = \"well_mixed\"", "mode = \"well_mixed\"\nspeed = 3"), "unknown key assumed.speed"),
+    (("n_sieves = 8", "n_sieves = 8.0"), "design.n_sieves = 8.0: expected int"),
+    (("kind = \"gaussian\"", "kind = \"pink\""), "noise.kind = 'pink'"),
+    (("strengths = [1, 3]", "strengths = [1, 3]\n[truth.params]\nalfa = 1.0"), "truth.params.alfa"),
+    (("starts = 2", "starts = 0"), "fit.starts = 0"),
+    (("replicates = 2", "replicates = 1"), "replicates = 1"),
+    (("kind = \"gaussian\"", "kind = \"gaussian\"\nrho = 0.3"), "noise.rho is only for kind = 'ar1'"),
+    (("breakage = \"single\"", "breakage = \"single\"\n[assumed.params.ln_B]\nmin = 0"), "ln_B"),
+])
+def test_config_errors_are_named(edit, match):
+    import tomllib
+    text = BASE.replace(*edit)
+    with pytest.raises(InputError, match=match):
+        parse_config(tomllib.loads(text), "c.toml")
+
+
+def test_missing_table():
+    import tomllib
+    raw = tomllib.loads(BASE)
+    del raw["noise"]
+    with pytest.raises(InputError, match=r"missing table \[noise\]"):
+        parse_config(raw, "c.toml")
+
+
+def test_cli_bad_config_exit_2_one_line(tmp_path, capsys):
+    p = _cfg(tmp_path, BASE.replace("sigma = 0.01", "sigma = -1.0"))
+    assert main(["falsify", str(p), "--quiet"]) == 2
+    err = capsys.readouterr().err.strip()
+    assert err.count("\n") == 0 and "noise.sigma = -1.0" in err and "Traceback" not in err
+
+
+def test_cli_writes_the_folder_and_refuses_to_overwrite(tmp_path, capsys):
+    p = _cfg(tmp_path)
+    out = tmp_path / "res"
+    assert main(["falsify", str(p), "--json", "--quiet", "--out", str(out)]) == 0
+    js = json.loads(capsys.readouterr().out)
+    assert sorted(f.name for f in out.iterdir()) == sorted(js["files"])
+    assert {"results.nc", "summary.json", "summary.csv", "bias_coverage.png"} <= set(js["files"])
+    assert [r["strength"] for r in js["strengths"]] == [1.0, 3.0]
+    assert not [f for f in tmp_path.iterdir() if f.name.startswith(".res.")]  # temp folder renamed away
+    import xarray as xr
+    with xr.open_dataset(out / "results.nc") as ds:
+        assert dict(ds.sizes) == {"strength": 2, "parameter": 3, "replicate": 2}
+    assert main(["falsify", str(p), "--quiet", "--out", str(out)]) == 2
+    assert "not empty" in capsys.readouterr().err
+    assert main(["falsify", str(p), "--quiet", "--no-plots", "--out", str(out), "--overwrite"]) == 0
+    assert "bias_coverage.png" not in {f.name for f in out.iterdir()}
+
+
+@pytest.mark.parametrize("name", ["tanks.toml", "slowing.toml"])
+def test_the_documented_configs_parse(name):
+    from pathlib import Path
+
+    from millflow.falsify.config import load_config
+    path = Path(__file__).resolve().parents[3] / "docs" / "examples" / "falsify" / name
+    cfg = load_config(path)
+    assert cfg.replicates == 50 and len(cfg.strengths) >= 5
