@@ -23,12 +23,7 @@ def load(name: str, version: int):
     """The compiled module ``millflow.<name>`` if it is usable, else None."""
     if os.environ.get("MILLFLOW_KERNEL", "").lower() == "numpy":
         return None
-    try:
-        module = importlib.import_module(f"millflow.{name}")
-    except ImportError:
-        return None
-    # a stale build of older source (an editable install does not rebuild by itself)
-    return module if getattr(module, "KERNEL_VERSION", None) == version else None
+    return _load_built(name, version)
 
 
 def kernel(piece: str, choice: str | None = None):
@@ -51,6 +46,8 @@ def kernel(piece: str, choice: str | None = None):
 
 
 def _load_built(name: str, version: int):
+    """The built module, or None if absent or a stale build of older source (an
+    editable install does not rebuild by itself)."""
     try:
         module = importlib.import_module(f"millflow.{name}")
     except ImportError:
@@ -60,4 +57,4 @@ def _load_built(name: str, version: int):
 
 def status() -> str:
     """Which kernel runs each compiled piece, e.g. "eigenbasis=compiled, cells=numpy"."""
-    return ", ".join(f"{name}={'numpy' if load(*spec) is None else 'compiled'}" for name, spec in KERNELS.items())
+    return ", ".join(f"{name}={'numpy' if kernel(name) is None else 'compiled'}" for name in KERNELS)

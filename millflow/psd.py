@@ -469,6 +469,7 @@ def fit_tail(size_m, passing, rule: str, n_points: int = 3) -> TailFit:
     """
     if rule not in TAIL_RULES:
         raise GridError(f"tail = {rule!r}: expected one of {', '.join(TAIL_RULES)}")
+    rule = "gates_gaudin_schuhmann" if rule == "ggs" else rule
     if int(n_points) != n_points or n_points < 2:
         raise GridError(f"tail_points = {n_points!r}: expected a whole number >= 2")
     s = np.asarray(size_m, dtype=float)
@@ -478,7 +479,8 @@ def fit_tail(size_m, passing, rule: str, n_points: int = 3) -> TailFit:
     if s.size < 2:
         raise GridError(f"tail = {rule!r}: needs at least 2 of the finest sieves with 0 < passing < 1, has {s.size}")
     lx = np.log(s)
-    y = np.log(P) if rule in ("ggs", "gates_gaudin_schuhmann") else np.log(-np.log1p(-P))
+    ggs = rule == "gates_gaudin_schuhmann"
+    y = np.log(P) if ggs else np.log(-np.log1p(-P))
     slope, icpt = np.polyfit(lx, y, 1)
     # a slope near 0 is a flat curve: it says nothing of where the fines are (and its
     # scale size, exp(-intercept/slope), is not finite); 1e-3 is far below real moduli (~0.3-2)
@@ -487,7 +489,5 @@ def fit_tail(size_m, passing, rule: str, n_points: int = 3) -> TailFit:
                         "expected > 1e-3 (passing falling towards fine sizes)")
     resid = float(np.sqrt(np.mean((slope * lx + icpt - y) ** 2)))
     scale = float(np.exp(-icpt / slope))
-    params = {"xmax": scale, "m": float(slope)} if rule in ("ggs", "gates_gaudin_schuhmann") \
-        else {"x63": scale, "n": float(slope)}
-    name = "gates_gaudin_schuhmann" if rule == "ggs" else rule
-    return TailFit(name, params, tuple(float(v) for v in s), resid)
+    params = {"xmax": scale, "m": float(slope)} if ggs else {"x63": scale, "n": float(slope)}
+    return TailFit(rule, params, tuple(float(v) for v in s), resid)

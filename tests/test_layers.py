@@ -15,14 +15,14 @@ PACKAGES = ("millflow", "rtd")
 
 # Layers, lowest first: a module may import from its own layer and the ones below.
 LAYERS = [
-    ("base", ("millflow.errors", "millflow.grid", "millflow.compiled", "millflow.plotting",
-              "millflow.units_io")),
-    ("kinetics", ("millflow.psd", "millflow.checks", "millflow.classifiers", "millflow.breakage", "millflow.linalg", "millflow.batch",
-                  "millflow.nonlinear")),
+    ("base", ("millflow.errors", "millflow.grid", "millflow.compiled", "millflow.plotting")),
+    ("kinetics", ("millflow.psd", "millflow.checks", "millflow.classifiers", "millflow.breakage", "millflow.linalg",
+                  "millflow.batch", "millflow.nonlinear")),  # nonlinear: where issue 12's kinetics land
     ("mill", ("millflow.mill",)),
-    ("circuits", ("millflow.flowsheet", "millflow.fitting", "millflow.scaleup", "millflow.sweep")),
+    ("circuits", ("millflow.flowsheet", "millflow.fitting", "millflow.scaleup",
+                  "millflow.sweep")),  # sweep: where issue 14's sweeps land
     ("studies", ("millflow.falsify",)),
-    ("commands", ("millflow.bench", "millflow.commands", "millflow.cli", "millflow.__main__", "millflow.output")),
+    ("commands", ("millflow.bench", "millflow.commands", "millflow.cli", "millflow.__main__")),
 ]
 
 

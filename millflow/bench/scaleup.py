@@ -21,15 +21,17 @@ DESCRIPTION = "closed-circuit scale-up with bands: delta method and 1,000-draw M
 TRUTH = {"ln_A0": math.log(1 / 240), "alpha": 1.0, "phi": 0.4, "gamma": 0.8, "beta": 3.5}
 
 
-def make_case():
-    """(ScaleUp, target P80 [m]) of the benchmark case."""
+def synthetic_lab_fit(theta: dict, grid, noise: float, rng, label: str = "synthetic lab fit"):
+    """A local eq. 9 fit to synthetic batch tests (1, 3, 9 min, 12 root-2 sieves from
+    4 mm, feed in the top three sieve intervals) made from ``theta`` (eq. 5 rates, eq. 6
+    breakage) on ``grid`` with Gaussian noise of sd ``noise`` on cumulative passing.
+    Returns (the fit as :func:`millflow.scaleup.fit_from_dict` reads it, the model)."""
     import pandas as pd
 
     from millflow.fitting.data import psd_data_from_frames
     from millflow.fitting.estimate import fit
     from millflow.fitting.models import ForwardModel, ModelSpec, default_parameters
-    from millflow.grid import SizeGrid
-    from millflow.scaleup import Circuit, MillDesign, ScaleUp, fit_from_dict
+    from millflow.scaleup import fit_from_dict
 
     sieves = 4.0 * 2 ** (-0.5 * np.arange(12))
     rows = [pd.DataFrame({"condition": "*", "location": "feed", "time_min": 0.0, "size_mm": sieves[:4],
@@ -38,17 +40,25 @@ def make_case():
         rows.append(pd.DataFrame({"condition": "lab", "location": "mill", "time_min": t, "size_mm": sieves,
                                   "passing": np.linspace(1, 0, 12)}))
     spec = ModelSpec(mode="batch", breakage="normalized")
-    grid = SizeGrid.between(4e-3, 1e-5, 2 ** 0.25)
     model = ForwardModel(spec, psd_data_from_frames(pd.concat(rows), strict=False), grid)
-    y = model.predict(np.array([TRUTH[n] for n in model.param_names]))
-    y = y + np.random.default_rng(0).normal(0.0, 0.004, y.size)
+    y = model.predict(np.array([theta[n] for n in model.param_names])) + rng.normal(0.0, noise, model.n_data)
     k = 0
     for r in rows[1:]:
         r["passing"] = y[k:k + 12]
         k += 12
     model = ForwardModel(spec, psd_data_from_frames(pd.concat(rows), strict=False), grid)
-    params = default_parameters(spec, {n: {"value": v} for n, v in TRUTH.items()})
-    fitted = fit_from_dict(fit(model, params, global_search=False, starts=1, grid_check=False).to_dict(), "bench")
+    params = default_parameters(spec, {n: {"value": float(v)} for n, v in theta.items()})
+    res = fit(model, params, global_search=False, starts=1, grid_check=False)
+    return fit_from_dict(res.to_dict(), label), model
+
+
+def make_case():
+    """(ScaleUp, target P80 [m]) of the benchmark case."""
+    from millflow.grid import SizeGrid
+    from millflow.scaleup import Circuit, MillDesign, ScaleUp
+
+    grid = SizeGrid.between(4e-3, 1e-5, 2 ** 0.25)
+    fitted, _ = synthetic_lab_fit(TRUTH, grid, 0.004, np.random.default_rng(0), "bench")
     lab = MillDesign(0.2, 0.2, 0.35, 0.8, 25.0, power_model="hogg_fuerstenau", name="lab")
     plant = MillDesign(4.0, 6.0, 0.35, 0.75, 50.0, name="plant")
     feed = np.zeros(fitted.x.size)

@@ -11,6 +11,7 @@ import math
 import numpy as np
 import pytest
 
+from millflow.bench.scaleup import synthetic_lab_fit
 from millflow.errors import InputError
 from millflow.grid import SizeGrid
 from millflow.scaleup import (Circuit, FittedBreakage, MillDesign, ScaleUp, austin_factors, austin_power,
@@ -192,32 +193,8 @@ def test_wide_covariance_is_reported_as_nonlinear():
 def _synthetic_lab_fit(rng, noise=0.004):
     """Batch tests at 1, 3, 9 min on a 12-sieve root-2 series, generated from THETA on a
     2^(1/4) grid, Gaussian noise of sd ``noise`` on cumulative passing; local eq. 9 fit."""
-    import pandas as pd
-
-    from millflow.fitting.data import psd_data_from_frames
-    from millflow.fitting.estimate import fit
-    from millflow.fitting.models import ForwardModel, ModelSpec, default_parameters
-    from millflow.scaleup import fit_from_dict
-
-    sieves = 4.0 * 2 ** (-0.5 * np.arange(12))
-    rows = [pd.DataFrame({"condition": "*", "location": "feed", "time_min": 0.0, "size_mm": sieves[:4],
-                          "passing": [1.0, 2 / 3, 1 / 3, 0.0]})]
-    for t in (1.0, 3.0, 9.0):
-        rows.append(pd.DataFrame({"condition": "lab", "location": "mill", "time_min": t, "size_mm": sieves,
-                                  "passing": np.linspace(1, 0, 12)}))
-    spec = ModelSpec(mode="batch", breakage="normalized")
     grid = SizeGrid.between(4e-3, 4e-3 / 2 ** 6, 2 ** 0.25)
-    model = ForwardModel(spec, psd_data_from_frames(pd.concat(rows), strict=False), grid)
-    y = model.predict(THETA) + rng.normal(0, noise, model.n_data)
-    k = 0
-    for r in rows[1:]:
-        r["passing"] = y[k:k + 12]
-        k += 12
-    model = ForwardModel(spec, psd_data_from_frames(pd.concat(rows), strict=False), grid)
-    params = default_parameters(spec, {n: {"value": float(v)} for n, v in zip(NAMES, THETA)})
-    res = fit(model, params, global_search=False, starts=1, grid_check=False)
-    d = res.to_dict()
-    return fit_from_dict(d, "synthetic lab fit"), model
+    return synthetic_lab_fit(dict(zip(NAMES, THETA)), grid, noise, rng)
 
 
 def _coverage(n_rep, seed):
