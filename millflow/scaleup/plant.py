@@ -27,13 +27,15 @@ import numpy as np
 
 from millflow.errors import InputError, SolverError
 from millflow.scaleup import power as _power
+from rtd import names as _rtd_names
+from rtd.base import RTDError
 
 __all__ = ["MillDesign", "Circuit", "TRANSPORTS"]
 
-#: transport names (as in ``millflow fit-rtd --model``) -> rtd class and its shape parameters
-TRANSPORTS = {"cstr": ("PerfectMixing", ()), "plug": ("PlugFlow", ()), "tis": ("TanksInSeries", ("n",)),
-              "ad-closed": ("AxialDispersion", ("pe",)), "ad-open": ("AxialDispersion", ("pe",)),
-              "cells": ("RecirculatingCells", ("n", "r"))}
+#: transport names: the one table in :mod:`rtd.names` (canonical names, with the short
+#: names of ``millflow fit-rtd --model`` as aliases) -> required and optional shape
+#: parameters besides tau (kept here as a read-only view for existing callers)
+TRANSPORTS = {name: entry.required + entry.optional for name, entry in _rtd_names.TRANSPORTS.items()}
 
 
 @dataclass(frozen=True)
@@ -111,10 +113,8 @@ class MillDesign:
 
 
 def make_transport(name: str, tau: float, params: dict):
-    import rtd
-    cls_name, _ = TRANSPORTS[name]
-    extra = {"bc": "open"} if name == "ad-open" else ({"bc": "closed"} if name == "ad-closed" else {})
-    return getattr(rtd, cls_name)(float(tau), **params, **extra)
+    """The rtd model ``name`` (canonical or alias) with mean residence time ``tau`` [s]."""
+    return _rtd_names.build(name, float(tau), **params)
 
 
 @dataclass(frozen=True)
@@ -125,21 +125,21 @@ class Circuit:
     and its parameters in SI (sizes [m])."""
 
     mill: MillDesign
-    transport: str = "tis"
+    transport: str = "tanks_in_series"
     transport_params: dict = field(default_factory=lambda: {"n": 3})
     classifier: dict | None = None
 
     def __post_init__(self):
-        if self.transport not in TRANSPORTS:
-            raise InputError(f"transport = {self.transport!r}: expected one of {list(TRANSPORTS)}")
-        need = TRANSPORTS[self.transport][1]
-        got = dict(self.transport_params)
-        if sorted(got) != sorted(need) and not (self.transport == "cells" and set(got) <= set(need) and "n" in got):
-            raise InputError(f"transport_params for {self.transport!r} = {got}: expected keys {list(need)}")
         try:
-            make_transport(self.transport, 1.0, got)
-        except Exception as exc:  # rtd's own validation
-            raise InputError(f"transport {self.transport!r} with {got}: {exc}") from None
+            name = _rtd_names.canonical_name(self.transport)
+        except RTDError as exc:
+            raise InputError(f"transport = {self.transport!r}: {exc}") from None
+        object.__setattr__(self, "transport", name)
+        got = dict(self.transport_params)
+        try:
+            make_transport(name, 1.0, got)
+        except RTDError as exc:  # rtd's own validation names the parameter
+            raise InputError(f"transport {name!r} with {got}: {exc}") from None
         if self.classifier is not None and "curve" not in self.classifier:
             raise InputError(f"classifier = {self.classifier!r}: expected a table with 'curve' and its parameters")
 
@@ -154,7 +154,8 @@ class Circuit:
     # --------------------------------------------------------------------- solves
     def _mill_matrix(self, S, b, F_m):
         tau = self.mill.holdup() / F_m
-        n = {"cstr": 1.0, "tis": float(dict(self.transport_params).get("n", 0))}.get(self.transport, 0.0)
+        n = {"perfect_mixing": 1.0,
+             "tanks_in_series": float(dict(self.transport_params).get("n", 0))}.get(self.transport, 0.0)
         if n >= 1 and n == int(n) and n <= 20:
             # equal well-mixed tanks: T = (I + tau/n A)^-n, A = (I - b) diag(S) lower
             # triangular, so one triangular solve and n-1 products (what
@@ -168,7 +169,7 @@ class Circuit:
             for _ in range(int(n) - 1):
                 T = Ti @ T
             return T, tau
-        if self.transport == "plug":
+        if self.transport == "plug_flow":
             from scipy.linalg import expm
             return expm(-tau * (np.eye(S.size) - b) * S[None, :]), tau
         from millflow.mill import transfer_matrix

@@ -17,7 +17,9 @@ from millflow.errors import GridError, InputError
 from millflow.grid import SizeGrid
 from millflow.psd import from_sieves
 from millflow.scaleup.fitted import FittedBreakage
-from millflow.scaleup.plant import TRANSPORTS, Circuit, MillDesign
+from millflow.scaleup.plant import Circuit, MillDesign
+from rtd import names as _rtd_names
+from rtd.base import RTDError
 from millflow.scaleup.predict import ScaleUp
 from millflow.scaleup.scaling import AUSTIN_DEFAULTS
 
@@ -65,29 +67,35 @@ def _mill(table, where, src) -> MillDesign:
         raise InputError(f"{src}: [{where}]: {exc}") from None
 
 
+def _transport_entry(name, where):
+    try:
+        return _rtd_names.transport(name)
+    except RTDError as exc:
+        raise InputError(f"{where}: {exc}") from None
+
+
 def _transport(table, src, base: Path):
-    t = dict(table or {"model": "tis", "n": 3})
+    t = dict(table or {"model": "tanks_in_series", "n": 3})
     if "rtd_fit" in t:
         p = base / t.pop("rtd_fit")
         try:
-            d = json.loads(p.read_text())
+            d = json.loads(p.read_text(encoding="utf-8-sig"))
         except FileNotFoundError:
             raise InputError(f"{src}: transport.rtd_fit {str(p)!r}: file not found") from None
+        except (UnicodeDecodeError, json.JSONDecodeError) as exc:
+            raise InputError(f"{p}: not a fit-rtd JSON result ({exc})") from None
         if t:
             raise InputError(f"{src}: [transport] with rtd_fit takes no other keys, got {sorted(t)}")
-        name = d.get("model")
-        if name not in TRANSPORTS:
-            raise InputError(f"{p}: model {name!r}: scale-up transports are {list(TRANSPORTS)}")
+        entry = _transport_entry(d.get("model"), f"{p}: model")
         params = {k: v["value"] for k, v in d.get("params", {}).items() if k != "tau"}
-        return name, params, f"fit-rtd result {p.name} (shape only; tau = H/F at the plant)"
-    name = t.pop("model", None)
-    if name not in TRANSPORTS:
-        raise InputError(f"{src}: transport.model = {name!r}: expected one of {list(TRANSPORTS)}")
+        return entry.name, params, f"fit-rtd result {p.name} (shape only; tau = H/F at the plant)"
+    entry = _transport_entry(t.pop("model", None), f"{src}: transport.model")
+    allowed = entry.required + entry.optional
     for k in t:
-        if k not in TRANSPORTS[name][1]:
-            raise InputError(f"{src}: transport.{k}: not a parameter of {name!r}; expected {list(TRANSPORTS[name][1])} "
+        if k not in allowed:
+            raise InputError(f"{src}: transport.{k}: not a parameter of {entry.name!r}; expected {list(allowed)} "
                              "(tau comes from the hold-up and the flow)")
-    return name, t, "given"
+    return entry.name, t, "given"
 
 
 def _classifier(table, src):

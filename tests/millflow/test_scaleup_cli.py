@@ -118,11 +118,11 @@ def test_unreachable_target_exit_2(tmp_path, fit_json, capsys):
 def test_rtd_fit_json_gives_the_transport_shape(tmp_path, fit_json, capsys):
     (tmp_path / "tracer.json").write_text(json.dumps({"model": "tis", "params": {"tau": {"value": 240.0, "se": 5.0},
                                                                                   "n": {"value": 2.5, "se": 0.2}}}))
-    plant = _plant(tmp_path, ('model = "tis"\nn = 3', 'rtd_fit = "tracer.json"'))
+    plant = _plant(tmp_path, ('model = "tanks_in_series"\nn = 3', 'rtd_fit = "tracer.json"'))
     assert main(["scaleup", str(fit_json), "--to", str(plant), "--method", "delta", "--json",
                  "--out", str(tmp_path / "o")]) == 0
     s = json.loads(capsys.readouterr().out)
-    assert s["transport"] == "tis" and s["transport_params"] == {"n": 2.5}
+    assert s["transport"] == "tanks_in_series" and s["transport_params"] == {"n": 2.5}
     assert "shape only" in s["transport_source"]
 
 
