@@ -16,8 +16,9 @@ from millflow.errors import InputError
 from millflow.fitting.data import psd_data_from_frames, read_sprite_folder
 from millflow.fitting.models import ForwardModel, ModelSpec
 from millflow.grid import SizeGrid
+from tests import paths
 
-REPO = os.path.dirname(os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
+REPO = str(paths.REPO)
 SPRITE = os.path.normpath(os.path.join(REPO, "..", "shared", "data", "sprite-knife-mill"))
 needs_sprite = pytest.mark.skipif(not os.path.isdir(SPRITE),
                                   reason=f"SPRITE knife-mill data not found at {SPRITE} (CI provides it there)")

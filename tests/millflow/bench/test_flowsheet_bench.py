@@ -1,10 +1,10 @@
 """The flowsheet benchmark suite runs and its target case agrees with the substitution baseline."""
 import tomllib
-from pathlib import Path
 
 from millflow.bench import flowsheet as bench
+from tests import paths
 
-FLOWSHEETS = Path(__file__).resolve().parents[2] / "flowsheets"
+FLOWSHEETS = paths.FLOWSHEETS
 
 
 def test_bench_case_matches_example_file():

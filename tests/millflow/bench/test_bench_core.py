@@ -10,7 +10,6 @@ import json
 import os
 import subprocess
 import sys
-from pathlib import Path
 
 import numpy as np
 import pytest
@@ -18,8 +17,9 @@ import pytest
 from millflow.batch import batch_solve
 from millflow.bench.core import CASE_NAMES, REFERENCE_DIR, CoreCase, core_cases, load_reference, rate_degeneracy
 from millflow.cli import main
+from tests import paths
 
-ROOT = Path(__file__).resolve().parents[2]
+ROOT = paths.REPO
 
 
 @pytest.mark.parametrize("name", CASE_NAMES)

@@ -10,7 +10,9 @@ import numpy as np
 import pandas as pd
 import pytest
 
+from millflow.batch import batch_grind
 from millflow.bench.fit import BOUNDS, TRUTH, make_batch_problem
+from millflow.breakage import b_from_B, normalized_B, power_law_rates
 from millflow.errors import InputError
 from millflow.fitting.data import psd_data_from_frames, read_psd_table
 from millflow.fitting.estimate import compare_models, fit
@@ -18,8 +20,6 @@ from millflow.fitting.models import ForwardModel, ModelSpec, Parameter, default_
 from millflow.fitting.statistics import f_test, information_criteria, jacobian, parameter_statistics
 from millflow.grid import SizeGrid
 from millflow.linalg import solve_well_mixed
-from millflow.batch import batch_grind
-from millflow.breakage import b_from_B, normalized_B, power_law_rates
 
 
 # ----------------------------------------------------------------------------- data

@@ -2,7 +2,6 @@
 independent two-product formula; nonlinear tearing; outputs; CLI; exit check."""
 import json
 import math
-from pathlib import Path
 
 import numpy as np
 import pytest
@@ -12,8 +11,9 @@ from millflow.errors import SolverError
 from millflow.flowsheet import circulating_loads, load, loads, save, solve, summary
 from millflow.flowsheet.results import mass_balance, stream_properties
 from millflow.psd import cum_passing
+from tests import paths
 
-FLOWSHEETS = Path(__file__).resolve().parents[2] / "flowsheets"
+FLOWSHEETS = paths.FLOWSHEETS
 EXAMPLES = sorted(FLOWSHEETS.glob("*.toml"))
 CLOSED = FLOWSHEETS / "closed_circuit_ball_mill.toml"
 

@@ -2,15 +2,15 @@
 one line naming the key and value)."""
 import json
 import os
-import shutil
 import sys
 
 import numpy as np
 import pytest
 
 from millflow.cli import main
+from tests import paths
 
-REPO = os.path.dirname(os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
+REPO = str(paths.REPO)
 EXAMPLE = os.path.join(REPO, "examples", "scaleup")
 
 

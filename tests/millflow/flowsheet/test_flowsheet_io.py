@@ -1,13 +1,13 @@
 """Flowsheet files: unit conversion at the edge and errors that name the key or stream."""
-from pathlib import Path
 
 import numpy as np
 import pytest
 
 from millflow.errors import GridError, InputError
 from millflow.flowsheet import loads, solve
+from tests import paths
 
-CLOSED = (Path(__file__).resolve().parents[2] / "flowsheets" / "closed_circuit_ball_mill.toml").read_text()
+CLOSED = (paths.FLOWSHEETS / "closed_circuit_ball_mill.toml").read_text()
 
 
 def edit(old, new, text=CLOSED):

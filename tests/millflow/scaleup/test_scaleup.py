@@ -14,9 +14,19 @@ import pytest
 from millflow.bench.scaleup import synthetic_lab_fit
 from millflow.errors import InputError
 from millflow.grid import SizeGrid
-from millflow.scaleup import (Circuit, FittedBreakage, MillDesign, ScaleUp, austin_factors, austin_power,
-                              bond_rowland_power, charge_arm, critical_speed, hogg_fuerstenau_power,
-                              predict_plant)
+from millflow.scaleup import (
+    Circuit,
+    FittedBreakage,
+    MillDesign,
+    ScaleUp,
+    austin_factors,
+    austin_power,
+    bond_rowland_power,
+    charge_arm,
+    critical_speed,
+    hogg_fuerstenau_power,
+    predict_plant,
+)
 from millflow.scaleup.power import BOND_METRIC_CONSTANT, G
 
 GRID = SizeGrid.geometric(4e-3, 2 ** 0.25, 40)
