@@ -74,7 +74,35 @@ def _transport_entry(name, where):
         raise InputError(f"{where}: {exc}") from None
 
 
-def _transport(table, src, base: Path):
+def _aspect_correlation(corr, entry, mill: MillDesign, src):
+    """A shape parameter from a correlation the user states in L/D: value = c (L/D)^e.
+
+    millflow ships no default: published ball-mill RTD correlations (reviewed by Austin,
+    Klimpel & Luckie 1984, ch. 8; Cho & Austin, Powder Technol. 124 (2002) 112) hold for
+    the mills they were measured on, so the plant file names its source."""
+    if not isinstance(corr, dict):
+        raise InputError(f"{src}: transport.from_aspect_ratio: expected a table with parameter, coefficient, "
+                         "exponent and source")
+    _check_keys(corr, {"parameter", "coefficient", "exponent", "source"}, "transport.from_aspect_ratio", src)
+    missing = [k for k in ("parameter", "coefficient", "exponent", "source") if k not in corr]
+    if missing:
+        raise InputError(f"{src}: transport.from_aspect_ratio: missing {missing} (value = coefficient * (L/D)^exponent, "
+                         "source names where the correlation comes from)")
+    name = corr["parameter"]
+    if name not in entry.required + entry.optional:
+        raise InputError(f"{src}: transport.from_aspect_ratio.parameter = {name!r}: not a parameter of "
+                         f"{entry.name!r}; expected one of {list(entry.required + entry.optional)}")
+    c, e = corr["coefficient"], corr["exponent"]
+    for key, v in (("coefficient", c), ("exponent", e)):
+        if isinstance(v, bool) or not isinstance(v, (int, float)) or not math.isfinite(v):
+            raise InputError(f"{src}: transport.from_aspect_ratio.{key} = {v!r}: expected a finite number")
+    if not isinstance(corr["source"], str) or not corr["source"].strip():
+        raise InputError(f"{src}: transport.from_aspect_ratio.source: expected the correlation's source as text")
+    ratio = mill.length_m / mill.diameter_m
+    return name, float(c) * ratio ** float(e), f"{name} = {c} (L/D)^{e} at L/D = {ratio:.4g} ({corr['source']})"
+
+
+def _transport(table, src, base: Path, mill: MillDesign | None = None):
     t = dict(table or {"model": "tanks_in_series", "n": 3})
     if "rtd_fit" in t:
         p = base / t.pop("rtd_fit")
@@ -91,11 +119,17 @@ def _transport(table, src, base: Path):
         return entry.name, params, f"fit-rtd result {p.name} (shape only; tau = H/F at the plant)"
     entry = _transport_entry(t.pop("model", None), f"{src}: transport.model")
     allowed = entry.required + entry.optional
+    note = "given"
+    if "from_aspect_ratio" in t:
+        name, value, note = _aspect_correlation(t.pop("from_aspect_ratio"), entry, mill, src)
+        if name in t:
+            raise InputError(f"{src}: transport.{name} given and also computed by from_aspect_ratio: give one")
+        t[name] = value
     for k in t:
         if k not in allowed:
             raise InputError(f"{src}: transport.{k}: not a parameter of {entry.name!r}; expected {list(allowed)} "
                              "(tau comes from the hold-up and the flow)")
-    return entry.name, t, "given"
+    return entry.name, t, note
 
 
 def _classifier(table, src):
@@ -152,7 +186,7 @@ def load_plant(path, fit: FittedBreakage) -> tuple[ScaleUp, dict]:
         raise InputError(f"{src}: unknown tables/keys {unknown}; expected {sorted(_TOP)}")
     lab = _mill(d.get("lab"), "lab", src)
     plant = _mill(d.get("mill"), "mill", src)
-    name, tparams, tsrc = _transport(d.get("transport"), src, path.parent)
+    name, tparams, tsrc = _transport(d.get("transport"), src, path.parent, plant)
     clf = _classifier(d.get("classifier"), src)
     x = fit.x
     g = d.get("grid")

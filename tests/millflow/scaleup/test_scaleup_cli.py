@@ -144,3 +144,23 @@ def test_austin_scaling_from_the_plant_file(tmp_path, fit_json, capsys):
     lab = dict(diameter_m=0.2, ball_size_mm=25, ball_filling=0.35, critical_speed_fraction=0.80, powder_filling=1.0)
     pl = dict(diameter_m=4.0, ball_size_mm=50, ball_filling=0.35, critical_speed_fraction=0.75, powder_filling=1.0)
     assert s["A_factor"] == pytest.approx(austin_factors(lab, pl)["A"], rel=1e-14)
+
+
+def test_transport_shape_from_a_stated_aspect_ratio_correlation(fit_json, tmp_path, capsys):
+    # Pe = 2.5 (L/D)^1.0 on the example's 4.0 m x 6.0 m mill: L/D = 1.5, so Pe = 3.75 exactly
+    corr = ('model = "axial_dispersion"\n[transport.from_aspect_ratio]\nparameter = "pe"\ncoefficient = 2.5\n'
+            'exponent = 1.0\nsource = "stated for this test"')
+    plant = _plant(tmp_path, ('model = "tanks_in_series"\nn = 3', corr))
+    assert main(["scaleup", str(fit_json), "--to", str(plant), "--method", "delta", "--json",
+                 "--out", str(tmp_path / "o")]) == 0
+    s = json.loads(capsys.readouterr().out)
+    assert s["transport"] == "axial_dispersion"
+    assert s["transport_params"]["pe"] == pytest.approx(3.75, rel=1e-15)  # one product and one power of 1.5
+    assert "L/D = 1.5" in s["transport_source"]
+
+
+def test_aspect_ratio_correlation_needs_its_source(fit_json, tmp_path, capsys):
+    corr = 'model = "axial_dispersion"\n[transport.from_aspect_ratio]\nparameter = "pe"\ncoefficient = 2.5\nexponent = 1.0'
+    plant = _plant(tmp_path, ('model = "tanks_in_series"\nn = 3', corr))
+    assert main(["scaleup", str(fit_json), "--to", str(plant), "--out", str(tmp_path / "o")]) == 2
+    assert "source" in capsys.readouterr().err
