@@ -366,8 +366,10 @@ def _blocks_expm_apply(blocks: np.ndarray, t: np.ndarray, w: np.ndarray) -> np.n
     tight = spread.max() * t <= 1.0
     if tight.any():
         out[tight] = _tight_block_series(G, mu, t[tight], w)
-    for j in np.flatnonzero(~tight):
-        out[j] = np.einsum("kpq,kq->kp", _block_expm_stack(blocks, t[j]), w)
+    loose = np.flatnonzero(~tight)
+    if loose.size:  # one scaling-and-squaring per block for all its loose times (same arithmetic per time)
+        for c in range(k):
+            out[loose, c] = _block_expm(blocks[c], t[loose]) @ w[c]
     return out
 
 
@@ -386,11 +388,6 @@ def _tight_block_series(G: np.ndarray, mu: np.ndarray, t: np.ndarray, w: np.ndar
         if (n >= p or n >= growth) and np.abs(term).max() <= 1e-18 * max(np.abs(total).max(), 1e-300):
             break
     return total.transpose(2, 0, 1)
-
-
-def _block_expm_stack(blocks: np.ndarray, t: float) -> np.ndarray:
-    """exp(-B_k t) for a stack of blocks (k, p, p) at one time."""
-    return np.array([_block_expm(B, np.array([t]))[0] for B in blocks])
 
 
 def _block_expm(block: np.ndarray, t: np.ndarray) -> np.ndarray:

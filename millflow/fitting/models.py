@@ -58,7 +58,7 @@ from millflow.batch import batch_grind_population
 from millflow.breakage.distributions import breakage_population
 from millflow.breakage.rates import X0_DEFAULT, austin_rates_population, power_law_rates_population
 from millflow.classifiers import screen_discharge, screen_power_discharge
-from millflow.errors import InputError
+from millflow.errors import InputError, SolverError
 from millflow.fitting.data import PSDData
 from millflow.grid import SizeGrid
 from millflow.mill.well_mixed import well_mixed_population
@@ -353,6 +353,16 @@ class ForwardModel:
                     W[r, g * N + (N - k - 1)] += u
                 r += 1
         self._W, self._const = W, const
+        # the same interpolation as two gathers: each row has at most two weights
+        rows = np.arange(W.shape[0])
+        if (np.count_nonzero(W, axis=1) > 2).any():
+            raise SolverError("internal: an interpolation row with more than two weights")
+        rest = W.copy()
+        self._i1 = np.argmax(rest != 0, axis=1)
+        self._w1 = rest[rows, self._i1].copy()
+        rest[rows, self._i1] = 0.0
+        self._i2 = np.argmax(rest != 0, axis=1)
+        self._w2 = rest[rows, self._i2].copy()
         if self.spec.objective == "fractional":
             D = np.zeros((y_cum.size, y_cum.size))
             for g in range(G):
@@ -532,7 +542,8 @@ class ForwardModel:
         """Cumulative passing of the grid solution, interpolated to every measured row; (P, rows)."""
         M = self.predict_grid(theta)
         P = np.cumsum(M[..., ::-1], axis=-1)[..., ::-1]
-        return P.reshape(P.shape[0], -1) @ self._W.T + self._const
+        flat = P.reshape(P.shape[0], -1)
+        return flat[:, self._i1] * self._w1 + flat[:, self._i2] * self._w2 + self._const
 
     def predict(self, theta):
         theta = np.asarray(theta, dtype=float)

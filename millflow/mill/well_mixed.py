@@ -68,12 +68,33 @@ def well_mixed_population(S, b, feed, tau=1.0, d_star=None) -> np.ndarray:
     lead = np.broadcast_shapes(s.shape[:-1], f.shape[:-1], b.shape[:-2])
     s = np.broadcast_to(s, lead + (n,))
     f = np.broadcast_to(f, lead + (n,))
-    q = np.zeros(lead + (n,))  # q_j = s_j p_j, the broken mass flow out of class j
-    p = np.empty(lead + (n,))
+    b_lead = (1,) * (len(lead) - (b.ndim - 2)) + b.shape[:-2]
     with np.errstate(over="ignore", invalid="ignore"):
+        if len(lead) >= 1 and b_lead[-1] == 1 and lead[-1] > 1:
+            return _substitute_shared(s, np.broadcast_to(b.reshape(b_lead + (n, n))[..., 0, :, :],
+                                                         lead[:-1] + (n, n)), f)
+        q = np.zeros(lead + (n,))  # q_j = s_j p_j, the broken mass flow out of class j
+        p = np.empty(lead + (n,))
         denom = 1.0 + s
         for i in range(n):
             acc = f[..., i] + np.einsum("...j,...j->...", b[..., i, :i], q[..., :i]) if i else f[..., 0]
             p[..., i] = acc / denom[..., i]
             q[..., i] = s[..., i] * p[..., i]
     return p
+
+
+def _substitute_shared(s, b, f):
+    """The substitution when b is shared along the last leading axis (conditions):
+    s, f (*B, C, N), b (*B, N, N). The sum over j < i is then one batched matrix
+    product per class, b[..., i, :i] @ q[..., :i, :], with classes before conditions."""
+    n = s.shape[-1]
+    sT = np.swapaxes(s, -1, -2)
+    fT = np.swapaxes(f, -1, -2)
+    q = np.zeros(sT.shape)
+    p = np.empty(sT.shape)
+    denom = 1.0 + sT
+    for i in range(n):
+        acc = fT[..., i, :] + np.matmul(b[..., i:i + 1, :i], q[..., :i, :])[..., 0, :] if i else fT[..., 0, :]
+        p[..., i, :] = acc / denom[..., i, :]
+        q[..., i, :] = sT[..., i, :] * p[..., i, :]
+    return np.swapaxes(p, -1, -2)
