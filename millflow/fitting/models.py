@@ -36,8 +36,10 @@ Parameters (positive ones in logs, named ``ln_...``):
   ``tau_column`` or 1), classification d_i* as above placed by ``where`` (None: the
   mill's default, the discharge for cells and the axis for plug flow and axial
   dispersion; ``"cells"`` = every cell outlet, as ``well_mixed`` with ``n_tanks``).
-  Locations ``product``, ``holdup`` (mill content) and ``cell_K`` (content of cell K,
-  1-based, cell transports). Evaluated member by member and condition by condition by
+  Locations ``product``, ``holdup`` (mill content), ``cell:K`` (content of cell K,
+  1-based, cell transports; ``cell_K`` is accepted as an alias) and ``z:Y`` (content at
+  the fractional axial position Y, plug flow and axial dispersion), spelled as
+  :func:`millflow.steady_mill` reads them. Evaluated member by member and condition by condition by
   :class:`millflow.mill.Mill` (``steady_mill`` for hold-up samples): exact, but much
   slower than the vectorised modes (milliseconds per member and condition instead of
   one array operation for the whole population): prefer local fits from a good start
@@ -64,7 +66,7 @@ from millflow.grid import SizeGrid
 from millflow.mill.well_mixed import well_mixed_population
 from millflow.psd import from_sieves
 
-__all__ = ["Parameter", "ModelSpec", "ForwardModel", "RATE_FORMS", "BREAKAGE_FORMS", "MODES",
+__all__ = ["Parameter", "ModelSpec", "ForwardModel", "RATE_FORMS", "BREAKAGE_FORMS", "MODES", "canonical_location",
            "CLASSIFICATIONS", "TRANSPORTS", "default_parameters"]
 
 RATE_FORMS = {"power": ("ln_A0", "alpha"), "austin": ("ln_A0", "alpha", "ln_mu", "Lambda")}
@@ -79,6 +81,17 @@ TRANSPORTS = {
     "plug_flow": ("PlugFlow", (), ()),
 }
 _CELL_TRANSPORTS = ("perfect_mixing", "tanks_in_series", "recirculating_cells")
+_AXIAL_TRANSPORTS = ("plug_flow", "axial_dispersion")
+
+
+def canonical_location(loc) -> str:
+    """One spelling of a sampling location: ``cell:K`` (content of cell K, 1-based) and
+    ``z:Y`` (fractional axial position), as :func:`millflow.steady_mill` reads them;
+    the fit's earlier spelling ``cell_K`` is accepted as an alias."""
+    loc = str(loc)
+    if loc.startswith("cell_") and loc[5:].isdigit():
+        return "cell:" + loc[5:]
+    return loc
 CLASSIFICATIONS = {None: (), "screen": ("ln_c50", "ln_sharp"), "screen_power": ("n_screen",)}
 
 _DEFAULTS = {  # value, min, max
@@ -316,12 +329,14 @@ class ForwardModel:
         groups, rows, ys, ws, sizes, conds = [], [], [], [], [], []
         cond_index = {c: k for k, c in enumerate(self.conditions)}
         for (cond, loc, t), grp in samples.groupby(["condition", "location", "time_s"], sort=False):
+            loc = canonical_location(loc)
             if self.spec.mode == "mill":
                 self._check_mill_location(loc, cond)
             elif self.spec.mode != "batch" and loc not in ("product", "holdup"):
                 raise InputError(f"location {loc!r} of condition {cond!r}: a {self.spec.mode} mill predicts "
                                  "'product' and (well_mixed) 'holdup' samples")
-            if loc == "holdup" and self.spec.mode != "mill" and (self.spec.mode != "well_mixed" or self.spec.n_tanks != 1):
+            if loc == "holdup" and self.spec.mode != "mill" and (
+                    self.spec.mode != "well_mixed" or self.spec.n_tanks != 1):
                 raise InputError("location 'holdup' needs mode well_mixed with n_tanks = 1")
             groups.append((cond_index[cond], loc, float(t)))
             ys.append(grp.passing.to_numpy())
@@ -385,9 +400,19 @@ class ForwardModel:
         if loc in ("product", "holdup"):
             return
         cells = {"perfect_mixing": 1}.get(spec.transport) or dict(spec.transport_params).get("n")
-        ok = "'product', 'holdup'" + (f" or 'cell_K' (K = 1..{int(cells)})" if spec.transport in _CELL_TRANSPORTS else "")
-        k = loc[5:] if loc.startswith("cell_") else ""
-        if not (spec.transport in _CELL_TRANSPORTS and k.isdigit() and 1 <= int(k) <= int(cells)):
+        axial = spec.transport in _AXIAL_TRANSPORTS
+        ok = "'product', 'holdup'" + (f" or 'cell:K' (K = 1..{int(cells)})" if spec.transport in _CELL_TRANSPORTS
+                                      else "") + (" or 'z:Y' (0 <= Y <= 1)" if axial else "")
+        good = False
+        if loc.startswith("cell:") and spec.transport in _CELL_TRANSPORTS:
+            k = loc[5:]
+            good = k.isdigit() and 1 <= int(k) <= int(cells)
+        elif loc.startswith("z:") and axial:
+            try:
+                good = 0.0 <= float(loc[2:]) <= 1.0
+            except ValueError:
+                good = False
+        if not good:
             raise InputError(f"location {loc!r} of condition {cond!r}: a mill with transport {spec.transport!r} "
                              f"predicts {ok}")
 
@@ -522,7 +547,9 @@ class ForwardModel:
             gsel = [g for g, grp in enumerate(self.groups) if grp[0] == c]
             locs = [self.groups[g][1] for g in gsel]
             only_product = all(loc == "product" for loc in locs)
-            specs = [loc_of.get(loc) or "cell:" + loc[5:] for loc in locs]
+            specs = [loc_of.get(loc, loc) for loc in locs]
+            zs = sorted({float(loc[2:]) for loc in locs if loc.startswith("z:")})
+            kw = {"positions": zs} if zs else {}
             for k in range(S.shape[0]):
                 Sk = S[k, c]
                 bk = b[k, c] if b.ndim == 4 else b[k]
@@ -533,7 +560,7 @@ class ForwardModel:
                 if only_product:
                     out[k, gsel] = Mill(Sk, bk, tr, dk, spec.where).product(self._feeds[c])
                 else:
-                    ds = steady_mill(Sk, bk, self._feeds[c], tr, dk, where=spec.where, locations=specs)
+                    ds = steady_mill(Sk, bk, self._feeds[c], tr, dk, where=spec.where, locations=specs, **kw)
                     vals = ds["sample"].values
                     for r, (g, loc) in enumerate(zip(gsel, locs)):
                         out[k, g] = ds["product"].values if loc == "product" else vals[r]
