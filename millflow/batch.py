@@ -96,8 +96,7 @@ def batch_solve(S, b, feed, t, method: str = "exact", *, rtol: float = 1e-10, at
         blocks, w, cancellation = SpectralBlocks.decompose(S, b, feed=feed, target=CANCELLATION_TARGET,
                                                            kernel=kernel)
         M = blocks.expm_apply(feed, t, w=w)
-        M, error, rounding = _finish(M[np.newaxis], feed, t, np.array([cancellation]))
-        M, error, rounding = M[0], float(error[0]), rounding[0]
+        M, error, rounding = _finish(M, feed, t, cancellation)
         info = {**blocks.summary(), "sink_rounding_removed": float(rounding.max())}
     elif method in ODE_METHODS:
         M, info = _ode_solve(breakage_matrix(S, b), feed, t, method, rtol, atol)
@@ -110,8 +109,9 @@ def batch_solve(S, b, feed, t, method: str = "exact", *, rtol: float = 1e-10, at
 
 
 def _finish(M, feed, t, cancellation):
-    """Last steps of the exact path for members (P, T, N) in place; returns (M, error (P,),
-    sink rounding removed (P, T)).
+    """Last steps of the exact path, in place, for one member (M (T, N), feed (N,),
+    cancellation a float) or a population (M (P, T, N), feed (P, N), cancellation (P,));
+    returns (M, error, sink rounding removed).
 
     The sink row of X is a difference of O(1) terms, which carries eps-level
     cancellation when the sink is nearly empty; the balance (the same quantity in
@@ -121,10 +121,12 @@ def _finish(M, feed, t, cancellation):
     estimate; it is set to zero and the amount recorded.
     """
     total = feed.sum(axis=-1)
-    M[..., -1] = total[..., np.newaxis] - M[..., :-1].sum(axis=-1)
-    M[:, t == 0] = feed[..., np.newaxis, :] if feed.ndim == 2 else feed
+    M[..., -1] = np.expand_dims(total, -1) - M[..., :-1].sum(axis=-1)
+    zero = t == 0
+    if zero.any():
+        M[..., zero, :] = np.expand_dims(feed, -2)
     error = 4.0 * cancellation + np.finfo(float).eps * total * feed.shape[-1]
-    rounding = np.clip(-M[..., -1], 0.0, np.broadcast_to(error, M.shape[0])[:, np.newaxis])
+    rounding = np.clip(-M[..., -1], 0.0, np.expand_dims(error, -1))
     M[..., -1] += rounding
     return M, error, rounding
 

@@ -36,7 +36,7 @@ __all__ = ["FitConfig", "load_config", "read_b_matrix"]
 
 _TABLES = {"data", "grid", "model", "params", "optimizer", "validation", "output", "candidates"}
 _MODEL_KEYS = {"mode", "rate", "breakage", "classification", "rate_process", "param_process", "screen_column",
-               "tau_column", "n_tanks", "transport", "transport_params", "where", "b_matrix_csv", "b_kind",
+               "ball_column", "tau_column", "n_tanks", "transport", "transport_params", "where", "b_matrix_csv", "b_kind",
                "t10_table_csv", "t10", "x0_mm", "objective", "label"}
 _OPT_KEYS = {"global", "starts", "popsize", "maxiter", "seed"}
 
@@ -88,7 +88,8 @@ def _spec(table: dict, where: str, rel=None, grid_of=None) -> tuple[str, ModelSp
     unknown = set(table) - _MODEL_KEYS
     if unknown:
         raise InputError(f"{where}: unknown keys {sorted(unknown)}; expected some of {sorted(_MODEL_KEYS)}")
-    kw = {k: table[k] for k in ("mode", "rate", "breakage", "screen_column", "tau_column", "objective", "n_tanks",
+    kw = {k: table[k] for k in ("mode", "rate", "breakage", "screen_column", "ball_column", "tau_column", "objective",
+                                "n_tanks",
                                 "transport", "where")
           if k in table}
     if "transport_params" in table:

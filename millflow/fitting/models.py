@@ -12,10 +12,15 @@ Parameters (positive ones in logs, named ``ln_...``):
 
 - rate ``power`` (eq. 5): ``ln_A0``, ``alpha``;  ``austin`` (eq. 7 without ball size):
   ``ln_A0``, ``alpha``, ``ln_mu`` (ln of mu0/x0), ``Lambda``. With process parameters
+  ``austin_ball`` (eq. 7 with its ball-size terms): also ``xi`` and ``eta``, the ball
+  size x_b [mm] from the process column ``ball_column`` and x_b0 its geometric mean
+  over the conditions. With process parameters
   (eq. 10) A = exp(ln_A0) prod_k (p_k/p_ref_k)^a_k, one exponent ``a_<column>`` each,
   p_ref the geometric mean over the conditions (it decorrelates ln_A0 from the a_k).
 - breakage ``normalized`` (eq. 6): ``phi``, ``gamma``, ``beta``; ``single``: B = r^gamma
-  (eq. 6 with phi = 1): ``gamma``; ``fixed``: a given b matrix, nothing fitted (the
+  (eq. 6 with phi = 1): ``gamma``; ``non_normalized`` (eq. 8): ``phi`` (phi0 at the
+  top of the grid), ``gamma``, ``beta``, ``theta`` (phi_j = phi0 (x_1/x_j)^theta; members
+  whose phi_j leaves [0, 1] are outside the domain); ``fixed``: a given b matrix, nothing fitted (the
   hybrid, semi-back-calculation method; fixing phi, gamma, beta with ``vary=False``
   does the same for eq. 6).
 - classification ``screen``: d_i* = 1 / (1 + (x_i / (c50 * screen))^n), parameters
@@ -69,8 +74,10 @@ from millflow.psd import from_sieves
 __all__ = ["Parameter", "ModelSpec", "ForwardModel", "RATE_FORMS", "BREAKAGE_FORMS", "MODES", "canonical_location",
            "CLASSIFICATIONS", "TRANSPORTS", "default_parameters"]
 
-RATE_FORMS = {"power": ("ln_A0", "alpha"), "austin": ("ln_A0", "alpha", "ln_mu", "Lambda")}
-BREAKAGE_FORMS = {"normalized": ("phi", "gamma", "beta"), "single": ("gamma",), "fixed": ()}
+RATE_FORMS = {"power": ("ln_A0", "alpha"), "austin": ("ln_A0", "alpha", "ln_mu", "Lambda"),
+              "austin_ball": ("ln_A0", "alpha", "ln_mu", "Lambda", "xi", "eta")}
+BREAKAGE_FORMS = {"normalized": ("phi", "gamma", "beta"), "single": ("gamma",), "fixed": (),
+                  "non_normalized": ("phi", "gamma", "beta", "theta")}
 MODES = ("batch", "plug_flow", "well_mixed", "mill")
 #: Transport models of mode "mill": name -> (rtd class name, required, optional parameters).
 TRANSPORTS = {
@@ -98,6 +105,8 @@ _DEFAULTS = {  # value, min, max
     "ln_A0": (0.0, -12.0, 12.0), "alpha": (1.0, -2.0, 4.0), "ln_mu": (1.0, -5.0, 8.0), "Lambda": (3.0, 0.5, 8.0),
     "phi": (0.5, 0.0, 1.0), "gamma": (1.0, 0.05, 4.0), "beta": (4.0, 1.0, 10.0),
     "ln_c50": (0.0, -4.0, 1.5), "ln_sharp": (1.0, -1.0, 3.5), "n_screen": (2.0, 0.0, 12.0),
+    # theta > 0 can lift phi_j = phi0 (x_1/x_j)^theta above 1 at fine sizes (outside eq. 8's domain)
+    "xi": (0.0, -3.0, 3.0), "eta": (0.0, -3.0, 3.0), "theta": (0.0, -1.0, 0.0),
 }
 
 
@@ -133,6 +142,7 @@ class ModelSpec:
     rate, breakage, classification : form names (classification None or "screen").
     rate_process : process-table columns entering A by eq. 10.
     screen_column : process column holding the screen opening [mm] for "screen".
+    ball_column : process column holding the ball size [mm] for rate "austin_ball".
     tau_column : process column holding tau [s] for continuous modes (None: tau = 1).
     x0_m : reference size of eq. 5 [m].
     b_matrix : (N, N) fractional b on the numerical grid for breakage "fixed".
@@ -147,6 +157,7 @@ class ModelSpec:
     rate_process: tuple = ()
     param_process: tuple = ()
     screen_column: str = "screen_mm"
+    ball_column: str = "ball_mm"
     tau_column: str | None = None
     x0_m: float = X0_DEFAULT
     n_tanks: int = 1
@@ -257,7 +268,8 @@ def default_parameters(spec: ModelSpec, overrides: dict | None = None) -> dict:
         v = float(o.get("value", min(max(v, lo), hi)))
         out[name] = Parameter(name, v, lo, hi, bool(o.get("vary", True)))
     if overrides:
-        raise InputError(f"params: {sorted(overrides)} are not parameters of this model; expected {list(spec.param_names)}")
+        raise InputError(f"params: {sorted(overrides)} are not parameters of this model; "
+                         f"expected {list(spec.param_names)}")
     return out
 
 
@@ -309,6 +321,8 @@ class ForwardModel:
         cols = list(spec.rate_process) + [col for _, col in spec.param_process]
         if spec.classification in ("screen", "screen_power"):
             cols.append(spec.screen_column)
+        if spec.rate == "austin_ball":
+            cols.append(spec.ball_column)
         if spec.tau_column:
             cols.append(spec.tau_column)
         out = {}
@@ -322,7 +336,8 @@ class ForwardModel:
             out[col] = v
         # references: geometric mean over all conditions of the data (not just these)
         self._ref = {c: float(np.exp(np.log(proc[c].to_numpy(dtype=float)).mean()))
-                     for c in list(spec.rate_process) + [col for _, col in spec.param_process]}
+                     for c in list(spec.rate_process) + [col for _, col in spec.param_process]
+                     + ([spec.ball_column] if spec.rate == "austin_ball" else [])}
         return out
 
     def _build_groups(self, samples):
@@ -429,7 +444,8 @@ class ForwardModel:
         proc = self.data.process
         return {"mode": s.mode, "rate": s.rate, "breakage": s.breakage, "classification": s.classification,
                 "rate_process": list(s.rate_process), "param_process": [list(p) for p in s.param_process],
-                "tau_column": s.tau_column, "x0_m": s.x0_m, "n_tanks": s.n_tanks, "transport": s.transport,
+                "tau_column": s.tau_column, "ball_column": s.ball_column if s.rate == "austin_ball" else None,
+                "x0_m": s.x0_m, "n_tanks": s.n_tanks, "transport": s.transport,
                 "transport_params": dict(s.transport_params), "param_names": list(s.param_names),
                 "grid_upper_m": [float(v) for v in self.x], "process_ref": dict(self._ref),
                 "process": {str(c): {str(k): float(v) for k, v in proc.loc[c].items()
@@ -471,6 +487,11 @@ class ForwardModel:
         if self.spec.rate == "austin":
             mu0 = np.exp(p["ln_mu"])[:, None] * x0
             return austin_rates_population(self.x, A, alpha, mu0, p["Lambda"][:, None], x0=x0)
+        if self.spec.rate == "austin_ball":  # eq. 7 with x_b per condition, x_b0 the geometric mean
+            col = self.spec.ball_column
+            mu0 = np.exp(p["ln_mu"])[:, None] * x0
+            return austin_rates_population(self.x, A, alpha, mu0, p["Lambda"][:, None], p["xi"][:, None],
+                                           self._proc[col] * 1e-3, self._ref[col] * 1e-3, p["eta"][:, None], x0=x0)
         return power_law_rates_population(self.x, A, alpha, x0)
 
     def frac_b(self, p, n_pop):
@@ -485,9 +506,11 @@ class ForwardModel:
         if self.spec.breakage == "single":  # B = r^gamma: eq. 6 with phi = 1
             return breakage_population(self.x, 1.0, gamma, gamma, kind="b")
         phi, beta = p["phi"], p["beta"]
+        theta = p["theta"] if self.spec.breakage == "non_normalized" else 0.0
         if gamma.ndim == 2:
             phi, beta = phi[:, None], beta[:, None]
-        return breakage_population(self.x, phi, gamma, beta, kind="b")
+            theta = theta[:, None] if np.ndim(theta) else theta
+        return breakage_population(self.x, phi, gamma, beta, theta, kind="b")
 
     def discharge(self, p, n_pop):
         """Normalised discharge d* (P, C, N), ones without classification; the curves
