@@ -36,8 +36,8 @@ __all__ = ["FitConfig", "load_config", "read_b_matrix"]
 
 _TABLES = {"data", "grid", "model", "params", "optimizer", "validation", "output", "candidates"}
 _MODEL_KEYS = {"mode", "rate", "breakage", "classification", "rate_process", "param_process", "screen_column",
-               "ball_column", "tau_column", "n_tanks", "transport", "transport_params", "where", "b_matrix_csv", "b_kind",
-               "t10_table_csv", "t10", "x0_mm", "objective", "label"}
+               "ball_column", "tau_column", "n_tanks", "transport", "transport_params", "where", "b_matrix_csv",
+               "b_kind", "t10_table_csv", "t10", "x0_mm", "objective", "label"}
 _OPT_KEYS = {"global", "starts", "popsize", "maxiter", "seed"}
 
 

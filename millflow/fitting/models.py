@@ -88,6 +88,9 @@ TRANSPORTS = {
     "plug_flow": ("PlugFlow", (), ()),
 }
 _CELL_TRANSPORTS = ("perfect_mixing", "tanks_in_series", "recirculating_cells")
+#: Transport parameters that mode "mill" can fit: name -> (fit parameter, transports).
+TRANSPORT_FIT = {"tau": ("ln_tau", tuple(TRANSPORTS)), "pe": ("ln_pe", ("axial_dispersion",)),
+                 "r": ("r", ("recirculating_cells",))}
 _AXIAL_TRANSPORTS = ("plug_flow", "axial_dispersion")
 
 
@@ -107,6 +110,9 @@ _DEFAULTS = {  # value, min, max
     "ln_c50": (0.0, -4.0, 1.5), "ln_sharp": (1.0, -1.0, 3.5), "n_screen": (2.0, 0.0, 12.0),
     # theta > 0 can lift phi_j = phi0 (x_1/x_j)^theta above 1 at fine sizes (outside eq. 8's domain)
     "xi": (0.0, -3.0, 3.0), "eta": (0.0, -3.0, 3.0), "theta": (0.0, -1.0, 0.0),
+    # fitted transport (mode "mill", transport_fit): tau [s] in logs, Peclet number in logs,
+    # recirculation ratio r
+    "ln_tau": (6.0, 0.0, 11.5), "ln_pe": (2.0, -2.0, 6.0), "r": (1.0, 0.0, 10.0),
 }
 
 
@@ -139,6 +145,12 @@ class ModelSpec:
         (e.g. ``{"n": 10}``, ``{"pe": 8.0}``, ``{"n": 5, "r": 1.0}``); stored as sorted pairs.
     where : mode "mill": where classification acts (None: the mill's default), see
         :func:`millflow.mill.steady_mill`.
+    transport_fit : mode "mill": transport parameters fitted with S and B (issue 15 §3),
+        a subset of :data:`TRANSPORT_FIT` for the transport: "tau" (parameter ``ln_tau``,
+        tau [s]; with a ``tau_column`` it scales the column: tau_c = exp(ln_tau) *
+        column_c / geometric mean), "pe" (``ln_pe``, axial dispersion) and "r" (``r``,
+        recirculation ratio of recirculating cells). The number of cells n stays fixed
+        (an integer: compare fits with different n instead).
     rate, breakage, classification : form names (classification None or "screen").
     rate_process : process-table columns entering A by eq. 10.
     screen_column : process column holding the screen opening [mm] for "screen".
@@ -166,6 +178,7 @@ class ModelSpec:
     transport: str | None = None
     transport_params: tuple = ()
     where: str | None = None
+    transport_fit: tuple = ()
 
     def __post_init__(self):
         for key, val, ok in (("mode", self.mode, MODES), ("rate", self.rate, RATE_FORMS),
@@ -198,7 +211,11 @@ class ModelSpec:
             raise InputError(f"model.transport_params = {self.transport_params!r}: expected a dict "
                              "name -> value") from exc
         object.__setattr__(self, "transport_params", tp)
+        fitted = tuple(str(v) for v in self.transport_fit)
+        object.__setattr__(self, "transport_fit", fitted)
         if self.mode != "mill":
+            if fitted:
+                raise InputError(f"model.transport_fit needs mode = 'mill' (mode is {self.mode!r})")
             if self.transport is not None or tp or self.where is not None:
                 raise InputError(f"model.transport, transport_params and where need mode = 'mill' "
                                  f"(mode is {self.mode!r})")
@@ -214,16 +231,24 @@ class ModelSpec:
                              + (f"unknown {unknown}; " if unknown else "") + (f"missing {missing}; " if missing else "")
                              + f"expected {list(required)} (required) and {list(optional)} (optional); "
                              "tau comes from tau_column")
+        for name in fitted:
+            if name not in TRANSPORT_FIT or self.transport not in TRANSPORT_FIT[name][1]:
+                ok = [k for k, (_, trs) in TRANSPORT_FIT.items() if self.transport in trs]
+                raise InputError(f"model.transport_fit: {name!r} cannot be fitted for transport {self.transport!r}; "
+                                 f"expected some of {ok}")
+        if "pe" in fitted and "pe" not in names:
+            object.__setattr__(self, "transport_params", tuple(sorted(tp + (("pe", 1.0),))))
         self.make_transport(1.0)  # parameter values checked by rtd
         if self.where is not None and self.classification is None:
             raise InputError("model.where is given but there is no classification")
 
-    def make_transport(self, tau: float):
-        """The rtd transport model of mode "mill" with mean residence time ``tau``."""
+    def make_transport(self, tau: float, **fitted):
+        """The rtd transport model of mode "mill" with mean residence time ``tau`` [s]
+        (``fitted``: values of fitted transport parameters, e.g. pe=8.0, r=1.0)."""
         import rtd
         cls = getattr(rtd, TRANSPORTS[self.transport][0])
         try:
-            return cls(float(tau), **dict(self.transport_params))
+            return cls(float(tau), **{**dict(self.transport_params), **fitted})
         except (rtd.RTDError, TypeError, ValueError) as exc:
             raise InputError(f"model.transport = {self.transport!r} with transport_params "
                              f"{dict(self.transport_params)}: {exc}") from exc
@@ -238,12 +263,15 @@ class ModelSpec:
         for name in [f"a_{p}" for p in self.rate_process] + list(self.base_names[1:]):
             names.append(name)
             names += [f"{name}_{col}" for par, col in self.param_process if par == name]
+        names += [TRANSPORT_FIT[k][0] for k in self.transport_fit]
         return tuple(names)
 
     def label(self) -> str:
         parts = [self.mode, f"rate={self.rate}", f"B={self.breakage}"]
         if self.mode == "mill":
-            parts.insert(1, f"transport={self.transport}" + "".join(f",{k}={v}" for k, v in self.transport_params))
+            parts.insert(1, f"transport={self.transport}" + "".join(f",{k}={v}" for k, v in self.transport_params
+                                                                    if k not in self.transport_fit)
+                         + "".join(f",{k}=fitted" for k in self.transport_fit))
         if self.classification:
             parts.append(f"class={self.classification}")
         if self.rate_process:
@@ -293,8 +321,10 @@ class ForwardModel:
     shape (n_data,) or (P, n_data), in the order of ``self.y``.
     """
 
-    def __init__(self, spec: ModelSpec, data: PSDData, grid: SizeGrid | None = None, conditions=None):
+    def __init__(self, spec: ModelSpec, data: PSDData, grid: SizeGrid | None = None, conditions=None, *,
+                 tracer=None, kind_weights: dict | None = None):
         self.spec, self.data = spec, data
+        self.tracer, self.kind_weights = tracer, dict(kind_weights or {})
         self.grid = grid if grid is not None else auto_grid(data)
         self.conditions = list(conditions) if conditions is not None else data.conditions
         unknown = [c for c in self.conditions if c not in data.conditions]
@@ -306,8 +336,72 @@ class ForwardModel:
         self._proc = self._process_matrix()
         samples = data.samples(self.conditions)
         self._build_groups(samples)
+        self._build_tracer()
 
     # ----------------------------------------------------------------- compilation
+    def _build_tracer(self):
+        """Tracer rows (mode "mill"): measured F(t), the fraction of a pulse that has
+        left by time t (or a step response), columns ``condition``, ``time_s``, ``F``.
+        They join the PSD rows in one objective; ``kind_weights`` (data kind -> weight,
+        default 1: F and cumulative passing are both fractions of order one with
+        comparable measurement noise) scales each kind's rows. Kinds: the PSD location
+        kinds ``product``, ``holdup``, ``cell``, ``z`` (and ``mill`` for batch) and
+        ``tracer``."""
+        kinds = np.array([self._kind(self.groups[g][1]) for g in range(len(self.groups))
+                          for _ in range(self.group_slices[g + 1] - self.group_slices[g])], dtype=object)
+        unknown = set(self.kind_weights) - set(kinds) - {"tracer"}
+        if unknown:
+            raise InputError(f"kind_weights: {sorted(unknown)} are not data kinds of this fit; "
+                             f"expected some of {sorted(set(kinds) | {'tracer'})}")
+        self._tracer = []
+        y_t, w_t = [], []
+        if self.tracer is not None:
+            if self.spec.mode != "mill":
+                raise InputError("tracer data need mode = 'mill' (the transport model predicts them)")
+            t = self.tracer
+            missing = [c for c in ("condition", "time_s", "F") if c not in t.columns]
+            if missing:
+                raise InputError(f"tracer table: columns {missing} missing; expected condition, time_s, F")
+            for cond, grp in t.groupby("condition", sort=False):
+                if cond not in self.conditions:
+                    continue  # a condition left out (validation folds)
+                times = grp.time_s.to_numpy(float)
+                F = grp.F.to_numpy(float)
+                if not (np.isfinite(times).all() and (times >= 0).all() and np.isfinite(F).all()):
+                    raise InputError(f"tracer table, condition {cond!r}: time_s must be finite >= 0 and F finite")
+                self._tracer.append((self.conditions.index(cond), times))
+                y_t.append(F)
+                w_t.append(np.full(F.size, 1.0))
+        w = np.array([self.kind_weights.get(k, 1.0) for k in kinds], dtype=float)
+        self.y_psd = self.y
+        self.weights = np.concatenate([self.weights * w] + [v * self.kind_weights.get("tracer", 1.0) for v in w_t])
+        self.y = np.concatenate([self.y] + y_t)
+        self.data_kind = np.concatenate([kinds, np.full(sum(v.size for v in y_t), "tracer", dtype=object)])
+
+    @staticmethod
+    def _kind(loc: str) -> str:
+        return loc.split(":")[0] if ":" in loc else loc
+
+    def transport_values(self, p):
+        """Per member and condition: tau [s] (P, C) and the fitted transport parameters
+        (name -> (P,)) of mode "mill"."""
+        spec = self.spec
+        col = self._proc[spec.tau_column] if spec.tau_column else np.ones(len(self.conditions))
+        n_pop = next(iter(p.values())).shape[0]
+        if "tau" in spec.transport_fit:
+            scale = col / float(np.exp(np.log(col).mean())) if spec.tau_column else col
+            tau = np.exp(p["ln_tau"])[:, None] * scale[None, :]
+        else:
+            tau = np.broadcast_to(col, (n_pop, col.size))
+        extra = {}
+        if "pe" in spec.transport_fit:
+            extra["pe"] = np.exp(p["ln_pe"])
+        if "r" in spec.transport_fit:
+            extra["r"] = p["r"]
+        return tau, extra
+
+    def _transport(self, tau, extra, k):
+        return self.spec.make_transport(float(tau), **{n: float(v[k]) for n, v in extra.items()})
     def _feed(self, cond):
         size, P = self.data.feed(cond)
         keep = size > 0
@@ -446,7 +540,8 @@ class ForwardModel:
                 "rate_process": list(s.rate_process), "param_process": [list(p) for p in s.param_process],
                 "tau_column": s.tau_column, "ball_column": s.ball_column if s.rate == "austin_ball" else None,
                 "x0_m": s.x0_m, "n_tanks": s.n_tanks, "transport": s.transport,
-                "transport_params": dict(s.transport_params), "param_names": list(s.param_names),
+                "transport_params": dict(s.transport_params), "transport_fit": list(s.transport_fit),
+                "param_names": list(s.param_names),
                 "grid_upper_m": [float(v) for v in self.x], "process_ref": dict(self._ref),
                 "process": {str(c): {str(k): float(v) for k, v in proc.loc[c].items()
                                      if isinstance(v, (int, float, np.floating, np.integer))}
@@ -551,7 +646,11 @@ class ForwardModel:
                     out[:, g] = prod[:, c]
         elif mode == "mill":
             d = self.discharge(p, n_pop) if self.spec.classification else None
-            self._predict_mill(S, b, d, tau, out)
+            tau_pc, extra = self.transport_values(p)
+            if self._chain_cells() is not None:
+                self._predict_chain(S, b, d, tau_pc, out)
+            else:
+                self._predict_mill(S, b, d, tau_pc, extra, out)
         else:
             for c in range(len(self.conditions)):
                 gsel = [g for g, grp in enumerate(self.groups) if grp[0] == c]
@@ -560,19 +659,56 @@ class ForwardModel:
                 out[:, gsel] = batch_grind_population(S[:, c], b[:, c] if b.ndim == 4 else b, self._feeds[c], t)
         return out
 
-    def _predict_mill(self, S, b, d, tau, out):
+    def _chain_cells(self):
+        """Number of equal well-mixed cells in a row for transports that are such a chain
+        (perfect mixing, tanks in series with integer n), else None."""
+        spec = self.spec
+        if spec.transport == "perfect_mixing":
+            return 1
+        n = dict(spec.transport_params).get("n")
+        if spec.transport == "tanks_in_series" and float(n) == int(n) and spec.where in (None, "discharge", "cells"):
+            return int(n)
+        return None
+
+    def _predict_chain(self, S, b, d, tau, out):
+        """Mode "mill" for a chain of equal well-mixed cells, vectorised over the population
+        and the conditions: eq. 3 per cell (tau/n each) by
+        :func:`millflow.mill.well_mixed.well_mixed_population`, classification at the
+        discharge (the last cell's outflow) or at every cell outlet (``where="cells"``).
+        Cell content per unit feed rate is tau_k p_k / d (classified outlet) or tau_k p_k."""
+        n = self._chain_cells()
+        b_pc = b if b.ndim == 4 else b[:, None]
+        ones = np.ones_like(S)
+        stream = np.broadcast_to(self._feeds, S.shape)
+        contents = []
+        for k in range(n):
+            classified = d is not None and (self.spec.where == "cells" or k == n - 1)
+            dk = d if classified else ones
+            stream = well_mixed_population(S, b_pc, stream, tau / n, dk)
+            contents.append(stream / dk)
+        for g, (c, loc, _) in enumerate(self.groups):
+            if loc == "product":
+                m = stream[:, c]
+            elif loc == "holdup":
+                m = sum(h[:, c] for h in contents)
+            else:  # cell:K
+                m = contents[int(loc[5:]) - 1][:, c]
+            out[:, g] = m / m.sum(axis=1, keepdims=True)
+
+    def _predict_mill(self, S, b, d, tau, extra, out):
         """Mode "mill": one :class:`~millflow.mill.Mill` per member and condition (slow path)."""
         from millflow.mill import Mill, steady_mill
         spec = self.spec
-        transports = [spec.make_transport(t) for t in tau]
+        fixed = not spec.transport_fit
         loc_of = {"product": "discharge", "holdup": "holdup"}
-        for c, tr in enumerate(transports):
+        for c in range(len(self.conditions)):
             gsel = [g for g, grp in enumerate(self.groups) if grp[0] == c]
             locs = [self.groups[g][1] for g in gsel]
             only_product = all(loc == "product" for loc in locs)
             specs = [loc_of.get(loc, loc) for loc in locs]
             zs = sorted({float(loc[2:]) for loc in locs if loc.startswith("z:")})
             kw = {"positions": zs} if zs else {}
+            tr = self._transport(tau[0, c], extra, 0) if fixed else None
             for k in range(S.shape[0]):
                 Sk = S[k, c]
                 bk = b[k, c] if b.ndim == 4 else b[k]
@@ -580,6 +716,12 @@ class ForwardModel:
                 if not (np.isfinite(Sk).all() and np.isfinite(bk).all() and (dk is None or np.isfinite(dk).all())):
                     out[k, gsel] = np.nan  # outside the model's domain: reported, not solved
                     continue
+                if not fixed:
+                    try:
+                        tr = self._transport(tau[k, c], extra, k)
+                    except InputError:
+                        out[k, gsel] = np.nan
+                        continue
                 if only_product:
                     out[k, gsel] = Mill(Sk, bk, tr, dk, spec.where).product(self._feeds[c])
                 else:
@@ -601,7 +743,25 @@ class ForwardModel:
         Y = self._cum_at_rows(theta)
         if self._D is not None:
             Y = self._apply_D(Y)
+        if self._tracer:
+            Y = np.concatenate([Y, self.predict_tracer(np.atleast_2d(theta))], axis=1)
         return Y[0] if single else Y
+
+    def predict_tracer(self, theta):
+        """Predicted tracer F(t) of every tracer row, (P, rows): the transport's cdf."""
+        theta = np.atleast_2d(np.asarray(theta, dtype=float))
+        p = self._unpack(theta)
+        tau, extra = self.transport_values(p)
+        out = []
+        for c, times in self._tracer:
+            rows = np.empty((theta.shape[0], times.size))
+            for k in range(theta.shape[0]):
+                try:
+                    rows[k] = self._transport(tau[k, c], extra, k).cdf(times)
+                except InputError:
+                    rows[k] = np.nan  # transport parameters outside rtd's domain
+            out.append(rows)
+        return np.concatenate(out, axis=1) if out else np.empty((theta.shape[0], 0))
 
     def predict_cum(self, theta):
         """Cumulative passing at every measured row (the README metric's model values)."""
@@ -611,10 +771,11 @@ class ForwardModel:
         spec = self.spec
         if spec.breakage == "fixed":
             raise InputError("a fixed b matrix belongs to one grid; give it on the refined grid to refine")
-        return ForwardModel(spec, self.data, grid, self.conditions)
+        return ForwardModel(spec, self.data, grid, self.conditions, tracer=self.tracer, kind_weights=self.kind_weights)
 
     def for_conditions(self, conditions) -> "ForwardModel":
-        return ForwardModel(self.spec, self.data, self.grid, conditions)
+        return ForwardModel(self.spec, self.data, self.grid, conditions, tracer=self.tracer,
+                            kind_weights=self.kind_weights)
 
     def __repr__(self):
         return (f"ForwardModel({self.spec.label()}, {len(self.conditions)} conditions, {self.n_data} values, "

@@ -181,3 +181,25 @@ def test_b_matrix_csv_config_round_trip(tmp_path):
     np.savetxt(tmp_path / "notb.csv", B, delimiter=",")
     with pytest.raises(InputError, match="notb.csv.*sums to"):
         load_config(_write_config(tmp_path, "notb.csv", "b"))  # a cumulative B given as b
+
+
+@pytest.mark.parametrize("where", [None, "cells"])
+def test_mill_mode_chain_is_vectorised_and_equals_the_mill(where):
+    """Issue 15 §3: mode "mill" with a chain of cells (tanks in series) is evaluated for
+    the whole population at once (eq. 3 per cell); it equals one Mill/steady_mill per
+    member and condition (the general path) to rounding: both are forward substitutions
+    of the same triangular systems (1e-12 on mass fractions <= 1)."""
+    d = _data(["c1", "c2"], ["cell:1", "cell:2", "holdup", "product"], PROC)
+    m = ForwardModel(ModelSpec(mode="mill", transport="tanks_in_series", transport_params={"n": 3},
+                               classification="screen", where=where, tau_column="tau_s"), d, GRID)
+    assert m._chain_cells() == 3
+    rng = np.random.default_rng(3)
+    theta = np.column_stack([rng.uniform(-6, -3, 4), rng.uniform(0.5, 1.5, 4), rng.uniform(0.2, 0.8, 4),
+                             rng.uniform(0.5, 1.2, 4), rng.uniform(2.5, 5, 4), rng.uniform(-1, 0.5, 4),
+                             rng.uniform(0.5, 2.5, 4)])
+    fast = m.predict_grid(theta)
+    p = m._unpack(theta)
+    slow = np.empty_like(fast)
+    tau, extra = m.transport_values(p)
+    m._predict_mill(m.rates(p), m.frac_b(p, 4), m.discharge(p, 4), tau, extra, slow)
+    np.testing.assert_allclose(fast, slow, rtol=0, atol=1e-12)
