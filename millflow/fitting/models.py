@@ -68,7 +68,7 @@ from millflow.classifiers import screen_discharge, screen_power_discharge
 from millflow.errors import InputError, SolverError
 from millflow.fitting.data import PSDData
 from millflow.grid import SizeGrid
-from millflow.mill.well_mixed import well_mixed_population
+from millflow.mill.well_mixed import well_mixed_population, well_mixed_population_geometric
 from millflow.psd import from_sieves
 
 __all__ = ["Parameter", "ModelSpec", "ForwardModel", "RATE_FORMS", "BREAKAGE_FORMS", "MODES", "canonical_location",
@@ -337,6 +337,11 @@ class ForwardModel:
         samples = data.samples(self.conditions)
         self._build_groups(samples)
         self._build_tracer()
+        # eq. 6 on a geometric grid (fixed ratio to rounding): eq. 3 by O(N) recurrences
+        log_ratio = np.log(x[:-1] / x[1:])
+        geometric = x.size > 1 and float(np.ptp(log_ratio)) <= 1e-12 * float(log_ratio.mean())
+        self._ratio = (float(np.exp(log_ratio.mean())) if geometric and spec.breakage in ("normalized", "single")
+                       else None)
 
     # ----------------------------------------------------------------- compilation
     def _build_tracer(self):
@@ -589,6 +594,13 @@ class ForwardModel:
                                            self._proc[col] * 1e-3, self._ref[col] * 1e-3, p["eta"][:, None], x0=x0)
         return power_law_rates_population(self.x, A, alpha, x0)
 
+    def _eq6(self, p):
+        """phi, gamma, beta of eq. 6 shaped (P, 1) or (P, C) (gamma per condition)."""
+        gamma = self.cond_param(p, "gamma") if self._depends("gamma") else p["gamma"][:, None]
+        if self.spec.breakage == "single":
+            return 1.0, gamma, gamma
+        return p["phi"][:, None], gamma, p["beta"][:, None]
+
     def frac_b(self, p, n_pop):
         """Fractional b, (P, N, N), or (P, C, N, N) when gamma depends on the process
         (eq. 6 from :func:`millflow.breakage.distributions.breakage_population`)."""
@@ -628,16 +640,23 @@ class ForwardModel:
         n_pop = theta.shape[0]
         p = self._unpack(theta)
         S = self.rates(p)
-        b = self.frac_b(p, n_pop)
         mode = self.spec.mode
+        b = None if (mode == "well_mixed" and self._ratio is not None) else self.frac_b(p, n_pop)
         tau = self._proc[self.spec.tau_column] if self.spec.tau_column else np.ones(len(self.conditions))
         out = np.empty((n_pop, len(self.groups), self.n))
         if mode == "well_mixed":
             d = self.discharge(p, n_pop)
-            b_pc = b if b.ndim == 4 else b[:, None]
             prod = self._feeds
+            tau_k = tau[None, :] / self.spec.n_tanks
+            if b is None:  # eq. 6 on a geometric grid: the O(N) recurrences of eq. 3
+                phi, gamma, beta = self._eq6(p)
+            else:
+                b_pc = b if b.ndim == 4 else b[:, None]
             for _ in range(self.spec.n_tanks):  # equal well-mixed tanks in series, tau/n each (eq. 3)
-                prod = well_mixed_population(S, b_pc, prod, tau[None, :] / self.spec.n_tanks, d)
+                if b is None:
+                    prod = well_mixed_population_geometric(S, prod, phi, gamma, beta, self._ratio, tau_k, d)
+                else:
+                    prod = well_mixed_population(S, b_pc, prod, tau_k, d)
             for g, (c, loc, _) in enumerate(self.groups):
                 if loc == "holdup":
                     m = prod[:, c] / d[:, c]

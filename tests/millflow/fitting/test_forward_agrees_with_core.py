@@ -199,3 +199,24 @@ def test_ball_terms_and_theta_are_recovered_by_a_fit():
     for n in start:
         # noise-free data: the optimum is the truth; 1e-5 allows the optimiser's tolerance
         assert res.params[n].value == pytest.approx(truth[n], abs=1e-5), n
+
+
+@settings(max_examples=25, deadline=None)
+@given(phi=st.floats(0.0, 1.0, **finite), gamma=st.floats(0.05, 4.0, **finite), beta=st.floats(0.05, 10.0, **finite),
+       ln_A=st.floats(-8.0, 3.0, **finite), alpha=st.floats(-2.0, 4.0, **finite), n=st.integers(2, 60),
+       log2_ratio=st.sampled_from([1 / 16, 1 / 4, 1 / 2, 1.0]))
+def test_geometric_grid_recurrence_is_the_matrix_substitution(phi, gamma, beta, ln_A, alpha, n, log2_ratio):
+    """Eq. 3 with eq. 6 on a geometric grid by O(N) recurrences equals the forward
+    substitution with the b matrix of breakage_population. Both sum non-negative terms
+    in a different order: the difference is rounding, a few N eps relative to the
+    largest flow (feeds sum to 1 here, so 1e-12 absolute, N <= 60)."""
+    from millflow.breakage import breakage_population, power_law_rates_population
+    from millflow.mill.well_mixed import well_mixed_population, well_mixed_population_geometric
+    x = SizeGrid.geometric(1e-2, 2 ** log2_ratio, n).x
+    S = power_law_rates_population(x, math.exp(ln_A), alpha, 1e-3)
+    feed = np.linspace(1.0, 0.0, n) ** 2
+    feed /= feed.sum()
+    d = classifiers.screen_discharge(x, 2e-3, 3.0)
+    ref = well_mixed_population(S, breakage_population(x, phi, gamma, beta, kind="b"), feed, 30.0, d)
+    got = well_mixed_population_geometric(S, feed, phi, gamma, beta, x[0] / x[1], 30.0, d)
+    np.testing.assert_allclose(got, ref, rtol=0, atol=ROUNDING)
