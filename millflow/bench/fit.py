@@ -103,12 +103,11 @@ def knife_data_dir() -> str | None:
 def run_knife_loo(data_dir: str) -> dict:
     """The knife-mill example's 12-fold leave-one-run-out, timed."""
     from millflow.fitting.config import load_config
-    from millflow.fitting.models import ForwardModel
     from millflow.fitting.validate import leave_out
 
     here = os.path.dirname(os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
     cfg = load_config(os.path.join(here, "examples", "knife_mill", "knife_mill.toml"), data_dir=data_dir)
-    model = ForwardModel(cfg.spec, cfg.data, cfg.grid)
+    model = cfg.model()
     start, cpu = time.perf_counter(), time.process_time()
     loo = leave_out(model, cfg.params, "each", **dict(cfg.optimizer))
     runtime, cpu = time.perf_counter() - start, time.process_time() - cpu

@@ -72,3 +72,44 @@ def test_tracer_rows_need_the_mill_mode_and_named_columns(example):
     # weights per data kind scale the rows of that kind
     w = ForwardModel(model.spec, model.data, model.grid, tracer=model.tracer, kind_weights={"tracer": 4.0}).weights
     np.testing.assert_array_equal(w[model.data_kind == "tracer"], 4.0)
+
+
+def test_config_reads_tracer_weights_and_transport_fit(example, tmp_path):
+    """TOML: [data] tracer (CSV: condition, time_min or time_s, F), [weights] per data
+    kind, [model] transport_fit; the config's model carries the tracer rows."""
+    from millflow.errors import InputError
+    from millflow.fitting.config import load_config
+    model, _ = example.make_problem(example.MULTI_LOCATION, psd_noise=0.0)  # a file must pass the data checks
+    t = model.data.table
+    t[["condition", "location", "size_m", "passing"]].assign(size_um=t.size_m * 1e6).drop(columns="size_m").to_csv(
+        tmp_path / "psd.csv", index=False)
+    model.data.process.reset_index().to_csv(tmp_path / "process.csv", index=False)
+    model.tracer.assign(time_min=model.tracer.time_s / 60.0).drop(columns="time_s").to_csv(
+        tmp_path / "tracer.csv", index=False)
+    toml = """[data]
+psd = "psd.csv"
+process = "process.csv"
+tracer = "tracer.csv"
+[model]
+mode = "mill"
+transport = "recirculating_cells"
+transport_params = { n = 4 }
+transport_fit = ["tau", "r"]
+classification = "screen"
+[weights]
+tracer = 2.0
+cell = 1.0
+"""
+    (tmp_path / "fit.toml").write_text(toml)
+    cfg = load_config(tmp_path / "fit.toml")
+    m = cfg.model(grid=model.grid)
+    assert m.param_names[-2:] == ("ln_tau", "r")
+    np.testing.assert_allclose(m.y[m.data_kind == "tracer"], model.y[model.data_kind == "tracer"], rtol=1e-12)
+    np.testing.assert_array_equal(m.weights[m.data_kind == "tracer"], 2.0)
+    (tmp_path / "bad.csv").write_text("condition,time_s,F\nrun1,60,x\n")
+    (tmp_path / "bad.toml").write_text(toml.replace("tracer.csv", "bad.csv"))
+    with pytest.raises(InputError, match="bad.csv: row 2, column F: 'x' is not a number"):
+        load_config(tmp_path / "bad.toml")
+    (tmp_path / "neg.toml").write_text(toml.replace("tracer = 2.0", "tracer = -1.0"))
+    with pytest.raises(InputError, match="\\[weights\\] tracer = -1.0"):
+        load_config(tmp_path / "neg.toml")
