@@ -668,6 +668,8 @@ class ForwardModel:
             tau_pc, extra = self.transport_values(p)
             if self._chain_cells() is not None:
                 self._predict_chain(S, b, d, tau_pc, out)
+            elif self.spec.transport == "recirculating_cells" and self.spec.where in (None, "discharge", "cells"):
+                self._predict_network(S, b, d, tau_pc, extra, out)
             else:
                 self._predict_mill(S, b, d, tau_pc, extra, out)
         else:
@@ -713,6 +715,46 @@ class ForwardModel:
             else:  # cell:K
                 m = contents[int(loc[5:]) - 1][:, c]
             out[:, g] = m / m.sum(axis=1, keepdims=True)
+
+    def _predict_network(self, S, b, d, tau, extra, out):
+        """Mode "mill" for recirculating cells, vectorised over the population and the
+        conditions (:func:`millflow.mill.cells.solve_cells_population`: a batched n x n
+        solve per class); one network per member and condition when transport
+        parameters are fitted. Members outside rtd's domain (e.g. r < 0) give NaN."""
+        from millflow.mill.cells import network_of, solve_cells_population
+        n_pop, C = S.shape[:2]
+        nets = np.empty((n_pop, C), dtype=object)
+        bad = np.zeros((n_pop, C), dtype=bool)
+        fitted = bool(self.spec.transport_fit)
+        for c in range(C):
+            for k in range(n_pop if fitted else 1):
+                try:
+                    net = network_of(self._transport(tau[k, c], extra, k))
+                except InputError:
+                    net, bad[k, c] = None, True
+                if fitted:
+                    nets[k, c] = net
+                else:
+                    nets[:, c] = [net] * n_pop
+        if bad.any():  # a valid placeholder, then NaN
+            ok = next(v for v in nets.ravel() if v is not None) if (~bad).any() else None
+            if ok is None:
+                out[:] = np.nan
+                return
+            nets[bad] = ok
+        b_pc = b if b.ndim == 4 else b[:, None]
+        where = "cells" if self.spec.where == "cells" else "discharge"
+        prod, hold = solve_cells_population(S, b_pc, self._feeds[None], nets, d, where)
+        for g, (c, loc, _) in enumerate(self.groups):
+            if loc == "product":
+                m = prod[:, c]
+            elif loc == "holdup":
+                m = hold[:, c].sum(axis=1)
+            else:  # cell:K
+                m = hold[:, c, int(loc[5:]) - 1]
+            with np.errstate(invalid="ignore"):
+                out[:, g] = m / m.sum(axis=1, keepdims=True)
+        out[bad.any(axis=1)] = np.nan
 
     def _predict_mill(self, S, b, d, tau, extra, out):
         """Mode "mill": one :class:`~millflow.mill.Mill` per member and condition (slow path)."""

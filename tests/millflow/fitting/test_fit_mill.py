@@ -203,3 +203,27 @@ def test_mill_mode_chain_is_vectorised_and_equals_the_mill(where):
     tau, extra = m.transport_values(p)
     m._predict_mill(m.rates(p), m.frac_b(p, 4), m.discharge(p, 4), tau, extra, slow)
     np.testing.assert_allclose(fast, slow, rtol=0, atol=1e-12)
+
+
+@pytest.mark.parametrize("where", [None, "cells"])
+def test_mill_mode_recirculating_cells_vectorised_equals_the_mill(where):
+    """Recirculating cells (not a chain) with fitted tau and r: the population path
+    (a batched n x n solve per class) equals one steady_mill per member and condition
+    to rounding (the same block equations; 1e-12 on mass fractions <= 1)."""
+    d = _data(["c1", "c2"], ["cell:1", "cell:3", "holdup", "product"], PROC)
+    m = ForwardModel(ModelSpec(mode="mill", transport="recirculating_cells", transport_params={"n": 4},
+                               transport_fit=("tau", "r"), classification="screen", where=where,
+                               tau_column="tau_s"), d, GRID)
+    rng = np.random.default_rng(5)
+    theta = np.column_stack([rng.uniform(-6, -3, 4), rng.uniform(0.5, 1.5, 4), rng.uniform(0.2, 0.8, 4),
+                             rng.uniform(0.5, 1.2, 4), rng.uniform(2.5, 5, 4), rng.uniform(-1, 0.5, 4),
+                             rng.uniform(0.5, 2.5, 4), rng.uniform(4.0, 6.0, 4), rng.uniform(0.0, 3.0, 4)])
+    fast = m.predict_grid(theta)
+    p = m._unpack(theta)
+    slow = np.empty_like(fast)
+    tau, extra = m.transport_values(p)
+    m._predict_mill(m.rates(p), m.frac_b(p, 4), m.discharge(p, 4), tau, extra, slow)
+    np.testing.assert_allclose(fast, slow, rtol=0, atol=1e-12)
+    theta[1, -1] = -1.0  # r < 0: outside rtd's domain, that member only
+    got = m.predict_grid(theta)
+    assert np.isnan(got[1]).all() and np.isfinite(got[[0, 2, 3]]).all()
