@@ -36,8 +36,10 @@ Parameters (positive ones in logs, named ``ln_...``):
   ``tau_column`` or 1), classification d_i* as above placed by ``where`` (None: the
   mill's default, the discharge for cells and the axis for plug flow and axial
   dispersion; ``"cells"`` = every cell outlet, as ``well_mixed`` with ``n_tanks``).
-  Locations ``product``, ``holdup`` (mill content) and ``cell_K`` (content of cell K,
-  1-based, cell transports). Evaluated member by member and condition by condition by
+  Locations ``product``, ``holdup`` (mill content), ``cell:K`` (content of cell K,
+  1-based, cell transports; ``cell_K`` is accepted as an alias) and ``z:Y`` (content at
+  the fractional axial position Y, plug flow and axial dispersion), spelled as
+  :func:`millflow.steady_mill` reads them. Evaluated member by member and condition by condition by
   :class:`millflow.mill.Mill` (``steady_mill`` for hold-up samples): exact, but much
   slower than the vectorised modes (milliseconds per member and condition instead of
   one array operation for the whole population): prefer local fits from a good start
@@ -54,12 +56,17 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from millflow.batch import batch_grind_population
+from millflow.breakage.distributions import breakage_population
+from millflow.breakage.rates import X0_DEFAULT, austin_rates_population, power_law_rates_population
+from millflow.classifiers import screen_discharge, screen_power_discharge
 from millflow.errors import InputError, SolverError
 from millflow.fitting.data import PSDData
 from millflow.grid import SizeGrid
+from millflow.mill.well_mixed import well_mixed_population
 from millflow.psd import from_sieves
 
-__all__ = ["Parameter", "ModelSpec", "ForwardModel", "RATE_FORMS", "BREAKAGE_FORMS", "MODES",
+__all__ = ["Parameter", "ModelSpec", "ForwardModel", "RATE_FORMS", "BREAKAGE_FORMS", "MODES", "canonical_location",
            "CLASSIFICATIONS", "TRANSPORTS", "default_parameters"]
 
 RATE_FORMS = {"power": ("ln_A0", "alpha"), "austin": ("ln_A0", "alpha", "ln_mu", "Lambda")}
@@ -74,6 +81,17 @@ TRANSPORTS = {
     "plug_flow": ("PlugFlow", (), ()),
 }
 _CELL_TRANSPORTS = ("perfect_mixing", "tanks_in_series", "recirculating_cells")
+_AXIAL_TRANSPORTS = ("plug_flow", "axial_dispersion")
+
+
+def canonical_location(loc) -> str:
+    """One spelling of a sampling location: ``cell:K`` (content of cell K, 1-based) and
+    ``z:Y`` (fractional axial position), as :func:`millflow.steady_mill` reads them;
+    the fit's earlier spelling ``cell_K`` is accepted as an alias."""
+    loc = str(loc)
+    if loc.startswith("cell_") and loc[5:].isdigit():
+        return "cell:" + loc[5:]
+    return loc
 CLASSIFICATIONS = {None: (), "screen": ("ln_c50", "ln_sharp"), "screen_power": ("n_screen",)}
 
 _DEFAULTS = {  # value, min, max
@@ -130,7 +148,7 @@ class ModelSpec:
     param_process: tuple = ()
     screen_column: str = "screen_mm"
     tau_column: str | None = None
-    x0_m: float = 1e-3
+    x0_m: float = X0_DEFAULT
     n_tanks: int = 1
     b_matrix: np.ndarray | None = field(default=None, compare=False)
     objective: str = "cumulative"
@@ -276,12 +294,6 @@ class ForwardModel:
         self._proc = self._process_matrix()
         samples = data.samples(self.conditions)
         self._build_groups(samples)
-        # eq. 6 ratio r = x_{i-1}/x_j on the strict lower triangle
-        i, j = np.tril_indices(self.n, -1)
-        self._ti, self._tj = i, j
-        self._logr = np.log(x[i - 1] / x[j])
-        self._strict_lower = np.tril(np.ones((self.n, self.n)), -1)
-        self._logx = np.log(x / spec.x0_m)
 
     # ----------------------------------------------------------------- compilation
     def _feed(self, cond):
@@ -317,12 +329,14 @@ class ForwardModel:
         groups, rows, ys, ws, sizes, conds = [], [], [], [], [], []
         cond_index = {c: k for k, c in enumerate(self.conditions)}
         for (cond, loc, t), grp in samples.groupby(["condition", "location", "time_s"], sort=False):
+            loc = canonical_location(loc)
             if self.spec.mode == "mill":
                 self._check_mill_location(loc, cond)
             elif self.spec.mode != "batch" and loc not in ("product", "holdup"):
                 raise InputError(f"location {loc!r} of condition {cond!r}: a {self.spec.mode} mill predicts "
                                  "'product' and (well_mixed) 'holdup' samples")
-            if loc == "holdup" and self.spec.mode != "mill" and (self.spec.mode != "well_mixed" or self.spec.n_tanks != 1):
+            if loc == "holdup" and self.spec.mode != "mill" and (
+                    self.spec.mode != "well_mixed" or self.spec.n_tanks != 1):
                 raise InputError("location 'holdup' needs mode well_mixed with n_tanks = 1")
             groups.append((cond_index[cond], loc, float(t)))
             ys.append(grp.passing.to_numpy())
@@ -354,6 +368,16 @@ class ForwardModel:
                     W[r, g * N + (N - k - 1)] += u
                 r += 1
         self._W, self._const = W, const
+        # the same interpolation as two gathers: each row has at most two weights
+        rows = np.arange(W.shape[0])
+        if (np.count_nonzero(W, axis=1) > 2).any():
+            raise SolverError("internal: an interpolation row with more than two weights")
+        rest = W.copy()
+        self._i1 = np.argmax(rest != 0, axis=1)
+        self._w1 = rest[rows, self._i1].copy()
+        rest[rows, self._i1] = 0.0
+        self._i2 = np.argmax(rest != 0, axis=1)
+        self._w2 = rest[rows, self._i2].copy()
         if self.spec.objective == "fractional":
             D = np.zeros((y_cum.size, y_cum.size))
             for g in range(G):
@@ -376,9 +400,19 @@ class ForwardModel:
         if loc in ("product", "holdup"):
             return
         cells = {"perfect_mixing": 1}.get(spec.transport) or dict(spec.transport_params).get("n")
-        ok = "'product', 'holdup'" + (f" or 'cell_K' (K = 1..{int(cells)})" if spec.transport in _CELL_TRANSPORTS else "")
-        k = loc[5:] if loc.startswith("cell_") else ""
-        if not (spec.transport in _CELL_TRANSPORTS and k.isdigit() and 1 <= int(k) <= int(cells)):
+        axial = spec.transport in _AXIAL_TRANSPORTS
+        ok = "'product', 'holdup'" + (f" or 'cell:K' (K = 1..{int(cells)})" if spec.transport in _CELL_TRANSPORTS
+                                      else "") + (" or 'z:Y' (0 <= Y <= 1)" if axial else "")
+        good = False
+        if loc.startswith("cell:") and spec.transport in _CELL_TRANSPORTS:
+            k = loc[5:]
+            good = k.isdigit() and 1 <= int(k) <= int(cells)
+        elif loc.startswith("z:") and axial:
+            try:
+                good = 0.0 <= float(loc[2:]) <= 1.0
+            except ValueError:
+                good = False
+        if not good:
             raise InputError(f"location {loc!r} of condition {cond!r}: a mill with transport {spec.transport!r} "
                              f"predicts {ok}")
 
@@ -426,52 +460,38 @@ class ForwardModel:
         return any(par == name for par, _ in self.spec.param_process)
 
     def rates(self, p):
-        """S (P, C, N) [1/s] (or tau*S if no tau column)."""
+        """S (P, C, N) [1/s] (or tau*S if no tau column): eq. 5 or 7 with A (and
+        exponents) per condition by eq. 10, from :mod:`millflow.breakage.rates`."""
         lnA = p["ln_A0"][:, None].copy()
         for col in self.spec.rate_process:
             lnA = lnA + self.cond_param(p, f"a_{col}") * np.log(self._proc[col] / self._ref[col])[None, :]
-        logS = lnA[:, :, None] + self.cond_param(p, "alpha")[:, :, None] * self._logx[None, None, :]
-        S = np.exp(np.minimum(logS, 600.0))
+        A = np.exp(np.minimum(lnA, 600.0))
+        alpha = self.cond_param(p, "alpha")
+        x0 = self.spec.x0_m
         if self.spec.rate == "austin":
-            mu_rel = self._logx[None, :] - p["ln_mu"][:, None]
-            S = S / (1.0 + np.exp(np.minimum(p["Lambda"][:, None] * mu_rel, 600.0)))[:, None, :]
-        S[..., -1] = 0.0
-        return S
+            mu0 = np.exp(p["ln_mu"])[:, None] * x0
+            return austin_rates_population(self.x, A, alpha, mu0, p["Lambda"][:, None], x0=x0)
+        return power_law_rates_population(self.x, A, alpha, x0)
 
     def frac_b(self, p, n_pop):
-        """Fractional b, (P, N, N), or (P, C, N, N) when gamma depends on the process."""
+        """Fractional b, (P, N, N), or (P, C, N, N) when gamma depends on the process
+        (eq. 6 from :func:`millflow.breakage.distributions.breakage_population`)."""
         N = self.n
         if self.spec.breakage == "fixed":
             return np.broadcast_to(np.asarray(self.spec.b_matrix, float), (n_pop, N, N))
-        lead = (n_pop,)
-        gamma = p["gamma"][:, None]
+        gamma = p["gamma"]
         if self._depends("gamma"):
-            lead = (n_pop, len(self.conditions))
-            gamma = self.cond_param(p, "gamma")[:, :, None]
-        if self.spec.breakage == "single":
-            vals = np.exp(gamma * self._logr)
-        else:
-            phi, beta = p["phi"], p["beta"]
-            if len(lead) == 2:
-                phi, beta = phi[:, None], beta[:, None]
-            phi, beta = phi[..., None], beta[..., None]
-            vals = phi * np.exp(gamma * self._logr) + (1 - phi) * np.exp(beta * self._logr)
-        # outside the physical domain of eq. 6 (0 <= phi <= 1, exponents > 0) B is not a
-        # distribution: return NaN so that the bounds check names the offending corner
-        bad = ~(gamma > 0)
-        if self.spec.breakage == "normalized":
-            bad = bad | ~((phi >= 0) & (phi <= 1) & (beta > 0))
-        vals = np.where(bad, np.nan, vals)
-        B = np.zeros(lead + (N, N))
-        B[..., self._ti, self._tj] = vals
-        k = np.arange(N - 1)
-        B[..., k + 1, k] = 1.0
-        b = B.copy()
-        b[..., :-1, :] -= B[..., 1:, :]
-        return b * self._strict_lower
+            gamma = self.cond_param(p, "gamma")
+        if self.spec.breakage == "single":  # B = r^gamma: eq. 6 with phi = 1
+            return breakage_population(self.x, 1.0, gamma, gamma, kind="b")
+        phi, beta = p["phi"], p["beta"]
+        if gamma.ndim == 2:
+            phi, beta = phi[:, None], beta[:, None]
+        return breakage_population(self.x, phi, gamma, beta, kind="b")
 
     def discharge(self, p, n_pop):
-        """Normalised discharge d* (P, C, N), ones without classification."""
+        """Normalised discharge d* (P, C, N), ones without classification; the curves
+        of :mod:`millflow.classifiers` (``screen_discharge``, ``screen_power_discharge``)."""
         C = len(self.conditions)
         if self.spec.classification is None:
             return np.ones((n_pop, C, self.n))
@@ -480,12 +500,9 @@ class ForwardModel:
             # normalised so that d* = 1 at x = x0 for the geometric-mean screen: ln_A0 is
             # then the rate at x0 for a typical screen, which decorrelates it from n_screen
             ref = float(np.exp(np.log(self.data.process[self.spec.screen_column].to_numpy(float)).mean())) * 1e-3
-            z = self.cond_param(p, "n_screen")[:, :, None] * (self._logx[None, None, :] + np.log(ref / screen)[None, :, None])
-            return np.exp(-np.clip(z, -600.0, 600.0))
+            return screen_power_discharge(self.x, self.cond_param(p, "n_screen"), self.spec.x0_m * screen / ref)
         d50 = np.exp(p["ln_c50"])[:, None] * screen[None, :]
-        sharp = np.exp(p["ln_sharp"])[:, None, None]
-        z = sharp * (np.log(self.x)[None, None, :] - np.log(d50)[:, :, None])
-        return 1.0 / (1.0 + np.exp(np.minimum(z, 600.0)))
+        return screen_discharge(self.x, d50, np.exp(p["ln_sharp"])[:, None])
 
     def predict_grid(self, theta):
         """Mass fractions (P, G, N) on the grid for every sample group."""
@@ -499,10 +516,10 @@ class ForwardModel:
         out = np.empty((n_pop, len(self.groups), self.n))
         if mode == "well_mixed":
             d = self.discharge(p, n_pop)
-            s_eff = S * tau[None, :, None] / d / self.spec.n_tanks
+            b_pc = b if b.ndim == 4 else b[:, None]
             prod = self._feeds
-            for _ in range(self.spec.n_tanks):  # equal well-mixed tanks in series, tau/n each
-                prod = _well_mixed(s_eff, b, prod)
+            for _ in range(self.spec.n_tanks):  # equal well-mixed tanks in series, tau/n each (eq. 3)
+                prod = well_mixed_population(S, b_pc, prod, tau[None, :] / self.spec.n_tanks, d)
             for g, (c, loc, _) in enumerate(self.groups):
                 if loc == "holdup":
                     m = prod[:, c] / d[:, c]
@@ -516,7 +533,8 @@ class ForwardModel:
             for c in range(len(self.conditions)):
                 gsel = [g for g, grp in enumerate(self.groups) if grp[0] == c]
                 t = np.array([self.groups[g][2] for g in gsel]) if mode == "batch" else np.full(len(gsel), tau[c])
-                out[:, gsel] = _batch(S[:, c], b[:, c] if b.ndim == 4 else b, self._feeds[c], t)
+                # eq. 4 by the core's population solve: exact also for nearly equal rates
+                out[:, gsel] = batch_grind_population(S[:, c], b[:, c] if b.ndim == 4 else b, self._feeds[c], t)
         return out
 
     def _predict_mill(self, S, b, d, tau, out):
@@ -529,7 +547,9 @@ class ForwardModel:
             gsel = [g for g, grp in enumerate(self.groups) if grp[0] == c]
             locs = [self.groups[g][1] for g in gsel]
             only_product = all(loc == "product" for loc in locs)
-            specs = [loc_of.get(loc) or "cell:" + loc[5:] for loc in locs]
+            specs = [loc_of.get(loc, loc) for loc in locs]
+            zs = sorted({float(loc[2:]) for loc in locs if loc.startswith("z:")})
+            kw = {"positions": zs} if zs else {}
             for k in range(S.shape[0]):
                 Sk = S[k, c]
                 bk = b[k, c] if b.ndim == 4 else b[k]
@@ -540,7 +560,7 @@ class ForwardModel:
                 if only_product:
                     out[k, gsel] = Mill(Sk, bk, tr, dk, spec.where).product(self._feeds[c])
                 else:
-                    ds = steady_mill(Sk, bk, self._feeds[c], tr, dk, where=spec.where, locations=specs)
+                    ds = steady_mill(Sk, bk, self._feeds[c], tr, dk, where=spec.where, locations=specs, **kw)
                     vals = ds["sample"].values
                     for r, (g, loc) in enumerate(zip(gsel, locs)):
                         out[k, g] = ds["product"].values if loc == "product" else vals[r]
@@ -549,7 +569,8 @@ class ForwardModel:
         """Cumulative passing of the grid solution, interpolated to every measured row; (P, rows)."""
         M = self.predict_grid(theta)
         P = np.cumsum(M[..., ::-1], axis=-1)[..., ::-1]
-        return P.reshape(P.shape[0], -1) @ self._W.T + self._const
+        flat = P.reshape(P.shape[0], -1)
+        return flat[:, self._i1] * self._w1 + flat[:, self._i2] * self._w2 + self._const
 
     def predict(self, theta):
         theta = np.asarray(theta, dtype=float)
@@ -575,63 +596,3 @@ class ForwardModel:
     def __repr__(self):
         return (f"ForwardModel({self.spec.label()}, {len(self.conditions)} conditions, {self.n_data} values, "
                 f"grid {self.n} classes)")
-
-
-def _well_mixed(s, b, feeds):
-    """Eq. 3 for a population: (I - K(s)) p = f with K = (b - I) diag(s), s = tau S / d*.
-
-    s (P, C, N), b (P, N, N) or (P, C, N, N), feeds (C, N) -> products (P, C, N). Forward substitution
-    vectorised over population and conditions: p_i = (f_i + sum_j b_ij s_j p_j)/(1 + s_i);
-    every term is non-negative, so nothing cancels.
-    """
-    n_pop, C, N = s.shape
-    f = np.broadcast_to(feeds, (n_pop, C, N))
-    q = np.zeros((n_pop, C, N))
-    p = np.empty((n_pop, C, N))
-    for i in range(N):
-        if i == 0:
-            acc = f[:, :, 0]
-        elif b.ndim == 4:
-            acc = f[:, :, i] + np.einsum("pcj,pcj->pc", b[:, :, i, :i], q[:, :, :i])
-        else:
-            acc = f[:, :, i] + np.einsum("pj,pcj->pc", b[:, i, :i], q[:, :, :i])
-        p[:, :, i] = acc / (1.0 + s[:, :, i])
-        q[:, :, i] = s[:, :, i] * p[:, :, i]
-    return p
-
-
-_CANCEL_TOL = 1e-8
-
-
-def _batch(S, b, feed, t):
-    """exp(K t) feed for a population: S (P, N), b (P, N, N), feed (N,), t (T,) -> (P, T, N).
-
-    Eigenvectors of A = -K for distinct rates by the stable row recurrence of
-    :mod:`millflow.linalg`, vectorised over the population; members whose rounding
-    estimate eps |X| |X^-1 f| exceeds 1e-8 (close rates) are recomputed one by one by
-    the exact clustered method (:func:`millflow.batch.batch_grind`).
-    """
-    n_pop, N = S.shape
-    A = -b * S[:, None, :]
-    X = np.broadcast_to(np.eye(N), (n_pop, N, N)).copy()
-    with np.errstate(divide="ignore", invalid="ignore", over="ignore"):
-        for i in range(1, N):
-            r = np.matmul(A[:, i:i + 1, :i], X[:, :i, :i])[:, 0]
-            X[:, i, :i] = r / (S[:, :i] - S[:, i:i + 1])
-        w = np.linalg.solve(X, np.broadcast_to(feed, (n_pop, N))[:, :, None])[:, :, 0]
-        E = np.exp(-S[:, None, :] * t[None, :, None]) * w[:, None, :]
-        M = np.matmul(E, X.transpose(0, 2, 1))
-        bad = ~np.isfinite(M).all(axis=(1, 2))
-        cancel = np.finfo(float).eps * np.matmul(np.abs(X), np.abs(w)[:, :, None])[:, :, 0].max(axis=1)
-    bad |= ~(cancel <= _CANCEL_TOL)
-    invalid = ~(np.isfinite(b).all(axis=(1, 2)) & np.isfinite(S).all(axis=1))
-    M[invalid] = np.nan  # parameters outside the model's domain: reported, not solved
-    bad &= ~invalid
-    if bad.any():
-        from millflow.batch import batch_grind
-        for k in np.flatnonzero(bad):
-            try:
-                M[k] = batch_grind(S[k], b[k], feed, t)
-            except Exception as exc:  # noqa: BLE001 - reported as a solver failure
-                raise SolverError(f"batch solve failed for a parameter vector: {exc}") from exc
-    return M

@@ -24,7 +24,7 @@ is solved exactly class by class: N solves with the banded n x n matrix
 S_i I - T^i, a column-diagonally dominant M-matrix (no pivoting happens, the solution
 stays non-negative). A chain of cells without back-mixing (tanks in series) is solved
 cell by cell instead: each cell is eq. (3) with tau_k = V_k / Q, one lower-triangular
-solve per cell (:func:`millflow.linalg.solve_well_mixed`).
+solve per cell (:func:`millflow.mill.well_mixed.solve_well_mixed`).
 """
 from __future__ import annotations
 

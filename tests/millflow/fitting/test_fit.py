@@ -19,7 +19,7 @@ from millflow.fitting.estimate import compare_models, fit
 from millflow.fitting.models import ForwardModel, ModelSpec, Parameter, default_parameters
 from millflow.fitting.statistics import f_test, information_criteria, jacobian, parameter_statistics
 from millflow.grid import SizeGrid
-from millflow.linalg import solve_well_mixed
+from millflow.mill.well_mixed import solve_well_mixed
 
 
 # ----------------------------------------------------------------------------- data

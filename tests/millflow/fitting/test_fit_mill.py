@@ -58,19 +58,39 @@ def test_mill_mode_equals_well_mixed_and_tanks(cls):
 
 
 def test_mill_mode_cell_samples():
-    """Without classification the last of n tanks holds what it discharges: cell_n = product."""
-    d = _data(["c1"], ["cell_1", "cell_3", "product"], PROC)
+    """Without classification the last of n tanks holds what it discharges: cell:n = product.
+    Locations are spelled as steady_mill reads them (cell:K); the old cell_K is an alias."""
+    d = _data(["c1"], ["cell:1", "cell_3", "product"], PROC)
     m = ForwardModel(ModelSpec(mode="mill", transport="tanks_in_series", transport_params={"n": 3},
                                tau_column="tau_s"), d, GRID)
     M = m.predict_grid(np.array([-3.5, 1.0, 0.4, 0.8, 3.0]))[0]
     g = {loc: k for k, (_, loc, _) in enumerate(m.groups)}
-    np.testing.assert_allclose(M[g["cell_3"]], M[g["product"]], atol=1e-12)
-    assert M[g["cell_1"]][0] > M[g["cell_3"]][0]  # coarser near the feed end
-    with pytest.raises(InputError, match="cell_4.*'product', 'holdup' or 'cell_K' \\(K = 1..3\\)"):
-        ForwardModel(m.spec, _data(["c1"], ["cell_4"], PROC), GRID)
-    with pytest.raises(InputError, match="predicts 'product', 'holdup'$"):
+    assert set(g) == {"cell:1", "cell:3", "product"}
+    np.testing.assert_allclose(M[g["cell:3"]], M[g["product"]], atol=1e-12)
+    assert M[g["cell:1"]][0] > M[g["cell:3"]][0]  # coarser near the feed end
+    with pytest.raises(InputError, match="cell:4.*'product', 'holdup' or 'cell:K' \\(K = 1..3\\)"):
+        ForwardModel(m.spec, _data(["c1"], ["cell:4"], PROC), GRID)
+    with pytest.raises(InputError, match="predicts 'product', 'holdup' or 'z:Y' \\(0 <= Y <= 1\\)$"):
         ForwardModel(ModelSpec(mode="mill", transport="axial_dispersion", transport_params={"pe": 5}),
-                     _data(["c1"], ["cell_1"], PROC), GRID)
+                     _data(["c1"], ["cell:1"], PROC), GRID)
+
+
+def test_mill_mode_axial_samples_match_steady_mill():
+    """Samples at axial positions z:Y are predicted by steady_mill's profile (issue 15 §3)."""
+    import rtd
+    from millflow.breakage import NormalizedBreakage, PowerLawRate
+    from millflow.mill import steady_mill
+    d = _data(["c1"], ["z:0.5", "product"], PROC)
+    m = ForwardModel(ModelSpec(mode="mill", transport="plug_flow", tau_column="tau_s"), d, GRID)
+    theta = np.array([-3.5, 1.0, 0.4, 0.8, 3.0])
+    M = m.predict_grid(theta)[0]
+    g = {loc: k for k, (_, loc, _) in enumerate(m.groups)}
+    x = m.grid.x
+    tau = float(m._proc["tau_s"][0])
+    ds = steady_mill(PowerLawRate(np.exp(-3.5), 1.0)(x), NormalizedBreakage(0.4, 0.8, 3.0)(x), m._feeds[0],
+                     rtd.PlugFlow(tau), positions=[0.5], locations=["z:0.5"])
+    np.testing.assert_allclose(M[g["z:0.5"]], ds["sample"].values[0], rtol=0, atol=1e-12)  # same solver
+    assert M[g["z:0.5"]][0] > M[g["product"]][0]  # coarser halfway along
 
 
 def test_mill_mode_names_are_validated():
