@@ -23,7 +23,7 @@ from millflow.flowsheet.graph import Flowsheet, Stream
 from millflow.flowsheet.units import (TRANSPORTS, UNIT_TYPES, Classifier, Feed, Mill, Mixer,
                                       Product, Splitter)
 from millflow.grid import SizeGrid
-from millflow.psd import from_sieves
+from millflow.psd import from_distribution, from_sieves, gates_gaudin_schuhmann, rosin_rammler
 
 __all__ = ["load", "loads", "from_dict", "DIMENSIONS"]
 
@@ -185,20 +185,22 @@ def _feed_psd(t: _Table, grid: SizeGrid) -> np.ndarray:
             t.finish("form, x63_um, n")
             if n <= 0:
                 raise InputError(f"{t.where}.n = {n!r}: expected > 0")
-            P = -np.expm1(-(grid.x / x63) ** n)
+
+            def cdf(x):
+                return rosin_rammler(x, x63, n)
         else:
             xmax = t.quantity("xmax", "length")
             m = t.plain("m", kind=float)
             t.finish("form, xmax_um, m")
             if m <= 0:
                 raise InputError(f"{t.where}.m = {m!r}: expected > 0")
-            P = np.minimum(grid.x / xmax, 1.0) ** m
-        if P[0] < 1 - 1e-4:
-            raise GridError(f"{t.where}: the size grid does not cover the feed: {100 * (1 - P[0]):.3g} % of it is "
-                            f"coarser than grid.top = {grid.x[0] * 1e6:.6g} um (at most 0.01 % is lumped into "
-                            "class 1); raise grid.top_um")
-        P = P / P[0]  # the <= 0.01 % above the top edge is lumped into class 1
-        return from_sieves(grid.x, P, grid) if grid.n >= 2 else np.ones(1)
+
+            def cdf(x):
+                return gates_gaudin_schuhmann(x, xmax, m)
+        try:  # at most 0.01 % above the top edge is lumped into class 1 (psd.from_distribution)
+            return from_distribution(grid, cdf, where=t.where)
+        except GridError as exc:
+            raise GridError(str(exc).replace("does not cover the PSD", "does not cover the feed")) from exc
     raise InputError(f"{t.where}.form = {form!r}: unknown feed PSD form; valid: ggs, rosin_rammler, sieves")
 
 
