@@ -20,7 +20,7 @@ from millflow.breakage import AustinRate, NonNormalizedBreakage, NormalizedBreak
 from millflow.classifiers import CURVES
 from millflow.errors import GridError, InputError, MillflowError
 from millflow.flowsheet.graph import Flowsheet, Stream
-from millflow.flowsheet.units import (TRANSPORTS, UNIT_TYPES, Classifier, Feed, Mill, Mixer,
+from millflow.flowsheet.units import (TRANSPORTS, UNIT_TYPES, Classifier, Feed, MillUnit, Mixer,
                                       Product, Splitter)
 from millflow.grid import SizeGrid
 from millflow.psd import from_distribution, from_sieves, gates_gaudin_schuhmann, rosin_rammler
@@ -267,7 +267,7 @@ def _curve_params(t: _Table, curve: str, skip=()) -> dict:
 
 
 # --------------------------------------------------------------- units
-def _mill(name: str, t: _Table, materials: dict) -> Mill:
+def _mill(name: str, t: _Table, materials: dict) -> MillUnit:
     """A mill table: breakage from its material (or its own), transport, tau or hold-up."""
     mat_name = t.plain("material", None, kind=str)
     mat = {}
@@ -320,7 +320,7 @@ def _mill(name: str, t: _Table, materials: dict) -> Mill:
     t.finish("type, material, rate, breakage, transport, tau_min, holdup_t, power_kW, classification, "
              "or by dimensions: diameter_m, length_m, ball_filling, critical_speed_fraction, ball_size_mm, ... "
              "(docs/scaleup.md)")
-    unit = _wrap(f"units.{name}", Mill, name, rate, brk, model, tparams, tau, holdup, cls, power)
+    unit = _wrap(f"units.{name}", MillUnit, name, rate, brk, model, tparams, tau, holdup, cls, power)
     _wrap(f"units.{name}", TRANSPORTS[model], tau or 1.0, **tparams)
     return unit
 
