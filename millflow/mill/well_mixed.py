@@ -21,18 +21,18 @@ from millflow.linalg import breakage_matrix
 __all__ = ["solve_well_mixed", "well_mixed_population", "well_mixed_population_geometric"]
 
 
-def solve_well_mixed(S, b, feed, tau: float, d_star=None) -> np.ndarray:
+def solve_well_mixed(S, b, feed, tau: float, d=None) -> np.ndarray:
     """Product of a perfectly mixed mill at steady state, eq. 3, by one triangular solve.
 
     Parameters
     ----------
     S : (N,) rates [1/s]; b : (N, N) fractional breakage distribution;
     feed : (N,) or (N, m) feed flows (any unit; the product has the same unit);
-    tau : mean residence time [s]; d_star : (N,) normalised discharge rates
+    tau : mean residence time [s]; d : (N,) normalised discharge rates
         d_i* = tau d_i (> 0), None for no classification (all ones).
     """
     S = np.asarray(S, dtype=float)
-    scaled = S if d_star is None else S / np.asarray(d_star, dtype=float)
+    scaled = S if d is None else S / np.asarray(d, dtype=float)
     M = np.eye(S.size) - tau * breakage_matrix(scaled, b)
     p, info = dtrtrs(M, np.asarray(feed, dtype=float), lower=1)
     if info > 0:
@@ -40,7 +40,7 @@ def solve_well_mixed(S, b, feed, tau: float, d_star=None) -> np.ndarray:
     return p
 
 
-def well_mixed_population(S, b, feed, tau=1.0, d_star=None) -> np.ndarray:
+def well_mixed_population(S, b, feed, tau=1.0, d=None) -> np.ndarray:
     """Eq. 3 for a population of parameter sets (and conditions) at once: (*L, N).
 
     Parameters
@@ -50,7 +50,7 @@ def well_mixed_population(S, b, feed, tau=1.0, d_star=None) -> np.ndarray:
         the members' b is shared by the conditions, or (N, N) for one b);
     feed : (*Lf, N) feed flows, broadcasting against L (e.g. (C, N));
     tau : mean residence time [s], a scalar or broadcasting against L;
-    d_star : (*Ld, N) normalised discharge d_i*, None for all ones.
+    d : (*Ld, N) normalised discharge d_i*, None for all ones.
 
     Forward substitution p_i = (f_i + sum_{j<i} b_ij s_j p_j) / (1 + s_i), s = tau S/d*,
     vectorised over the leading axes: the same arithmetic as :func:`solve_well_mixed`,
@@ -61,8 +61,8 @@ def well_mixed_population(S, b, feed, tau=1.0, d_star=None) -> np.ndarray:
     b = np.asarray(b, dtype=float)
     tau = np.asarray(tau, dtype=float)
     s = S * tau[..., np.newaxis] if tau.ndim else S * float(tau)
-    if d_star is not None:
-        s = s / np.asarray(d_star, dtype=float)
+    if d is not None:
+        s = s / np.asarray(d, dtype=float)
     n = s.shape[-1]
     f = np.asarray(feed, dtype=float)
     lead = np.broadcast_shapes(s.shape[:-1], f.shape[:-1], b.shape[:-2])
