@@ -100,7 +100,7 @@ def _substitute_shared(s, b, f):
     return np.swapaxes(p, -1, -2)
 
 
-def well_mixed_population_geometric(S, feed, phi, gamma, beta, ratio: float, tau=1.0, d_star=None) -> np.ndarray:
+def well_mixed_population_geometric(S, feed, phi, gamma, beta, ratio: float, tau=1.0, d=None) -> np.ndarray:
     """Eq. 3 with the eq. 6 breakage of a geometric grid, in O(N) per member: (*L, N).
 
     On a grid with a fixed ratio R = x_k/x_{k+1} the eq. 6 distribution depends on
@@ -119,13 +119,13 @@ def well_mixed_population_geometric(S, feed, phi, gamma, beta, ratio: float, tau
     ----------
     S : (*L, N) rates [1/s]; feed : (*Lf, N) feed flows; phi, gamma, beta : eq. 6
         parameters broadcasting to L (phi = 1 for B = r^gamma); ratio : the grid's
-        ratio x_k/x_{k+1} (> 1); tau, d_star : as :func:`well_mixed_population`.
+        ratio x_k/x_{k+1} (> 1); tau, d : as :func:`well_mixed_population`.
     """
     S = np.asarray(S, dtype=float)
     tau = np.asarray(tau, dtype=float)
     s = S * tau[..., np.newaxis] if tau.ndim else S * float(tau)
-    if d_star is not None:
-        s = s / np.asarray(d_star, dtype=float)
+    if d is not None:
+        s = s / np.asarray(d, dtype=float)
     n = s.shape[-1]
     f = np.asarray(feed, dtype=float)
     phi, gamma, beta = (np.asarray(v, dtype=float) for v in (phi, gamma, beta))
