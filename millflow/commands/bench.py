@@ -40,8 +40,10 @@ def suite_names() -> list[str]:
 
 
 def load_suite(name: str):
-    """Import suite ``name``; an unknown name raises InputError listing the valid ones."""
+    """Import suite ``name``; an unknown name raises InputError listing the valid ones.
+    A hyphen stands for the module's underscore (``model-error`` is ``model_error``)."""
     names = suite_names()
+    name = name.replace("-", "_")
     if name not in names:
         raise InputError(f"benchmark suite {name!r} is unknown; expected one of: {', '.join(names)}")
     return importlib.import_module(f"millflow.bench.{name}")

@@ -7,10 +7,11 @@ benchmark.
 """
 from millflow.falsify.design import Design, batch_design, continuous_design
 from millflow.falsify.noise import AR1Noise, GaussianNoise
+from millflow.falsify.nonlinear_truths import AggregationTruth, PopulationTruth
 from millflow.falsify.study import StudyResult, lag1, runs_test, study
 from millflow.falsify.truths import (BREAKAGE_TRUTH, CallableTruth, LinearTruth, SlowingDownTruth, Truth,
                                      classification_truth, rtd_truth)
 
 __all__ = ["Design", "batch_design", "continuous_design", "GaussianNoise", "AR1Noise", "study", "StudyResult",
            "runs_test", "lag1", "Truth", "LinearTruth", "SlowingDownTruth", "CallableTruth", "rtd_truth",
-           "classification_truth", "BREAKAGE_TRUTH"]
+           "classification_truth", "BREAKAGE_TRUTH", "AggregationTruth", "PopulationTruth"]

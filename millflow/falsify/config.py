@@ -9,7 +9,11 @@ drift_replicates = 10    # replicates refitted on short and long halves
 
 [truth]
 type = "tanks_in_series" # tanks_in_series | axial_dispersion | recirculating_cells |
-                         # classification | slowing_down | assumed (no model error)
+                         # classification | slowing_down | aggregation | population |
+                         # assumed (no model error)
+# aggregation: strength = beta0 [1/s]; kernel = "constant" (sum, product, shear);
+#   x_ref_um = reference size of the kernel's volumes (default the finest sieve)
+# population: strength = cushioning exponent; fines_um (default the middle sieve)
 strengths = [1, 2, 3, 5] # or strength = 3; n cells, Pe, n_screen, slowing-down s
 r = 1.0                  # recirculating_cells back-flow ratio
 [truth.params]           # breakage parameters of the truth (default BREAKAGE_TRUTH)
@@ -47,6 +51,7 @@ from dataclasses import dataclass
 from millflow.errors import InputError
 from millflow.falsify.design import batch_design, continuous_design
 from millflow.falsify.noise import make_noise
+from millflow.falsify.nonlinear_truths import AggregationTruth, PopulationTruth
 from millflow.falsify.study import study_parameters
 from millflow.falsify.truths import BREAKAGE_TRUTH, LinearTruth, SlowingDownTruth, classification_truth, rtd_truth
 from millflow.fitting.models import ModelSpec
@@ -54,11 +59,12 @@ from millflow.fitting.models import ModelSpec
 __all__ = ["StudyConfig", "load_config", "parse_config", "TRUTH_TYPES"]
 
 TRUTH_TYPES = ("tanks_in_series", "axial_dispersion", "recirculating_cells", "classification", "slowing_down",
-               "assumed")
+               "aggregation", "population", "assumed")
 _NUM = (int, float)
 _TOP = {"replicates": int, "seed": int, "workers": int, "drift_replicates": int,
         "truth": dict, "assumed": dict, "design": dict, "noise": dict, "fit": dict}
-_TRUTH = {"type": str, "strength": _NUM, "strengths": list, "r": _NUM, "params": dict, "n_screen": _NUM}
+_TRUTH = {"type": str, "strength": _NUM, "strengths": list, "r": _NUM, "params": dict, "n_screen": _NUM,
+          "kernel": str, "x_ref_um": _NUM, "fines_um": _NUM}
 _ASSUMED = {"mode": str, "rate": str, "breakage": str, "classification": str, "n_tanks": int, "transport": str,
             "transport_params": dict, "where": str, "params": dict}
 _DESIGN = {"tau_s": list, "tau_min": list, "times_s": list, "times_min": list, "top_size_um": _NUM,
@@ -199,6 +205,11 @@ def parse_config(raw: dict, src: str = "<config>") -> StudyConfig:
         raise InputError(f"{src}: truth.type = {ttype!r} needs a continuous design (design.tau_s or tau_min)")
     if ttype == "slowing_down" and not design.is_batch:
         raise InputError(f"{src}: truth.type = 'slowing_down' needs a batch design (design.times_s or times_min)")
+    for key, only in (("kernel", "aggregation"), ("x_ref_um", "aggregation"), ("fines_um", "population")):
+        if key in tr and ttype != only:
+            raise InputError(f"{src}: truth.{key} is only for truth.type = {only!r}")
+        if key.endswith("_um") and key in tr and tr[key] <= 0:
+            raise InputError(f"{src}: truth.{key} = {tr[key]!r}: expected a size > 0 [um]")
     if "n_screen" in tr:
         screens = {"screen_mm": [1.0] * len(design.conditions)}
         design = continuous_design(list(dict(design.process)["tau_s"]), extra_process=screens, **kw)
@@ -223,6 +234,13 @@ def _truth_factory(ttype, tparams, tr, assumed, src):
         return lambda s: classification_truth(s, tparams)
     if ttype == "slowing_down":
         return lambda s: SlowingDownTruth(s, tparams)
+    if ttype == "aggregation":
+        kernel = tr.get("kernel", "constant")
+        x_ref = float(tr["x_ref_um"]) * 1e-6 if "x_ref_um" in tr else None
+        return lambda s: AggregationTruth(s, tparams, kernel=kernel, x_ref_m=x_ref)
+    if ttype == "population":
+        fines = float(tr["fines_um"]) * 1e-6 if "fines_um" in tr else None
+        return lambda s: PopulationTruth(s, tparams, fines_m=fines)
     missing = [n for n in assumed.param_names if n not in tparams]
     if missing:
         raise InputError(f"{src}: truth.type = 'assumed' needs truth.params {missing}")

@@ -39,7 +39,7 @@ def _cfg(tmp_path, text=BASE, name="c.toml"):
 @pytest.mark.parametrize("edit, match", [
     (("replicates = 2", "replicates = 2\ncolour = 1"), "unknown key colour"),
     (("sigma = 0.01", "sigma = \"0.01\""), r"noise.sigma = '0.01': expected int or float"),
-    (("type = \"tanks_in_series\"", "type = \"aggregation\""), "truth.type = 'aggregation'"),
+    (("type = \"tanks_in_series\"", "type = \"coagulation\""), "truth.type = 'coagulation'"),
     (("strengths = [1, 3]", "strengths = [1, 2.5]"), "integer >= 1"),
     (("strengths = [1, 3]", "strength = 1\nstrengths = [1, 3]"), "not both"),
     (("tau_s = [30, 120, 480]", "times_s = [30, 120, 480]"), "assumed.mode = 'well_mixed' needs design.tau_s"),

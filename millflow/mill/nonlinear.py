@@ -1,0 +1,359 @@
+"""Continuous mills with non-linear kinetics (aggregation, population-dependent rates):
+the steady product of eq. 3 with R(M) of :mod:`millflow.nonlinear.kinetics` in place of
+the linear K M. No classification inside the mill (d* = 1): the hold-up composition is
+then the local mass fraction everywhere.
+
+- perfect mixing:   0 = f - M + tau R(M), by Newton with the analytic Jacobian
+  -I + tau dR/dM, backtracking line search, and pseudo-transient continuation
+  ((I/dt - J) dM = F, dt grown by the residual ratio) if Newton stalls;
+- tanks in series:  one cell at a time, cell k at tau/n fed by cell k - 1;
+- plug flow:        the batch ODE in contact time, product M(tau);
+- axial dispersion: the steady convection-dispersion-reaction equation with Danckwerts
+  boundaries, discretised exactly as :mod:`millflow.mill.axial` (vertex-centred volumes,
+  exponential fitting), all nodes solved together by Newton with the sparse block-
+  tridiagonal Jacobian;
+- micromixing limits for any RTD model with ``pdf``/``cdf``: complete segregation,
+  int_0^inf E(t) M_batch(t) dt, and maximum mixedness (Zwietering 1959),
+  dM/dlambda = -R(M) + h(lambda) (M - f), h = E/(1 - F), integrated from large lambda
+  (where M solves the same equation with dM/dlambda = 0) down to lambda = 0, product M(0).
+  For first-order kinetics the two coincide (the RTD fixes the product, segregated flow
+  is exact); then one linear answer is returned and the result says so.
+
+A linear scene (nothing non-linear declared) takes the exact linear path of
+:mod:`millflow.linalg` / :mod:`millflow.mill` with nothing added. A steady solve that
+does not reach its tolerance raises SolverError naming the unit and the residual.
+The state carries the aggregation overflow (mass above the top class) as component N + 1:
+it leaves with the product and is reported as ``overflow_mass``.
+"""
+from __future__ import annotations
+
+import math
+import time
+from dataclasses import dataclass, field
+
+import numpy as np
+import scipy.linalg
+import scipy.sparse
+import scipy.sparse.linalg
+from scipy import special
+from scipy.integrate import quad_vec, solve_ivp
+
+from millflow import checks
+from millflow.errors import InputError, SolverError
+from millflow.linalg import solve_well_mixed
+from millflow.mill.axial import _bernoulli, solve_axial_grid
+from millflow.nonlinear.batch import batch_nonlinear
+from millflow.nonlinear.kinetics import Kinetics
+
+__all__ = ["NonlinearSteady", "MicromixingBounds", "well_mixed", "tanks_in_series", "plug_flow", "axial_dispersion",
+           "micromixing_bounds"]
+
+
+@dataclass(frozen=True)
+class NonlinearSteady:
+    """Steady product (mass flows per unit feed rate, sum = sum(feed) - overflow) with the
+    diagnostics of the solve: ``residual`` max |F| at the answer, ``error_estimate`` the
+    size of the next Newton step (or the ODE's estimate), ``iterations``."""
+
+    product: np.ndarray
+    overflow_mass: float
+    method: str
+    residual: float
+    error_estimate: float
+    mass_balance_error: float
+    iterations: int
+    runtime_s: float
+    info: dict = field(default_factory=dict)
+
+
+def _check(kin: Kinetics, feed, tau):
+    if not isinstance(kin, Kinetics):
+        raise InputError(f"kinetics: expected millflow.nonlinear.Kinetics, got {type(kin).__name__}")
+    feed = checks.class_vector(feed, kin.n, "feed", "mass flow")
+    if not (isinstance(tau, (int, float)) and math.isfinite(tau) and tau > 0):
+        raise InputError(f"tau = {tau!r}: expected a mean residence time > 0 [s]")
+    return feed, float(tau)
+
+
+def _newton_cell(kin: Kinetics, y_in, tau, y0, *, tol, max_iter, unit):
+    """Solve F(y) = y_in - y + tau R(y) = 0; returns (y, residual, step, iterations, how)."""
+    n1 = y_in.size
+    eye = np.eye(n1)
+
+    def F(y):
+        return y_in - y + tau * kin.rate(y)
+
+    def safe_F(y):
+        try:
+            return F(y)
+        except SolverError:  # e.g. Phi undefined at a trial point: a failed trial, not a failed solve
+            return None
+
+    y = y0.copy()
+    f = F(y)
+    res = float(np.abs(f).max())
+    its = 0
+    how = "newton"
+    lu = None
+    for phase in ("newton", "pseudo-transient", "newton"):
+        dt = 0.1 * tau
+        stalled = False
+        while res > tol and its < max_iter:
+            its += 1
+            J = -eye + tau * kin.jacobian(y)
+            if phase == "newton":
+                lu = scipy.linalg.lu_factor(J, check_finite=False)
+                dy = scipy.linalg.lu_solve(lu, -f, check_finite=False)
+                lam, accepted = 1.0, False
+                while lam >= 1.0 / 256:
+                    yt = y + lam * dy
+                    ft = safe_F(yt)
+                    if ft is not None and np.abs(ft).max() <= (1.0 - 1e-4 * lam) * res:
+                        accepted = True
+                        break
+                    lam *= 0.5
+                if not accepted:
+                    stalled = True
+                    break
+            else:
+                dy = np.linalg.solve(eye / dt - J, f)
+                yt = y + dy
+                ft = safe_F(yt)
+                if ft is None or not np.isfinite(ft).all():
+                    dt *= 0.25
+                    continue
+                dt *= min(10.0, max(0.5, res / max(float(np.abs(ft).max()), 1e-300)))
+                if float(np.abs(ft).max()) < 1e-6:
+                    y, f, res = yt, ft, float(np.abs(ft).max())
+                    break
+            y, f, res = yt, ft, float(np.abs(ft).max())
+        if res <= tol:
+            break
+        if phase == "newton" and not stalled and its >= max_iter:
+            break
+        how = "newton + pseudo-transient"
+    if res > tol or not np.isfinite(res):
+        raise SolverError(f"{unit}: the steady state did not converge: residual max|f - M + tau R(M)| = {res:.3g} "
+                          f"> tol {tol:g} after {its} iterations ({kin.describe()})")
+    if lu is None:
+        lu = scipy.linalg.lu_factor(-eye + tau * kin.jacobian(y), check_finite=False)
+    step = float(np.abs(scipy.linalg.lu_solve(lu, -f, check_finite=False)).max())
+    return y, res, step, its, how
+
+
+def well_mixed(kin: Kinetics, feed, tau: float, *, tol: float = 1e-12, max_iter: int = 60,
+               unit: str = "perfectly mixed mill") -> NonlinearSteady:
+    """Steady product of a perfectly mixed mill with non-linear kinetics (eq. 3 + R(M))."""
+    feed, tau = _check(kin, feed, tau)
+    start = time.perf_counter()
+    lin = solve_well_mixed(kin.S, kin.b, feed, tau)
+    if kin.is_linear:
+        return NonlinearSteady(lin, 0.0, "exact linear (eq. 3)", 0.0, float(np.finfo(float).eps * feed.sum() * kin.n),
+                               float(abs(lin.sum() - feed.sum())), 0, time.perf_counter() - start,
+                               {"kinetics": "linear"})
+    y_in = np.append(feed, 0.0)
+    y, res, step, its, how = _newton_cell(kin, y_in, tau, np.append(np.maximum(lin, 0.0), 0.0), tol=tol,
+                                          max_iter=max_iter, unit=unit)
+    return NonlinearSteady(y[:-1], float(y[-1]), how, res, step, float(abs(y.sum() - feed.sum())), its,
+                           time.perf_counter() - start, {"kinetics": kin.describe()})
+
+
+def tanks_in_series(kin: Kinetics, feed, tau: float, n: int, *, tol: float = 1e-12, max_iter: int = 60
+                    ) -> NonlinearSteady:
+    """n equal perfect mixers in series (total mean residence time tau), one cell at a time."""
+    feed, tau = _check(kin, feed, tau)
+    if int(n) != n or n < 1:
+        raise InputError(f"n = {n!r}: expected an integer number of tanks >= 1")
+    start = time.perf_counter()
+    if kin.is_linear:
+        p = feed
+        for _ in range(int(n)):
+            p = solve_well_mixed(kin.S, kin.b, p, tau / n)
+        return NonlinearSteady(p, 0.0, "exact linear (cells)", 0.0, float(np.finfo(float).eps * kin.n * n),
+                               float(abs(p.sum() - feed.sum())), 0, time.perf_counter() - start,
+                               {"kinetics": "linear"})
+    y = np.append(feed, 0.0)
+    its, res, step, cells = 0, 0.0, 0.0, []
+    for k in range(int(n)):
+        guess = np.append(np.maximum(solve_well_mixed(kin.S, kin.b, y[:-1], tau / n), 0.0), y[-1])
+        y, r, s, i, how = _newton_cell(kin, y, tau / n, guess, tol=tol, max_iter=max_iter,
+                                       unit=f"tanks in series, cell {k + 1} of {int(n)}")
+        its += i
+        res, step = max(res, r), max(step, s)
+        cells.append(y[:-1].copy())
+    return NonlinearSteady(y[:-1], float(y[-1]), f"cells ({how})", res, step, float(abs(y.sum() - feed.sum())), its,
+                           time.perf_counter() - start, {"kinetics": kin.describe(), "cells": np.array(cells)})
+
+
+def plug_flow(kin: Kinetics, feed, tau: float, *, rtol: float = 1e-8, atol: float = 1e-12) -> NonlinearSteady:
+    """Plug flow: the batch solve in contact time, product M(tau) (eq. 4 with t -> t*)."""
+    feed, tau = _check(kin, feed, tau)
+    res = batch_nonlinear(kin, feed, [tau], rtol=rtol, atol=atol)
+    return NonlinearSteady(res.M[0], float(res.overflow_mass[0]), f"plug flow ({res.method})", 0.0,
+                           res.error_estimate, res.mass_balance_error, int(res.info.get("nfev", 0)), res.runtime_s,
+                           {"kinetics": res.info["kinetics"]})
+
+
+def axial_dispersion(kin: Kinetics, feed, tau: float, pe: float, *, m_cells: int = 64, tol: float = 1e-12,
+                     max_iter: int = 40) -> NonlinearSteady:
+    """Axial dispersion (Peclet ``pe``), closed vessel, on ``m_cells`` volumes; Newton on
+    all nodes. The discretisation error is estimated against the grid of m_cells / 2."""
+    feed, tau = _check(kin, feed, tau)
+    if not (math.isfinite(pe) and pe > 0):
+        raise InputError(f"pe = {pe!r}: expected a Peclet number > 0")
+    if int(m_cells) != m_cells or m_cells < 4 or m_cells % 2:
+        raise InputError(f"m_cells = {m_cells!r}: expected an even integer >= 4")
+    start = time.perf_counter()
+    if kin.is_linear:
+        _, _, p = solve_axial_grid(kin.S, kin.b, feed, tau, pe, int(m_cells))
+        _, _, p2 = solve_axial_grid(kin.S, kin.b, feed, tau, pe, int(m_cells) // 2)
+        return NonlinearSteady(p, 0.0, "exact linear (axial grid)", 0.0, float(np.abs(p - p2).max()),
+                               float(abs(p.sum() - feed.sum())), 0, time.perf_counter() - start, {"kinetics": "linear"})
+    p, over, res, its = _axial_newton(kin, feed, tau, pe, int(m_cells), tol, max_iter)
+    p2, over2, _, _ = _axial_newton(kin, feed, tau, pe, int(m_cells) // 2, tol, max_iter)
+    err = float(max(np.abs(p - p2).max(), abs(over - over2)))
+    return NonlinearSteady(p, over, f"axial dispersion, {int(m_cells)} volumes, Newton", res, err,
+                           float(abs(p.sum() + over - feed.sum())), its, time.perf_counter() - start,
+                           {"kinetics": kin.describe(), "error": "|p(M) - p(M/2)|"})
+
+
+def _axial_newton(kin, feed, tau, pe, m, tol, max_iter):
+    n1 = kin.n + 1
+    h = 1.0 / m
+    wts = np.full(m + 1, h)
+    wts[[0, -1]] = 0.5 * h
+    D = 1.0 / pe
+    P = h / D
+    a = D / h * float(_bernoulli(np.array([-P]))[0])  # F_{k+1/2} = a c_k - bt c_{k+1}
+    bt = D / h * float(_bernoulli(np.array([P]))[0])
+    # linear transport part T (block tridiagonal with scalar blocks, same for every component)
+    main = np.full(m + 1, -(a + bt))
+    main[0] = -a
+    main[-1] = -bt - 1.0
+    T = scipy.sparse.diags([np.full(m, bt), main, np.full(m, a)], [1, 0, -1], format="csr")
+    Tbig = scipy.sparse.kron(T, scipy.sparse.identity(n1), format="csr")
+    src = np.zeros((m + 1, n1))
+    src[0, :-1] = feed
+    src = src.ravel()
+    _, c_lin, _ = solve_axial_grid(kin.S, kin.b, feed, tau, pe, m)
+    C = np.concatenate([np.maximum(c_lin, 0.0), np.zeros((m + 1, 1))], axis=1)
+
+    def F(C):
+        R = np.array([kin.rate(c) for c in C])
+        return Tbig @ C.ravel() + src + tau * (wts[:, None] * R).ravel()
+
+    f = F(C)
+    res = float(np.abs(f).max())
+    its = 0
+    while res > tol and its < max_iter:
+        its += 1
+        blocks = [tau * wts[k] * kin.jacobian(C[k]) for k in range(m + 1)]
+        J = Tbig + scipy.sparse.block_diag(blocks, format="csr")
+        dC = scipy.sparse.linalg.spsolve(J.tocsc(), -f).reshape(m + 1, n1)
+        lam = 1.0
+        while True:
+            try:
+                ft = F(C + lam * dC)
+                if np.abs(ft).max() <= (1.0 - 1e-4 * lam) * res or lam < 1.0 / 256:
+                    break
+            except SolverError:
+                pass
+            lam *= 0.5
+            if lam < 1.0 / 256:
+                ft = None
+                break
+        if ft is None:
+            break
+        C, f, res = C + lam * dC, ft, float(np.abs(ft).max())
+    if res > tol:
+        raise SolverError(f"axial dispersion mill: Newton did not converge: residual {res:.3g} > tol {tol:g} "
+                          f"after {its} iterations on {m} volumes ({kin.describe()})")
+    out = C[-1]  # product = v c(1) with v = 1
+    return out[:-1].copy(), float(out[-1]), res, its
+
+
+# ------------------------------------------------------------------ micromixing
+@dataclass(frozen=True)
+class MicromixingBounds:
+    """Products of the two micromixing limits for one RTD: ``segregated`` and
+    ``max_mixedness`` (N,), ``spread`` max |difference|, ``coincide`` True for linear
+    kinetics (then both are the one exact answer), ``note`` what the user should know."""
+
+    segregated: np.ndarray
+    max_mixedness: np.ndarray
+    spread: float
+    coincide: bool
+    note: str
+    error_estimate: float
+    runtime_s: float
+    info: dict = field(default_factory=dict)
+
+
+def _survival(model, t):
+    if type(model).__name__ == "TanksInSeries":
+        return special.gammaincc(model.n, model.n * np.maximum(t, 0) / model.tau)
+    if type(model).__name__ == "PerfectMixing":
+        return np.exp(-np.maximum(t, 0) / model.tau)
+    return 1.0 - np.asarray(model.cdf(t), float)
+
+
+def _horizon(model, eps=1e-13):
+    t = float(model.mean)
+    while float(np.asarray(_survival(model, t)).ravel()[0]) > eps:
+        t *= 1.5
+        if t > 1e6 * model.mean:
+            raise InputError(f"RTD {model!r}: the survival 1 - F(t) does not fall below {eps:g} by 1e6 mean times")
+    return t
+
+
+def micromixing_bounds(kin: Kinetics, feed, model, *, rtol: float = 1e-9, atol: float = 1e-13) -> MicromixingBounds:
+    """Both micromixing limits for the RTD ``model`` (an rtd model with pdf and cdf)."""
+    feed, _ = _check(kin, feed, float(getattr(model, "mean", 1.0)))
+    start = time.perf_counter()
+    if type(model).__name__ == "PlugFlow":
+        res = batch_nonlinear(kin, feed, [model.mean], rtol=rtol, atol=atol)
+        return MicromixingBounds(res.M[0], res.M[0], 0.0, True, "plug flow: no mixing at all, the two limits are "
+                                 "the same batch grind", res.error_estimate, time.perf_counter() - start)
+    if kin.is_linear:
+        from millflow.mill.segregated import segregated
+        p, _, err, _ = segregated(kin.S, kin.b, feed, model, holdup=False)
+        return MicromixingBounds(p, p, 0.0, True, "linear (first-order) kinetics: segregation and maximum mixedness "
+                                 "coincide, the RTD alone fixes the product; one exact answer is given",
+                                 float(err), time.perf_counter() - start)
+    t_max = _horizon(model)
+    y0 = np.append(feed, 0.0)
+    sol = solve_ivp(lambda _t, y: kin.rate(y), (0.0, t_max), y0, method="BDF", jac=lambda _t, y: kin.jacobian(y),
+                    rtol=rtol, atol=atol, dense_output=True)
+    if not sol.success:
+        raise SolverError(f"micromixing (segregation): the batch solve failed: {sol.message}")
+    seg, seg_err = quad_vec(lambda t: sol.sol(t) * float(model.pdf(t)), 0.0, t_max, epsabs=atol, epsrel=rtol,
+                            limit=400)
+    seg = seg + y0 * float(getattr(model, "atom_at_zero", 0.0) or 0.0)
+
+    def hazard(lam):
+        s = float(_survival(model, lam))
+        return float(model.pdf(lam)) / s if s > 0 else float("inf")
+
+    # start: M solving 0 = -R(M) + h(lam_max) (M - f), a perfect mixer at 1/h
+    lam_max = _horizon(model, 1e-12)
+    h_inf = hazard(lam_max)
+    start_cell = well_mixed(kin, feed, 1.0 / h_inf, unit="maximum mixedness (start at large lambda)")
+    ys = np.append(start_cell.product, start_cell.overflow_mass)
+
+    def rhs(s, y):  # s = lam_max - lambda
+        return kin.rate(y) - hazard(lam_max - s) * (y - y0)
+
+    def jac(s, y):
+        return kin.jacobian(y) - hazard(lam_max - s) * np.eye(y.size)
+
+    zw = solve_ivp(rhs, (0.0, lam_max), ys, method="BDF", jac=jac, rtol=rtol, atol=atol)
+    if not zw.success:
+        raise SolverError(f"micromixing (maximum mixedness): the Zwietering solve failed: {zw.message}")
+    mm = zw.y[:, -1]
+    spread = float(np.abs(seg[:-1] - mm[:-1]).max())
+    err = float(seg_err + rtol * np.abs(mm).max() * 10 + atol)
+    return MicromixingBounds(seg[:-1], mm[:-1], spread, False,
+                             "non-linear kinetics: the product depends on micromixing, which the RTD cannot tell; "
+                             "every real mill lies between these two limits", err, time.perf_counter() - start,
+                             {"overflow": (float(seg[-1]), float(mm[-1])), "lambda_max_s": lam_max,
+                              "kinetics": kin.describe()})

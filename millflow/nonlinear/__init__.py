@@ -1,0 +1,18 @@
+"""Non-linear grinding kinetics (issue 12, Principle I): aggregation by fixed pivots,
+population-dependent and slowing-down breakage rates, the batch solve, exact solutions.
+
+- :mod:`.kernels`: aggregation kernels (constant, sum, product, shear, user);
+- :mod:`.aggregation`: fixed-pivot aggregation on any size grid, with overflow;
+- :mod:`.kinetics`: the right-hand side R(M) and its Jacobian; slowing-down;
+- :mod:`.batch`: the batch ODE solve with error estimate;
+- :mod:`.exact`: exact solutions for validation (Scott, Golovin, a combined steady state).
+"""
+from millflow.nonlinear.aggregation import Aggregation, AggregationOperator, pivot_volumes
+from millflow.nonlinear.batch import NonlinearBatchResult, batch_nonlinear
+from millflow.nonlinear.kernels import (KERNELS, Kernel, KernelError, constant_kernel, product_kernel,
+                                        shear_kernel, sum_kernel, user_kernel)
+from millflow.nonlinear.kinetics import Kinetics, PopulationRate, kinetics, slowing_down, theta_of
+
+__all__ = ["Aggregation", "AggregationOperator", "pivot_volumes", "NonlinearBatchResult", "batch_nonlinear",
+           "KERNELS", "Kernel", "KernelError", "constant_kernel", "product_kernel", "shear_kernel", "sum_kernel",
+           "user_kernel", "Kinetics", "PopulationRate", "kinetics", "slowing_down", "theta_of"]

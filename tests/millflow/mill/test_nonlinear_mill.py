@@ -1,0 +1,110 @@
+"""Continuous mills with non-linear kinetics (millflow.mill.nonlinear): the linear limit
+through the non-linear code paths (aggregation with a zero kernel is non-linear code with
+linear physics), an independent transient route to the steady state, the micromixing
+limits, and the failures."""
+import numpy as np
+import pytest
+from scipy.integrate import solve_ivp
+
+import rtd
+from millflow.breakage import b_from_B, normalized_B, power_law_rates
+from millflow.errors import SolverError
+from millflow.grid import SizeGrid
+from millflow.linalg import solve_well_mixed
+from millflow.mill import nonlinear as nl
+from millflow.mill.axial import solve_axial_grid
+from millflow.mill.segregated import segregated
+from millflow.nonlinear import Aggregation, constant_kernel, kinetics
+
+TAU = 600.0
+
+
+def _scene(n=40):
+    grid = SizeGrid.geometric(1e-2, 2 ** 0.25, n)
+    S = power_law_rates(grid.x, 30.0 / TAU, 1.0, grid.x[0])
+    S[-1] = 0.0
+    b = b_from_B(normalized_B(grid.x, 0.4, 0.8, 3.0))
+    feed = np.zeros(n)
+    feed[:3] = [0.2, 0.5, 0.3]
+    return grid, S, b, feed
+
+
+def _nonlinear(grid, S, b, beta0=0.02, lam=-1.0):
+    w = np.zeros((S.size, S.size))
+    w[:, S.size // 2:] = 3.0  # fines cushion
+    return kinetics(S, b, w=w, lam=lam, aggregation=Aggregation(constant_kernel(beta0), grid.x[-1]), grid=grid)
+
+
+def _zero_kernel(grid, S, b):
+    return kinetics(S, b, aggregation=Aggregation(constant_kernel(0.0), grid.x[-1]), grid=grid)
+
+
+def test_linear_scene_takes_the_exact_path():
+    grid, S, b, feed = _scene()
+    r = nl.well_mixed(kinetics(S, b), feed, TAU)
+    assert r.method.startswith("exact linear") and r.iterations == 0
+    assert np.array_equal(r.product, solve_well_mixed(S, b, feed, TAU))
+
+
+def test_nonlinear_code_with_linear_physics_matches_the_linear_solvers():
+    grid, S, b, feed = _scene()
+    kin = _zero_kernel(grid, S, b)
+    assert not kin.is_linear
+    # Newton converges to the exact linear answer (rounding of a 41 x 41 LU, ~1e-15)
+    assert np.abs(nl.well_mixed(kin, feed, TAU).product - solve_well_mixed(S, b, feed, TAU)).max() < 1e-13
+    p = feed
+    for _ in range(4):
+        p = solve_well_mixed(S, b, p, TAU / 4)
+    assert np.abs(nl.tanks_in_series(kin, feed, TAU, 4).product - p).max() < 1e-13
+    ax = nl.axial_dispersion(kin, feed, TAU, 8.0, m_cells=16)
+    _, _, p_ax = solve_axial_grid(S, b, feed, TAU, 8.0, 16)
+    assert np.abs(ax.product - p_ax).max() < 1e-12  # the same discretisation, solved by Newton
+    mm = nl.micromixing_bounds(kin, feed, rtd.TanksInSeries(TAU, 3))
+    exact, _, err, _ = segregated(S, b, feed, rtd.TanksInSeries(TAU, 3), holdup=False)
+    # both limits are the exact linear RTD answer, to the ODE/quadrature tolerance (rtol 1e-9)
+    assert np.abs(mm.segregated - exact).max() < 1e-7 and np.abs(mm.max_mixedness - exact).max() < 1e-7
+
+
+def test_well_mixed_newton_against_the_transient_route():
+    grid, S, b, feed = _scene()
+    kin = _nonlinear(grid, S, b)
+    r = nl.well_mixed(kin, feed, TAU)
+    assert r.residual <= 1e-12 and r.mass_balance_error < 1e-13
+    y0 = np.append(feed, 0.0)
+    # independent: integrate the dynamic perfect mixer dM/dt = (f - M)/tau + R(M) to steady state
+    sol = solve_ivp(lambda t, y: (y0 - y) / TAU + kin.rate(y), (0, 60 * TAU), y0, method="Radau",
+                    jac=lambda t, y: -np.eye(y.size) / TAU + kin.jacobian(y), rtol=1e-11, atol=1e-15)
+    assert np.abs(sol.y[:-1, -1] - r.product).max() < 1e-9  # exp(-60) transient left, ODE tolerance
+
+
+def test_tanks_one_cell_is_well_mixed_and_many_cells_approach_plug_flow():
+    grid, S, b, feed = _scene(30)
+    kin = _nonlinear(grid, S, b)
+    assert np.abs(nl.tanks_in_series(kin, feed, TAU, 1).product - nl.well_mixed(kin, feed, TAU).product).max() < 1e-14
+    pf = nl.plug_flow(kin, feed, TAU).product
+    d40 = np.abs(nl.tanks_in_series(kin, feed, TAU, 40).product - pf).max()
+    d10 = np.abs(nl.tanks_in_series(kin, feed, TAU, 10).product - pf).max()
+    assert d40 < d10 / 3  # the distance to plug flow falls as 1/n (4x more cells, ~4x closer)
+
+
+def test_micromixing_limits_differ_for_nonlinear_kinetics():
+    grid, S, b, feed = _scene(30)
+    kin = _nonlinear(grid, S, b, beta0=0.05)
+    mm = nl.micromixing_bounds(kin, feed, rtd.PerfectMixing(TAU))
+    # maximum mixedness of an exponential RTD is the perfect mixer itself
+    assert np.abs(mm.max_mixedness - nl.well_mixed(kin, feed, TAU).product).max() < 1e-8
+    assert not mm.coincide and mm.spread > 100 * mm.error_estimate
+
+
+def test_micromixing_for_linear_kinetics_says_they_coincide():
+    grid, S, b, feed = _scene(30)
+    mm = nl.micromixing_bounds(kinetics(S, b), feed, rtd.TanksInSeries(TAU, 2))
+    assert mm.coincide and mm.spread == 0.0 and "coincide" in mm.note
+
+
+def test_newton_failure_names_unit_and_residual():
+    grid, S, b, feed = _scene(30)
+    kin = _nonlinear(grid, S, b, beta0=5.0)
+    with pytest.raises(SolverError, match=r"perfectly mixed mill: .*residual .* > tol") as exc:
+        nl.well_mixed(kin, feed, TAU, max_iter=1)
+    assert "\n" not in str(exc.value)
