@@ -225,20 +225,19 @@ class ModelSpec:
         _, required, optional = TRANSPORTS[self.transport]
         names = dict(tp)
         unknown = sorted(set(names) - set(required) - set(optional))
-        missing = [k for k in required if k not in names]
+        missing = [k for k in required if k not in names and k not in fitted]
         if unknown or missing:
             raise InputError(f"model.transport_params for {self.transport!r}: "
                              + (f"unknown {unknown}; " if unknown else "") + (f"missing {missing}; " if missing else "")
                              + f"expected {list(required)} (required) and {list(optional)} (optional); "
-                             "tau comes from tau_column")
+                             "tau comes from tau_column or transport_fit")
         for name in fitted:
             if name not in TRANSPORT_FIT or self.transport not in TRANSPORT_FIT[name][1]:
                 ok = [k for k, (_, trs) in TRANSPORT_FIT.items() if self.transport in trs]
                 raise InputError(f"model.transport_fit: {name!r} cannot be fitted for transport {self.transport!r}; "
                                  f"expected some of {ok}")
-        if "pe" in fitted and "pe" not in names:
-            object.__setattr__(self, "transport_params", tuple(sorted(tp + (("pe", 1.0),))))
-        self.make_transport(1.0)  # parameter values checked by rtd
+        # fitted parameters given a placeholder for the check (the fit supplies the value)
+        self.make_transport(1.0, **{k: 1.0 for k in fitted if k != "tau"})  # values checked by rtd
         if self.where is not None and self.classification is None:
             raise InputError("model.where is given but there is no classification")
 
