@@ -669,6 +669,8 @@ class ForwardModel:
                 self._predict_chain(S, b, d, tau_pc, out)
             elif self.spec.transport == "recirculating_cells" and self.spec.where in (None, "discharge", "cells"):
                 self._predict_network(S, b, d, tau_pc, extra, out)
+            elif self.spec.transport == "plug_flow" and all(g[1] != "holdup" for g in self.groups):
+                self._predict_plug(S, b, d, tau_pc, out)
             else:
                 self._predict_mill(S, b, d, tau_pc, extra, out)
         else:
@@ -714,6 +716,23 @@ class ForwardModel:
             else:  # cell:K
                 m = contents[int(loc[5:]) - 1][:, c]
             out[:, g] = m / m.sum(axis=1, keepdims=True)
+
+    def _predict_plug(self, S, b, d, tau, out):
+        """Mode "mill" with plug flow (product and z:Y samples), vectorised over the
+        population: eq. 4 in the contact time, classification along the axis (class i
+        travels at d_i* u, so its rate per unit length is S_i/d_i*), by
+        :func:`millflow.batch.batch_grind_population` on the dimensionless rates
+        tau S/d* at the positions Y (1 = the discharge). The content at Y is
+        tau M(Y)/d* per unit length (normalised)."""
+        rates = S * tau[:, :, None] if d is None else S * tau[:, :, None] / d
+        for c in range(len(self.conditions)):
+            gsel = [g for g, grp in enumerate(self.groups) if grp[0] == c]
+            pos = np.array([1.0 if self.groups[g][1] == "product" else float(self.groups[g][1][2:]) for g in gsel])
+            M = batch_grind_population(rates[:, c], b[:, c] if b.ndim == 4 else b, self._feeds[c], pos)
+            for r, g in enumerate(gsel):
+                m = M[:, r] if (self.groups[g][1] == "product" or d is None) else M[:, r] / d[:, c]
+                with np.errstate(invalid="ignore"):
+                    out[:, g] = m / m.sum(axis=1, keepdims=True)
 
     def _predict_network(self, S, b, d, tau, extra, out):
         """Mode "mill" for recirculating cells, vectorised over the population and the
