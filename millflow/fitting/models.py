@@ -640,7 +640,8 @@ class ForwardModel:
         p = self._unpack(theta)
         S = self.rates(p)
         mode = self.spec.mode
-        b = None if (mode == "well_mixed" and self._ratio is not None) else self.frac_b(p, n_pop)
+        geometric = self._ratio is not None and (mode == "well_mixed" or (mode == "mill" and self._chain_cells()))
+        b = None if geometric else self.frac_b(p, n_pop)
         tau = self._proc[self.spec.tau_column] if self.spec.tau_column else np.ones(len(self.conditions))
         out = np.empty((n_pop, len(self.groups), self.n))
         if mode == "well_mixed":
@@ -666,7 +667,7 @@ class ForwardModel:
             d = self.discharge(p, n_pop) if self.spec.classification else None
             tau_pc, extra = self.transport_values(p)
             if self._chain_cells() is not None:
-                self._predict_chain(S, b, d, tau_pc, out)
+                self._predict_chain(S, b, d, tau_pc, out, p)
             elif self.spec.transport == "recirculating_cells" and self.spec.where in (None, "discharge", "cells"):
                 self._predict_network(S, b, d, tau_pc, extra, out)
             elif self.spec.transport == "plug_flow" and all(g[1] != "holdup" for g in self.groups):
@@ -692,21 +693,29 @@ class ForwardModel:
             return int(n)
         return None
 
-    def _predict_chain(self, S, b, d, tau, out):
+    def _predict_chain(self, S, b, d, tau, out, p):
         """Mode "mill" for a chain of equal well-mixed cells, vectorised over the population
         and the conditions: eq. 3 per cell (tau/n each) by
         :func:`millflow.mill.well_mixed.well_mixed_population`, classification at the
         discharge (the last cell's outflow) or at every cell outlet (``where="cells"``).
-        Cell content per unit feed rate is tau_k p_k / d (classified outlet) or tau_k p_k."""
+        Cell content per unit feed rate is tau_k p_k / d (classified outlet) or tau_k p_k.
+        ``b`` None: eq. 6 on a geometric grid, by the O(N) recurrences
+        (:func:`millflow.mill.well_mixed.well_mixed_population_geometric`)."""
         n = self._chain_cells()
-        b_pc = b if b.ndim == 4 else b[:, None]
         ones = np.ones_like(S)
         stream = np.broadcast_to(self._feeds, S.shape)
         contents = []
+        if b is None:  # eq. 6 on a geometric grid: the O(N) recurrences
+            phi, gamma, beta = self._eq6(p)
+        else:
+            b_pc = b if b.ndim == 4 else b[:, None]
         for k in range(n):
             classified = d is not None and (self.spec.where == "cells" or k == n - 1)
             dk = d if classified else ones
-            stream = well_mixed_population(S, b_pc, stream, tau / n, dk)
+            if b is None:
+                stream = well_mixed_population_geometric(S, stream, phi, gamma, beta, self._ratio, tau / n, dk)
+            else:
+                stream = well_mixed_population(S, b_pc, stream, tau / n, dk)
             contents.append(stream / dk)
         for g, (c, loc, _) in enumerate(self.groups):
             if loc == "product":
