@@ -225,20 +225,19 @@ class ModelSpec:
         _, required, optional = TRANSPORTS[self.transport]
         names = dict(tp)
         unknown = sorted(set(names) - set(required) - set(optional))
-        missing = [k for k in required if k not in names]
+        missing = [k for k in required if k not in names and k not in fitted]
         if unknown or missing:
             raise InputError(f"model.transport_params for {self.transport!r}: "
                              + (f"unknown {unknown}; " if unknown else "") + (f"missing {missing}; " if missing else "")
                              + f"expected {list(required)} (required) and {list(optional)} (optional); "
-                             "tau comes from tau_column")
+                             "tau comes from tau_column or transport_fit")
         for name in fitted:
             if name not in TRANSPORT_FIT or self.transport not in TRANSPORT_FIT[name][1]:
                 ok = [k for k, (_, trs) in TRANSPORT_FIT.items() if self.transport in trs]
                 raise InputError(f"model.transport_fit: {name!r} cannot be fitted for transport {self.transport!r}; "
                                  f"expected some of {ok}")
-        if "pe" in fitted and "pe" not in names:
-            object.__setattr__(self, "transport_params", tuple(sorted(tp + (("pe", 1.0),))))
-        self.make_transport(1.0)  # parameter values checked by rtd
+        # fitted parameters given a placeholder for the check (the fit supplies the value)
+        self.make_transport(1.0, **{k: 1.0 for k in fitted if k != "tau"})  # values checked by rtd
         if self.where is not None and self.classification is None:
             raise InputError("model.where is given but there is no classification")
 
@@ -641,7 +640,8 @@ class ForwardModel:
         p = self._unpack(theta)
         S = self.rates(p)
         mode = self.spec.mode
-        b = None if (mode == "well_mixed" and self._ratio is not None) else self.frac_b(p, n_pop)
+        geometric = self._ratio is not None and (mode == "well_mixed" or (mode == "mill" and self._chain_cells()))
+        b = None if geometric else self.frac_b(p, n_pop)
         tau = self._proc[self.spec.tau_column] if self.spec.tau_column else np.ones(len(self.conditions))
         out = np.empty((n_pop, len(self.groups), self.n))
         if mode == "well_mixed":
@@ -667,9 +667,11 @@ class ForwardModel:
             d = self.discharge(p, n_pop) if self.spec.classification else None
             tau_pc, extra = self.transport_values(p)
             if self._chain_cells() is not None:
-                self._predict_chain(S, b, d, tau_pc, out)
+                self._predict_chain(S, b, d, tau_pc, out, p)
             elif self.spec.transport == "recirculating_cells" and self.spec.where in (None, "discharge", "cells"):
                 self._predict_network(S, b, d, tau_pc, extra, out)
+            elif self.spec.transport == "plug_flow" and all(g[1] != "holdup" for g in self.groups):
+                self._predict_plug(S, b, d, tau_pc, out)
             else:
                 self._predict_mill(S, b, d, tau_pc, extra, out)
         else:
@@ -691,21 +693,29 @@ class ForwardModel:
             return int(n)
         return None
 
-    def _predict_chain(self, S, b, d, tau, out):
+    def _predict_chain(self, S, b, d, tau, out, p):
         """Mode "mill" for a chain of equal well-mixed cells, vectorised over the population
         and the conditions: eq. 3 per cell (tau/n each) by
         :func:`millflow.mill.well_mixed.well_mixed_population`, classification at the
         discharge (the last cell's outflow) or at every cell outlet (``where="cells"``).
-        Cell content per unit feed rate is tau_k p_k / d (classified outlet) or tau_k p_k."""
+        Cell content per unit feed rate is tau_k p_k / d (classified outlet) or tau_k p_k.
+        ``b`` None: eq. 6 on a geometric grid, by the O(N) recurrences
+        (:func:`millflow.mill.well_mixed.well_mixed_population_geometric`)."""
         n = self._chain_cells()
-        b_pc = b if b.ndim == 4 else b[:, None]
         ones = np.ones_like(S)
         stream = np.broadcast_to(self._feeds, S.shape)
         contents = []
+        if b is None:  # eq. 6 on a geometric grid: the O(N) recurrences
+            phi, gamma, beta = self._eq6(p)
+        else:
+            b_pc = b if b.ndim == 4 else b[:, None]
         for k in range(n):
             classified = d is not None and (self.spec.where == "cells" or k == n - 1)
             dk = d if classified else ones
-            stream = well_mixed_population(S, b_pc, stream, tau / n, dk)
+            if b is None:
+                stream = well_mixed_population_geometric(S, stream, phi, gamma, beta, self._ratio, tau / n, dk)
+            else:
+                stream = well_mixed_population(S, b_pc, stream, tau / n, dk)
             contents.append(stream / dk)
         for g, (c, loc, _) in enumerate(self.groups):
             if loc == "product":
@@ -715,6 +725,23 @@ class ForwardModel:
             else:  # cell:K
                 m = contents[int(loc[5:]) - 1][:, c]
             out[:, g] = m / m.sum(axis=1, keepdims=True)
+
+    def _predict_plug(self, S, b, d, tau, out):
+        """Mode "mill" with plug flow (product and z:Y samples), vectorised over the
+        population: eq. 4 in the contact time, classification along the axis (class i
+        travels at d_i* u, so its rate per unit length is S_i/d_i*), by
+        :func:`millflow.batch.batch_grind_population` on the dimensionless rates
+        tau S/d* at the positions Y (1 = the discharge). The content at Y is
+        tau M(Y)/d* per unit length (normalised)."""
+        rates = S * tau[:, :, None] if d is None else S * tau[:, :, None] / d
+        for c in range(len(self.conditions)):
+            gsel = [g for g, grp in enumerate(self.groups) if grp[0] == c]
+            pos = np.array([1.0 if self.groups[g][1] == "product" else float(self.groups[g][1][2:]) for g in gsel])
+            M = batch_grind_population(rates[:, c], b[:, c] if b.ndim == 4 else b, self._feeds[c], pos)
+            for r, g in enumerate(gsel):
+                m = M[:, r] if (self.groups[g][1] == "product" or d is None) else M[:, r] / d[:, c]
+                with np.errstate(invalid="ignore"):
+                    out[:, g] = m / m.sum(axis=1, keepdims=True)
 
     def _predict_network(self, S, b, d, tau, extra, out):
         """Mode "mill" for recirculating cells, vectorised over the population and the

@@ -227,3 +227,41 @@ def test_mill_mode_recirculating_cells_vectorised_equals_the_mill(where):
     theta[1, -1] = -1.0  # r < 0: outside rtd's domain, that member only
     got = m.predict_grid(theta)
     assert np.isnan(got[1]).all() and np.isfinite(got[[0, 2, 3]]).all()
+
+
+def test_mill_mode_fits_peclet_number_and_reads_axial_samples():
+    """transport_fit = ("tau", "pe") for axial dispersion: parameters ln_tau and ln_pe,
+    no fixed pe needed; the prediction at z:Y is steady_mill's profile with that
+    AxialDispersion (the same solver, so equal to rounding of the interpolation)."""
+    import rtd
+    from millflow.breakage import NormalizedBreakage, PowerLawRate
+    from millflow.mill import steady_mill
+    d = _data(["c1"], ["z:0.5", "product"], PROC)
+    m = ForwardModel(ModelSpec(mode="mill", transport="axial_dispersion", transport_fit=("tau", "pe")), d, GRID)
+    assert m.param_names[-2:] == ("ln_tau", "ln_pe")
+    theta = np.array([-5.0, 1.0, 0.4, 0.8, 3.0, np.log(300.0), np.log(6.0)])
+    M = m.predict_grid(theta)[0]
+    g = {loc: k for k, (_, loc, _) in enumerate(m.groups)}
+    ds = steady_mill(PowerLawRate(np.exp(-5.0), 1.0)(X), NormalizedBreakage(0.4, 0.8, 3.0)(X), m._feeds[0],
+                     rtd.AxialDispersion(300.0, 6.0), positions=[0.5], locations=["z:0.5"])
+    np.testing.assert_allclose(M[g["z:0.5"]], ds["sample"].values[0], rtol=0, atol=1e-12)
+    np.testing.assert_allclose(M[g["product"]], ds["product"].values, rtol=0, atol=1e-12)  # the same solve
+
+
+@pytest.mark.parametrize("cls", [None, "screen"])
+def test_mill_mode_plug_flow_vectorised_equals_the_mill(cls):
+    """Plug flow with product and z:Y samples is evaluated for the population at once
+    (batch solve in the contact time); it equals one steady_mill per member to rounding
+    (the same eigenbasis; 1e-12 on mass fractions <= 1)."""
+    d = _data(["c1", "c2"], ["z:0.25", "z:0.5", "product"], PROC)
+    m = ForwardModel(ModelSpec(mode="mill", transport="plug_flow", classification=cls, tau_column="tau_s"), d, GRID)
+    rng = np.random.default_rng(7)
+    cols = [rng.uniform(-6, -3, 4), rng.uniform(0.0, 1.5, 4), rng.uniform(0.2, 0.8, 4), rng.uniform(0.5, 1.2, 4),
+            rng.uniform(2.5, 5, 4)] + ([rng.uniform(-1, 0.5, 4), rng.uniform(0.5, 2.5, 4)] if cls else [])
+    theta = np.column_stack(cols)
+    fast = m.predict_grid(theta)
+    p = m._unpack(theta)
+    slow = np.empty_like(fast)
+    tau, extra = m.transport_values(p)
+    m._predict_mill(m.rates(p), m.frac_b(p, 4), m.discharge(p, 4) if cls else None, tau, extra, slow)
+    np.testing.assert_allclose(fast, slow, rtol=0, atol=1e-12)
