@@ -19,8 +19,9 @@ from millflow.breakage import (
 )
 from millflow.errors import BreakageError, GridError, InputError, MillflowError, SolverError
 from millflow.grid import SizeGrid
-from millflow.linalg import SpectralBlocks, breakage_matrix, solve_well_mixed
+from millflow.linalg import SpectralBlocks, breakage_matrix
 from millflow.mill import Mill, steady_mill, transfer_matrix
+from millflow.mill.well_mixed import solve_well_mixed
 
 __version__ = "0.1.0"
 __all__ = [

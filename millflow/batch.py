@@ -22,9 +22,15 @@ from scipy.integrate import solve_ivp
 
 from millflow import checks
 from millflow.errors import InputError, SolverError
-from millflow.linalg import SpectralBlocks, breakage_matrix
+from millflow.linalg import (DEFAULT_CLUSTER_GAP, SpectralBlocks, breakage_matrix,
+                             eigenvectors_distinct_population)
 
-__all__ = ["BatchResult", "batch_grind", "batch_solve", "grind", "plug_flow_profile", "ODE_METHODS"]
+__all__ = ["BatchResult", "batch_grind", "batch_grind_population", "batch_solve", "grind", "plug_flow_profile",
+           "ODE_METHODS"]
+
+#: Cancellation target of the exact path: the first decomposition (distinct rates, gap
+#: 1e-3) is accepted when eps * max |X| |X^-1 f| is below it (as in SpectralBlocks.decompose).
+CANCELLATION_TARGET = 1e-13
 
 #: solve_ivp methods offered on the ODE path (implicit, for stiff rates).
 ODE_METHODS = ("BDF", "Radau", "LSODA")
@@ -87,19 +93,10 @@ def batch_solve(S, b, feed, t, method: str = "exact", *, rtol: float = 1e-10, at
     S, b, feed, t = _check_inputs(S, b, feed, t)
     start = time.perf_counter()
     if method == "exact":
-        blocks, w, cancellation = SpectralBlocks.decompose(S, b, feed=feed, kernel=kernel)
+        blocks, w, cancellation = SpectralBlocks.decompose(S, b, feed=feed, target=CANCELLATION_TARGET,
+                                                           kernel=kernel)
         M = blocks.expm_apply(feed, t, w=w)
-        # The sink row of X is a difference of O(1) terms, which carries eps-level
-        # cancellation when the sink is nearly empty; the balance (the same quantity in
-        # exact arithmetic, since columns of K sum to zero) is accurate to the error of
-        # the other classes.
-        M[:, -1] = feed.sum() - M[:, :-1].sum(axis=1)
-        M[t == 0] = feed  # exp(0) = I exactly, not through X X^-1
-        error = 4.0 * cancellation + np.finfo(float).eps * feed.sum() * feed.size
-        # A nearly empty sink can come out as -1e-16: rounding of the other classes'
-        # sum, inside the error estimate. It is set to zero and the amount recorded.
-        rounding = np.clip(-M[:, -1], 0.0, error)
-        M[:, -1] += rounding
+        M, error, rounding = _finish(M, feed, t, cancellation)
         info = {**blocks.summary(), "sink_rounding_removed": float(rounding.max())}
     elif method in ODE_METHODS:
         M, info = _ode_solve(breakage_matrix(S, b), feed, t, method, rtol, atol)
@@ -109,6 +106,89 @@ def batch_solve(S, b, feed, t, method: str = "exact", *, rtol: float = 1e-10, at
     runtime = time.perf_counter() - start
     mass_error = float(np.abs(M.sum(axis=1) - feed.sum()).max())
     return BatchResult(M, t, method, float(error), mass_error, runtime, info)
+
+
+def _finish(M, feed, t, cancellation):
+    """Last steps of the exact path, in place, for one member (M (T, N), feed (N,),
+    cancellation a float) or a population (M (P, T, N), feed (P, N), cancellation (P,));
+    returns (M, error, sink rounding removed).
+
+    The sink row of X is a difference of O(1) terms, which carries eps-level
+    cancellation when the sink is nearly empty; the balance (the same quantity in
+    exact arithmetic, since columns of K sum to zero) is accurate to the error of the
+    other classes. exp(0) = I exactly, not through X X^-1. A nearly empty sink can
+    come out as -1e-16: rounding of the other classes' sum, inside the error
+    estimate; it is set to zero and the amount recorded.
+    """
+    total = feed.sum(axis=-1)
+    M[..., -1] = np.expand_dims(total, -1) - M[..., :-1].sum(axis=-1)
+    zero = t == 0
+    if zero.any():
+        M[..., zero, :] = np.expand_dims(feed, -2)
+    error = 4.0 * cancellation + np.finfo(float).eps * total * feed.shape[-1]
+    rounding = np.clip(-M[..., -1], 0.0, np.expand_dims(error, -1))
+    M[..., -1] += rounding
+    return M, error, rounding
+
+
+def batch_grind_population(S, b, feed, t, *, kernel: str | None = None) -> np.ndarray:
+    """Eq. 4 for a population of rate and breakage sets at once: (P, T, N).
+
+    Each member's result is :func:`batch_grind`'s (the same method, to rounding): the
+    eigenvectors of the breakage matrix by the row recurrence of :mod:`millflow.linalg`
+    (``kernel``: the compiled kernel member by member when available, else numpy
+    vectorised over the population), accepted when no two rates lie within the
+    cluster gap (1e-3 relative) and the cancellation estimate eps |X| |X^-1 f| is below
+    :data:`CANCELLATION_TARGET`; every other member (nearly equal rates, e.g. alpha
+    near 0 in eq. 5) is solved by :func:`batch_solve`, which groups close rates into
+    blocks and stays exact.
+
+    Parameters
+    ----------
+    S : (P, N) rates [1/s] (S_N = 0); b : (P, N, N) or (N, N) fractional breakage;
+    feed : (N,) or (P, N); t : (T,) times [s] (>= 0).
+
+    Members with non-finite S or b (parameters outside the model's domain, see
+    :func:`millflow.breakage.rates.power_law_rates_population`) get NaN, not an error:
+    an optimiser's population may visit them. Other bad input raises InputError.
+    """
+    S = np.atleast_2d(np.asarray(S, dtype=float))
+    n_pop, n = S.shape
+    b = np.broadcast_to(np.asarray(b, dtype=float), (n_pop, n, n))
+    feed = np.asarray(feed, dtype=float)
+    if feed.shape not in ((n,), (n_pop, n)):
+        raise InputError(f"feed has shape {feed.shape}; expected ({n},) or ({n_pop}, {n})")
+    feeds = np.broadcast_to(feed, (n_pop, n))
+    t = np.atleast_1d(np.asarray(t, dtype=float))
+    if t.ndim != 1 or not np.all(np.isfinite(t)) or np.any(t < 0):
+        raise InputError(f"t = {t!r}: expected a 1-D array of finite times >= 0 [s]")
+    out = np.full((n_pop, t.size, n), np.nan)
+    valid = np.isfinite(S).all(axis=1) & np.isfinite(b).all(axis=(1, 2))
+    s_sorted = np.sort(S, axis=1)
+    close = (np.diff(s_sorted, axis=1) <= DEFAULT_CLUSTER_GAP * s_sorted[:, 1:]).any(axis=1)
+    fast = np.flatnonzero(valid & ~close)
+    slow = [int(k) for k in np.flatnonzero(valid & close)]
+    if fast.size:
+        Sf = S[fast]
+        A = b[fast] * -Sf[:, np.newaxis, :]
+        A[:, np.arange(n), np.arange(n)] = Sf
+        X = eigenvectors_distinct_population(A, Sf, kernel)
+        ok = np.isfinite(X).all(axis=(1, 2))
+        w = np.zeros((fast.size, n))
+        if ok.any():
+            w[ok] = np.linalg.solve(X[ok], feeds[fast[ok]][:, :, np.newaxis])[:, :, 0]
+        with np.errstate(invalid="ignore", over="ignore"):
+            cancellation = np.finfo(float).eps * np.matmul(np.abs(X), np.abs(w)[:, :, np.newaxis])[:, :, 0].max(axis=1)
+        ok &= cancellation <= CANCELLATION_TARGET
+        keep = fast[ok]
+        if keep.size:
+            E = np.exp(-S[keep][:, np.newaxis, :] * t[np.newaxis, :, np.newaxis]) * w[ok][:, np.newaxis, :]
+            M = np.matmul(E, X[ok].transpose(0, 2, 1))
+            out[keep] = _finish(M, feeds[keep], t, cancellation[ok])[0]
+        slow += [int(k) for k in fast[~ok]]
+    for k in sorted(slow):
+        out[k] = batch_solve(S[k], b[k], feeds[k], t, kernel=kernel).M
+    return out
 
 
 def batch_grind(S, b, feed, t, method: str = "exact", *, rtol: float = 1e-10, atol: float = 1e-14) -> np.ndarray:
@@ -188,7 +268,8 @@ def grind(grid, rates, breakage, feed, times_s, method: str = "exact"):
     >>> from millflow.breakage import PowerLawRate, NormalizedBreakage
     >>> grid = SizeGrid.geometric(1e-3, 2 ** 0.25, 40)
     >>> feed = np.r_[1.0, np.zeros(39)]
-    >>> ds = grind(grid, PowerLawRate(A=0.01, alpha=1.0, x0=1e-3), NormalizedBreakage(0.4, 0.8, 3.0), feed, [0, 60, 600])
+    >>> rate, breakage = PowerLawRate(A=0.01, alpha=1.0, x0=1e-3), NormalizedBreakage(0.4, 0.8, 3.0)
+    >>> ds = grind(grid, rate, breakage, feed, [0, 60, 600])
     >>> ds.mass_fraction.dims
     ('time', 'size')
     >>> bool(ds.attrs["mass_balance_error"] < 1e-13)

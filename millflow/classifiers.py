@@ -39,7 +39,8 @@ from scipy.optimize import brentq
 from millflow.errors import InputError
 from millflow.grid import as_sizes
 
-__all__ = ["whiten", "plitt", "screen_efficiency", "tromp", "CURVES", "efficiency", "mill_discharge_rates"]
+__all__ = ["whiten", "plitt", "screen_efficiency", "tromp", "CURVES", "efficiency", "mill_discharge_rates",
+           "screen_discharge", "screen_power_discharge"]
 
 _LN2 = math.log(2.0)
 
@@ -212,3 +213,44 @@ def mill_discharge_rates(c) -> np.ndarray:
         raise InputError("discharge classification retains the finest class completely (c_N = 1): "
                          "nothing can leave the mill")
     return (1.0 - c) / free
+
+
+# --------------------------------------------------------------- discharge through a screen
+# Normalised discharge rates d_i* (eq. 1-3) of a mill whose exit is a screen, as the
+# fit estimates them: vectorised over a population of parameter sets (leading axes),
+# not validated (the hot loop of a fit; non-finite parameters give NaN or inf).
+
+def screen_discharge(x, d50, n) -> np.ndarray:
+    """Log-logistic screen discharge d_i* = 1 / (1 + (x_i / d50)^n), shape (*L, N).
+
+    Material much finer than d50 [m] leaves at the mean rate (d* = 1), coarser material
+    is held back until it breaks (d* -> 0); n [-] is the sharpness. It is one minus the
+    corrected Tromp curve (:func:`tromp`) with the same d50 and exponent, without the
+    1/(1 - c_N) scaling of :func:`mill_discharge_rates`. ``d50`` and ``n`` broadcast to
+    a leading shape L (members of a population, conditions); evaluated as
+    1/(1 + exp(n ln(x/d50))) with the exponent capped at 600, so nothing overflows.
+    """
+    xs = as_sizes(x)
+    d50 = np.asarray(d50, dtype=float)[..., np.newaxis]
+    n = np.asarray(n, dtype=float)[..., np.newaxis]
+    with np.errstate(invalid="ignore", divide="ignore"):
+        z = n * (np.log(xs) - np.log(d50))
+    return 1.0 / (1.0 + np.exp(np.minimum(z, 600.0)))
+
+
+def screen_power_discharge(x, n, x_ref) -> np.ndarray:
+    """Power-law screen discharge d_i* = (x_i / x_ref)^-n, shape (*L, N).
+
+    The limit of :func:`screen_discharge` for d50 far below the sizes of interest
+    (then d* = (x/d50)^-n): only the combination of the rate prefactor and d50^n is
+    identifiable from product samples; x_ref [m] is the size where d* = 1 (in the fit:
+    the reference size x0 times the screen opening over the geometric-mean opening).
+    ``n`` and ``x_ref`` broadcast to a leading shape L; the exponent is capped at
+    +-600 so nothing overflows.
+    """
+    xs = as_sizes(x)
+    n = np.asarray(n, dtype=float)[..., np.newaxis]
+    x_ref = np.asarray(x_ref, dtype=float)[..., np.newaxis]
+    with np.errstate(invalid="ignore", divide="ignore"):
+        z = n * (np.log(xs) - np.log(x_ref))
+    return np.exp(-np.clip(z, -600.0, 600.0))

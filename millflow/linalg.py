@@ -34,13 +34,12 @@ from __future__ import annotations
 from dataclasses import dataclass, field
 
 import numpy as np
-import scipy.linalg
 from scipy.linalg.lapack import dtrtrs
 
 from millflow import compiled
-from millflow.errors import InputError, SolverError
+from millflow.errors import SolverError
 
-__all__ = ["breakage_matrix", "cluster_rates", "SpectralBlocks"]
+__all__ = ["breakage_matrix", "cluster_rates", "SpectralBlocks", "eigenvectors_distinct_population"]
 
 #: Rates closer than this relative gap are treated as one cluster (first trial).
 DEFAULT_CLUSTER_GAP = 1e-3
@@ -235,13 +234,50 @@ def _eigenvectors_distinct(A: np.ndarray, S: np.ndarray, module=None) -> np.ndar
 
 
 def _eigenvectors_distinct_numpy(A: np.ndarray, S: np.ndarray) -> np.ndarray:
-    """:func:`_eigenvectors_distinct` in numpy: vectorised over the columns j < i,
-    one row at a time, written in place (the reference and the fallback)."""
-    n = S.size
-    X = np.eye(n)
-    gaps = S[np.newaxis, :] - S[:, np.newaxis]  # gaps[i, j] = S_j - S_i
-    for i in range(1, n):
-        np.divide(A[i, :i] @ X[:i, :i], gaps[i, :i], out=X[i, :i])
+    """:func:`_eigenvectors_distinct` in numpy: one member of
+    :func:`eigenvectors_distinct_population` (the reference and the fallback)."""
+    return _eigenvectors_population_numpy(A[np.newaxis], S[np.newaxis])[0]
+
+
+def _eigenvectors_population_numpy(A: np.ndarray, S: np.ndarray) -> np.ndarray:
+    """The numpy row recurrence for a population: A (P, N, N), S (P, N) -> X (P, N, N).
+
+    Row i of every member at once, vectorised over the columns j < i, written in place:
+    x_ij = (A_i,<i X_<i,j) / (S_j - S_i). Equal rates give inf or NaN (callers route
+    such members to the clustered method first).
+    """
+    n_pop, n = S.shape
+    X = np.zeros((n_pop, n, n))
+    X[:, np.arange(n), np.arange(n)] = 1.0
+    gaps = S[:, np.newaxis, :] - S[:, :, np.newaxis]  # gaps[p, i, j] = S_j - S_i
+    with np.errstate(divide="ignore", invalid="ignore", over="ignore"):
+        for i in range(1, n):
+            r = np.matmul(A[:, i:i + 1, :i], X[:, :i, :i])[:, 0]
+            np.divide(r, gaps[:, i, :i], out=X[:, i, :i])
+    return X
+
+
+def eigenvectors_distinct_population(A: np.ndarray, S: np.ndarray, kernel: str | None = None) -> np.ndarray:
+    """Unit lower-triangular eigenvectors X (P, N, N) of A = -K for P members at once.
+
+    A (P, N, N) = (I - b) diag(S) per member, S (P, N) rates with no two (nearly) equal
+    (callers check, see :func:`millflow.batch.batch_grind_population`). The same row
+    recurrence as :func:`_eigenvectors_distinct`: the compiled kernel member by member
+    when it is available (``kernel`` as :func:`millflow.compiled.kernel`), else numpy
+    vectorised over the population.
+    """
+    A = np.asarray(A, dtype=float)
+    S = np.asarray(S, dtype=float)
+    module = compiled.kernel("eigenbasis", kernel)
+    if module is None:
+        return _eigenvectors_population_numpy(A, S)
+    n_pop, n = S.shape
+    X = np.zeros((n_pop, n, n))
+    X[:, np.arange(n), np.arange(n)] = 1.0
+    A = np.ascontiguousarray(A)
+    S = np.ascontiguousarray(S)
+    for k in range(n_pop):
+        module.distinct(A[k], S[k], X[k])
     return X
 
 
@@ -330,8 +366,21 @@ def _blocks_expm_apply(blocks: np.ndarray, t: np.ndarray, w: np.ndarray) -> np.n
     tight = spread.max() * t <= 1.0
     if tight.any():
         out[tight] = _tight_block_series(G, mu, t[tight], w)
-    for j in np.flatnonzero(~tight):
-        out[j] = np.einsum("kpq,kq->kp", _block_expm_stack(blocks, t[j]), w)
+    loose = np.flatnonzero(~tight)
+    if loose.size:  # one scaling-and-squaring per block for all its loose times (same arithmetic per time)
+        # |exp(-B t)| <= exp(-d_min t) sum_{m<p} (|L| t)^m / m! entrywise (B = D + L lower
+        # triangular, L nilpotent): where that is below e^-800 (under the smallest
+        # subnormal, 5e-324, by far) the block's contribution is zero in double precision
+        d_min = diag.min(axis=1)
+        lower = np.abs(np.tril(blocks, -1)).sum(axis=1).max(axis=1)
+        for c in range(k):
+            tl = t[loose]
+            log_bound = -d_min[c] * tl + np.log(p) + (p - 1) * np.log(np.maximum(1.0, lower[c] * tl))
+            log_bound += np.log(max(float(np.abs(w[c]).sum()), 1e-300))
+            zero = log_bound < -800.0
+            out[loose[zero], c] = 0.0
+            if (~zero).any():
+                out[loose[~zero], c] = _block_expm(blocks[c], tl[~zero]) @ w[c]
     return out
 
 
@@ -352,11 +401,6 @@ def _tight_block_series(G: np.ndarray, mu: np.ndarray, t: np.ndarray, w: np.ndar
     return total.transpose(2, 0, 1)
 
 
-def _block_expm_stack(blocks: np.ndarray, t: float) -> np.ndarray:
-    """exp(-B_k t) for a stack of blocks (k, p, p) at one time."""
-    return np.array([_block_expm(B, np.array([t]))[0] for B in blocks])
-
-
 def _block_expm(block: np.ndarray, t: np.ndarray) -> np.ndarray:
     """exp(-block t) for each t: (T, p, p), by Taylor series with scaling and squaring.
 
@@ -372,16 +416,29 @@ def _block_expm(block: np.ndarray, t: np.ndarray) -> np.ndarray:
     norm = np.abs(shifted).sum(axis=0).max()
     squarings = np.maximum(0, np.ceil(np.log2(np.maximum(norm * t, 1e-300)))).astype(int)
     h = t / 2.0 ** squarings
-    E = -shifted[np.newaxis] * h[:, np.newaxis, np.newaxis]
+    # times that share the scaled step h (t_j = t_i 2^m, e.g. geometric sampling times:
+    # division by 2^s is exact) share the Taylor part, and the squaring chain of the
+    # longer passes through the shorter: each is computed once (the same operations
+    # per time as separately)
+    steps, which = np.unique(h, return_inverse=True)
+    which = which.ravel()
+    E = -shifted[np.newaxis] * steps[:, np.newaxis, np.newaxis]
     term = np.broadcast_to(np.eye(p), E.shape).copy()
-    total = term.copy()
+    base = term.copy()
     for k in range(1, 19):  # |E| <= 1: 18 terms reach 1/19! ~ 8e-18
         term = term @ E / k
-        total += term
-    total *= np.exp(-mu * h)[:, np.newaxis, np.newaxis]
-    for level in range(squarings.max(initial=0), 0, -1):
-        sel = squarings >= level
-        total[sel] = total[sel] @ total[sel]
+        base += term
+    base *= np.exp(-mu * steps)[:, np.newaxis, np.newaxis]
+    total = np.empty((t.size, p, p))
+    for u in range(steps.size):
+        members = np.flatnonzero(which == u)
+        members = members[np.argsort(squarings[members], kind="stable")]
+        M, level = base[u], 0
+        for m in members:
+            while level < squarings[m]:
+                M = M @ M
+                level += 1
+            total[m] = M
     return total
 
 
@@ -456,25 +513,3 @@ def contour_funm(fun, block: np.ndarray, n_points: int = 64, *, analytic_left: f
         result = result @ Gs
         result[np.diag_indices(p)] += coeffs[k]
     return result.real
-
-
-def solve_well_mixed(S, b, feed, tau: float, d_star=None) -> np.ndarray:
-    """Product of a perfectly mixed mill at steady state, eq. 3, by one triangular solve.
-
-        p_i = f_i - tau (S_i/d_i*) p_i + tau sum_{j<i} b_ij (S_j/d_j*) p_j
-        <=>  (I - tau K diag(1/d*)) p = f,   K = (b - I) diag(S).
-
-    Parameters
-    ----------
-    S : (N,) rates [1/s]; b : (N, N) fractional breakage distribution;
-    feed : (N,) or (N, m) feed flows (any unit; the product has the same unit);
-    tau : mean residence time [s]; d_star : (N,) normalised discharge rates
-        d_i* = tau d_i (> 0), None for no classification (all ones).
-    """
-    S = np.asarray(S, dtype=float)
-    scaled = S if d_star is None else S / np.asarray(d_star, dtype=float)
-    M = np.eye(S.size) - tau * breakage_matrix(scaled, b)
-    p, info = dtrtrs(M, np.asarray(feed, dtype=float), lower=1)
-    if info > 0:
-        raise InputError(f"eq. 3 is singular at class {info}: tau * S / d* makes 1 + tau S_i / d_i* zero")
-    return p

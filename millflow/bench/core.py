@@ -145,7 +145,7 @@ def degenerate_rates(grid: SizeGrid) -> np.ndarray:
     the coarse side of the peak gives its rate to the unused class on the fine side
     with the nearest rate, exactly (even pairs) or times 1 + 1e-9 (odd pairs).
     """
-    S = austin_rates(grid, A=1.0, alpha=1.0, mu0=1e-3, Lambda=3.0)
+    S = austin_rates(grid, A=1.0, alpha=1.0, mu0=1e-3, Lambda=3.0, x0=1.0)  # A per m^alpha, as in the references
     S *= 0.05 / S.max()
     peak = int(np.argmax(S))
     S = np.minimum(S, 0.9 * S.max())

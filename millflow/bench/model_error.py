@@ -69,7 +69,7 @@ def _time(fn, repeats: int):
 
 def targets(quick: bool) -> list[dict]:
     from millflow.batch import batch_solve
-    from millflow.linalg import solve_well_mixed
+    from millflow.mill.well_mixed import solve_well_mixed
     from millflow.mill import nonlinear as nl
     from millflow.nonlinear import batch_nonlinear
 

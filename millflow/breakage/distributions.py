@@ -24,6 +24,7 @@ from millflow.grid import as_sizes, class_label
 __all__ = [
     "normalized_B",
     "non_normalized_B",
+    "breakage_population",
     "b_from_B",
     "B_from_b",
     "validate_B",
@@ -51,18 +52,97 @@ def _param(value, name: str, lo: float | None = None, hi: float | None = None) -
     return v
 
 
-def _cumulative(xs: np.ndarray, phi_j: np.ndarray, gamma: float, beta: float) -> np.ndarray:
-    """B_ij = phi_j r^gamma + (1 - phi_j) r^beta with r = x_{i-1}/x_j, for i > j."""
+@functools.lru_cache(maxsize=32)
+def _pair_table(key: bytes) -> dict:
+    """Index tables of the strict lower triangle for the sizes in ``key`` (float64 bytes).
+
+    The pairs i > j with their distinct ratios r = x_{i-1}/x_j (on a geometric grid a
+    few hundred instead of N^2/2: the powers are taken once per ratio) and maps that
+    scatter values on distinct ratios (or on pairs) into the full (N, N) matrix in one
+    gather (``np.take``), for B and for b = B_ij - B_{i+1,j}.
+    """
+    xs = np.frombuffer(key, dtype=float)
     n = xs.size
-    B = np.zeros((n, n))
     i, j = np.tril_indices(n, -1)
-    r = xs[i - 1] / xs[j]
-    B[i, j] = phi_j[j] * r ** gamma + (1.0 - phi_j[j]) * r ** beta
-    # r = 1 on the first subdiagonal; phi + (1 - phi) can round to 1 - ulp, and the
-    # convention B_{j+1,j} = 1 must hold exactly for the columns of b to sum to 1
-    k = np.arange(n - 1)
-    B[k + 1, k] = 1.0
-    return B
+    ratios, inverse = np.unique(xs[i - 1] / xs[j], return_inverse=True)
+    n_r, n_p = ratios.size, i.size
+    one, zero = n_r, n_r + 1  # extended value table: [F(ratios), 1, 0]
+    c = np.where(i == j + 1, one, inverse.ravel())  # B_{j+1,j} = 1 exactly
+    pos = np.full((n + 1, n), n_p)
+    pos[i, j] = np.arange(n_p)
+    nxt = pos[i + 1, j]  # pair (i + 1, j), or n_p (B = 0 below the sink)
+    c_next = np.append(c, zero)[nxt]
+    combos, inv_b = np.unique(np.stack([c, c_next]), axis=1, return_inverse=True)
+    full_B = np.full(n * n, zero)
+    full_B[i * n + j] = c
+    full_b = np.full(n * n, combos.shape[1])  # extended: [b on combos, 0]
+    full_b[i * n + j] = inv_b.ravel()
+    full_pair = np.full(n * n, n_p)  # extended: [values on pairs, 0]
+    full_pair[i * n + j] = np.arange(n_p)
+    out = dict(i=i, j=j, log_r=np.log(ratios), inverse=inverse.ravel(), c=c, nxt=nxt, combos=combos,
+               full_B=full_B, full_b=full_b, full_pair=full_pair)
+    for arr in out.values():
+        arr.setflags(write=False)
+    return out
+
+
+def breakage_population(x, phi0, gamma, beta, theta=0.0, x_max=None, *, kind: str = "B") -> np.ndarray:
+    """Eqs. 6 and 8 for a population of parameter sets: B (or b) of shape (*L, N, N).
+
+    B_ij = phi_j r^gamma + (1 - phi_j) r^beta, r = x_{i-1}/x_j (i > j), phi_j =
+    phi0 (x_max/x_j)^theta (theta = 0: eq. 6 with phi = phi0), B_{j+1,j} = 1 exactly.
+    The one implementation of both equations: :func:`normalized_B` and
+    :func:`non_normalized_B` are this with scalar parameters, then checked.
+
+    Parameters
+    ----------
+    x : SizeGrid or array_like, upper class sizes [m].
+    phi0, gamma, beta, theta : float or arrays broadcasting to a leading shape L
+        (members of a population, conditions); x_max [m] (default the top size x_1).
+    kind : "B" (cumulative) or "b" (fractional, b_ij = B_ij - B_{i+1,j}, b_Nj = B_Nj).
+
+    Nothing is raised for parameter values (the hot loop of a fit): a member whose
+    phi_j leaves [0, 1] for a breaking class, or with a negative or non-finite exponent,
+    gets NaN entries, which an optimiser reads as "outside the model's domain".
+    """
+    if kind not in ("B", "b"):
+        raise BreakageError(f"kind = {kind!r}: expected 'B' or 'b'")
+    xs = as_sizes(x)
+    n = xs.size
+    tab = _pair_table(np.ascontiguousarray(xs, dtype=float).tobytes())
+    phi0, gamma, beta, theta = (np.asarray(v, dtype=float) for v in (phi0, gamma, beta, theta))
+    lead = np.broadcast_shapes(phi0.shape, gamma.shape, beta.shape, theta.shape)
+    x_max = xs[0] if x_max is None else float(x_max)
+    log_r = tab["log_r"]
+    with np.errstate(over="ignore", invalid="ignore", divide="ignore"):
+        phi_j = phi0[..., np.newaxis] * (x_max / xs[:-1]) ** theta[..., np.newaxis]  # breaking classes
+        ok = ((phi_j >= 0) & (phi_j <= 1)).all(axis=-1) & (gamma >= 0) & (beta >= 0)
+        ok &= np.isfinite(gamma) & np.isfinite(beta)
+        fine = np.exp(gamma[..., np.newaxis] * log_r)  # r^gamma on the distinct ratios
+        single = bool((phi_j == 1).all())
+        coarse = None if single else np.exp(beta[..., np.newaxis] * log_r)
+        if not (theta == 0).all():  # eq. 8: phi depends on the breaking class j
+            pj = phi_j[..., tab["j"]]
+            vals = pj * fine[..., tab["inverse"]] + (1.0 - pj) * coarse[..., tab["inverse"]]
+            vals = np.where(tab["c"] == log_r.size, 1.0, np.broadcast_to(vals, lead + vals.shape[-1:]))
+            ext = np.concatenate([vals, np.zeros(lead + (1,))], axis=-1)
+            if kind == "b":
+                ext[..., :-1] = vals - ext[..., tab["nxt"]]
+            out = np.take(ext, tab["full_pair"], axis=-1)
+        else:  # eq. 6: B is a function of the ratio alone
+            F = fine if single else phi0[..., np.newaxis] * fine + (1.0 - phi0[..., np.newaxis]) * coarse
+            F = np.broadcast_to(F, lead + log_r.shape)
+            ext = np.concatenate([F, np.ones(lead + (1,)), np.zeros(lead + (1,))], axis=-1)
+            if kind == "b":
+                c1, c2 = tab["combos"]
+                ext = np.concatenate([ext[..., c1] - ext[..., c2], np.zeros(lead + (1,))], axis=-1)
+                out = np.take(ext, tab["full_b"], axis=-1)
+            else:
+                out = np.take(ext, tab["full_B"], axis=-1)
+    out = out.reshape(lead + (n, n))
+    if not ok.all():
+        out[~ok] = np.nan
+    return out
 
 
 def normalized_B(x, phi: float, gamma: float, beta: float) -> np.ndarray:
@@ -95,7 +175,7 @@ def normalized_B(x, phi: float, gamma: float, beta: float) -> np.ndarray:
     phi = _param(phi, "phi", 0.0, 1.0)
     gamma = _param(gamma, "gamma", 0.0)
     beta = _param(beta, "beta", 0.0)
-    return _cumulative(xs, np.full(xs.size, phi), gamma, beta)
+    return breakage_population(xs, phi, gamma, beta)
 
 
 def non_normalized_B(x, phi0: float, gamma: float, beta: float, theta: float,
@@ -140,7 +220,7 @@ def non_normalized_B(x, phi0: float, gamma: float, beta: float, theta: float,
             f"phi_j = phi0 (x_max/x_j)^theta = {float(phi_j[k])!r} at {class_label(k, xs)}; expected 0 <= phi_j <= 1 "
             f"(phi0 = {phi0:g}, theta = {theta:g}, x_max = {x_max:.6g} m)"
         )
-    return _cumulative(xs, phi_j, gamma, beta)
+    return breakage_population(xs, phi0, gamma, beta, theta, x_max)
 
 
 def b_from_B(B, x=None) -> np.ndarray:

@@ -23,6 +23,9 @@ from millflow.grid import as_sizes, class_label
 __all__ = [
     "power_law_rates",
     "austin_rates",
+    "power_law_rates_population",
+    "austin_rates_population",
+    "X0_DEFAULT",
     "process_power_law",
     "validate_rates",
     "evaluate_rates",
@@ -30,6 +33,11 @@ __all__ = [
     "AustinRate",
     "TabulatedRate",
 ]
+
+
+#: Default reference size x0 [m] of eqs. 5 and 7: 1 mm, for every rate law (A is then
+#: the rate of 1 mm particles, in 1/s).
+X0_DEFAULT = 1e-3
 
 
 def _finite(value, name: str, *, positive: bool = False, nonneg: bool = False) -> float:
@@ -112,7 +120,52 @@ def evaluate_rates(model, grid) -> np.ndarray:
 
 
 # ----------------------------------------------------------------------- functional forms
-def power_law_rates(x, A: float, alpha: float, x0: float) -> np.ndarray:
+def power_law_rates_population(x, A, alpha, x0=X0_DEFAULT) -> np.ndarray:
+    """Eq. 5 for a population of parameter sets: S[..., i] = A (x_i / x0)^alpha, S_N = 0.
+
+    The one implementation of eq. 5 (:func:`power_law_rates` is this with scalar
+    parameters, then checked). ``A`` [1/s] (rate at x0), ``alpha`` [-] and ``x0`` [m]
+    broadcast against each other to a leading shape L (e.g. (P,) members or (P, C)
+    members x conditions); returns (*L, N). Nothing is validated or raised here (the
+    hot loop of a fit): a member with A < 0 or a non-finite parameter gets NaN rates,
+    which an optimiser reads as "outside the model's domain".
+    """
+    xs = as_sizes(x)
+    A, alpha, x0 = (np.asarray(v, dtype=float)[..., np.newaxis] for v in (A, alpha, x0))
+    with np.errstate(over="ignore", invalid="ignore"):
+        S = A * (xs / x0) ** alpha
+    S = np.where((A >= 0) & np.isfinite(alpha) & (x0 > 0), S, np.nan)
+    S[..., -1] = 0.0  # the sink does not break
+    return S
+
+
+def austin_rates_population(x, A, alpha, mu0, Lambda, xi=0.0, x_b=None, x_b0=None, eta=0.0,
+                            x0=X0_DEFAULT) -> np.ndarray:
+    """Eq. 7 for a population of parameter sets; see :func:`austin_rates` for the symbols.
+
+    S = A (x/x0)^alpha (x_b0/x_b)^xi / (1 + [x / (mu0 (x_b/x_b0)^eta)]^Lambda), S_N = 0.
+    The one implementation of eq. 7: every parameter (ball sizes too, e.g. one per
+    condition) broadcasts to a leading shape L; returns (*L, N). Not validated: members
+    outside the domain (A < 0, mu0 <= 0, Lambda < 0, non-finite) get NaN rates.
+    """
+    xs = as_sizes(x)
+    A, alpha, mu0, Lambda, xi, eta, x0 = (np.asarray(v, dtype=float)[..., np.newaxis]
+                                          for v in (A, alpha, mu0, Lambda, xi, eta, x0))
+    if (x_b is None) != (x_b0 is None):
+        raise BreakageError(f"x_b = {x_b!r}, x_b0 = {x_b0!r}: give both ball sizes [m] or neither")
+    ball = 1.0
+    if x_b is not None:
+        ball = np.asarray(x_b, dtype=float)[..., np.newaxis] / np.asarray(x_b0, dtype=float)[..., np.newaxis]
+    with np.errstate(over="ignore", invalid="ignore", divide="ignore"):
+        mu = mu0 * ball ** eta
+        S = A * (xs / x0) ** alpha * ball ** (-xi) / (1.0 + (xs / mu) ** Lambda)
+        ok = (A >= 0) & (mu0 > 0) & (Lambda >= 0) & (x0 > 0) & np.isfinite(alpha + xi + eta) & (np.asarray(ball) > 0)
+    S = np.where(ok, S, np.nan)
+    S[..., -1] = 0.0  # the sink does not break
+    return S
+
+
+def power_law_rates(x, A: float, alpha: float, x0: float = X0_DEFAULT) -> np.ndarray:
     """Power-law specific breakage rates, eq. 5: S_i = A (x_i / x0)^alpha.
 
     Parameters
@@ -124,7 +177,8 @@ def power_law_rates(x, A: float, alpha: float, x0: float) -> np.ndarray:
     alpha : float
         Exponent [-] (typically 0.5 to 1.5).
     x0 : float
-        Reference size [m], > 0 (often 1e-3).
+        Reference size [m], > 0; default 1 mm (:data:`X0_DEFAULT`): A is then the
+        rate of 1 mm particles.
 
     Returns
     -------
@@ -140,20 +194,20 @@ def power_law_rates(x, A: float, alpha: float, x0: float) -> np.ndarray:
     A = _finite(A, "A", nonneg=True)
     alpha = _finite(alpha, "alpha")
     x0 = _finite(x0, "x0", positive=True)
-    S = A * (xs / x0) ** alpha
-    S[-1] = 0.0  # the sink does not break
-    return validate_rates(S, xs)
+    return validate_rates(power_law_rates_population(xs, A, alpha, x0), xs)
 
 
 def austin_rates(x, A: float, alpha: float, mu0: float, Lambda: float, *, xi: float = 0.0,
                  x_b: float | None = None, x_b0: float | None = None, eta: float = 0.0,
-                 x0: float = 1.0) -> np.ndarray:
+                 x0: float = X0_DEFAULT) -> np.ndarray:
     """Austin's rate with a maximum and ball-size dependence, eq. 7.
 
     S_i = A (x_i/x0)^alpha (x_b0/x_b)^xi / (1 + [x_i / (mu0 (x_b/x_b0)^eta)]^Lambda)
 
-    With the default ``x0 = 1`` m this is eq. 7 as written (A in 1/s per m^alpha);
-    ``x0 = 1e-3`` gives Austin's usual convention of sizes in mm.
+    With the default ``x0 = 1e-3`` m (1 mm, as for eq. 5) A is the rate of 1 mm
+    particles without the maximum term, Austin's usual convention of sizes in mm;
+    ``x0 = 1`` gives eq. 7 as written with sizes in m (A in 1/s per m^alpha). To move
+    A from x0 = 1 m to 1 mm, multiply it by (1e-3)^alpha.
 
     Parameters
     ----------
@@ -173,7 +227,7 @@ def austin_rates(x, A: float, alpha: float, mu0: float, Lambda: float, *, xi: fl
         Ball size and reference ball size [m]; both or neither. Without them the
         ball-size factors are 1.
     x0 : float
-        Reference size for alpha [m].
+        Reference size for alpha [m], default 1 mm (:data:`X0_DEFAULT`).
 
     Returns
     -------
@@ -190,10 +244,10 @@ def austin_rates(x, A: float, alpha: float, mu0: float, Lambda: float, *, xi: fl
     x0 = _finite(x0, "x0", positive=True)
     if (x_b is None) != (x_b0 is None):
         raise BreakageError(f"x_b = {x_b!r}, x_b0 = {x_b0!r}: give both ball sizes [m] or neither")
-    ball = 1.0 if x_b is None else _finite(x_b, "x_b", positive=True) / _finite(x_b0, "x_b0", positive=True)
-    mu = mu0 * ball ** eta
-    S = A * (xs / x0) ** alpha * ball ** (-xi) / (1.0 + (xs / mu) ** Lambda)
-    S[-1] = 0.0  # the sink does not break
+    if x_b is not None:
+        _finite(x_b, "x_b", positive=True)
+        _finite(x_b0, "x_b0", positive=True)
+    S = austin_rates_population(xs, A, alpha, mu0, Lambda, xi, x_b, x_b0, eta, x0)
     return validate_rates(S, xs)
 
 
@@ -254,12 +308,12 @@ class PowerLawRate:
     alpha : float
         Exponent [-].
     x0 : float
-        Reference size [m], default 1 mm.
+        Reference size [m], default 1 mm (:data:`X0_DEFAULT`): A is the rate at 1 mm.
     """
 
     A: float
     alpha: float
-    x0: float = 1e-3
+    x0: float = X0_DEFAULT
 
     def __post_init__(self):
         _finite(self.A, "A", nonneg=True)
@@ -267,7 +321,7 @@ class PowerLawRate:
         _finite(self.x0, "x0", positive=True)
 
     @classmethod
-    def from_process(cls, A0, params, exponents, alpha: float, x0: float = 1e-3) -> "PowerLawRate":
+    def from_process(cls, A0, params, exponents, alpha: float, x0: float = X0_DEFAULT) -> "PowerLawRate":
         """Power law whose prefactor follows eq. 10 from process parameters."""
         return cls(process_power_law(A0, params, exponents), alpha, x0)
 
@@ -280,7 +334,12 @@ class PowerLawRate:
 
 @dataclass(frozen=True)
 class AustinRate:
-    """Eq. 7 rate model with a maximum and ball-size dependence; see :func:`austin_rates`."""
+    """Eq. 7 rate model with a maximum and ball-size dependence; see :func:`austin_rates`.
+
+    A [1/s] is the rate at the reference size x0 [m] (default 1 mm, as for
+    :class:`PowerLawRate`) without the maximum term; mu0 [m] the size where the
+    maximum term halves it; x_b, x_b0 [m] ball and reference ball sizes.
+    """
 
     A: float
     alpha: float
@@ -290,7 +349,7 @@ class AustinRate:
     x_b: float | None = None
     x_b0: float | None = None
     eta: float = 0.0
-    x0: float = 1.0
+    x0: float = X0_DEFAULT
 
     def __post_init__(self):
         _finite(self.A, "A", nonneg=True)

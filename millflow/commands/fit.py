@@ -26,21 +26,23 @@ def add_parser(subparsers) -> None:
 def run(args) -> int:
     from millflow.fitting.config import load_config
     from millflow.fitting.estimate import compare_models, fit
-    from millflow.fitting.models import ForwardModel
     from millflow.fitting.report import write_report
     from millflow.fitting.validate import leave_out
 
     say = (lambda msg: None) if args.quiet else (lambda msg: print(f"[fit] {msg}", file=sys.stderr, flush=True))
     cfg = load_config(args.config, data_dir=args.data_dir)
-    model = ForwardModel(cfg.spec, cfg.data, cfg.grid)
+    model = cfg.model()
     say(f"{model}")
     result = fit(model, cfg.params, progress=say, **cfg.optimizer)
     out = result.to_dict()
+    if len(set(model.data_kind)) > 1:  # several data kinds: how much each constrains each parameter
+        from millflow.fitting.information import information_shares
+        out["information_share"] = information_shares(result)
     if cfg.candidates:
         models = {cfg.label: model}
         params = {cfg.label: cfg.params}
         for label, spec, par in cfg.candidates:
-            models[label] = ForwardModel(spec, cfg.data, model.grid)
+            models[label] = cfg.model(spec, model.grid)
             params[label] = par
         say(f"ranking {len(models)} candidate models")
         cmp = compare_models(models, params, **cfg.optimizer)

@@ -43,7 +43,8 @@ def format_summary(s: dict) -> str:
              f"circulating load {100 * s['circulating_load']:.1f} %"]
     if "throughput_tph" in s:
         lines.append(f"target P80 {s['target_p80_um']:.4g} um: throughput {s['throughput_tph']:.4g} t/h "
-                     f"(95 %: {_band(s['bands']['throughput_tph'], 't/h')}; residual {s['throughput_residual_rel']:.1e}), "
+                     f"(95 %: {_band(s['bands']['throughput_tph'], 't/h')}; "
+                     f"residual {s['throughput_residual_rel']:.1e}), "
                      f"specific energy {s['specific_energy_at_target_kWh_t']:.4g} kWh/t "
                      f"(95 %: {_band(s['bands']['specific_energy_kWh_t'], 'kWh/t', '{:.3g}')})")
     for q, d in s.get("disagreement", {}).items():
@@ -92,7 +93,6 @@ def run(args) -> int:
 
 
 def _write(res, s, out: Path, plots: bool):
-    import numpy as np
     import pandas as pd
 
     files = [out / "scaleup.nc", out / "scaleup_psd.csv", out / "scaleup.json"]

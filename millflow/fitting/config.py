@@ -20,6 +20,7 @@ Tables and keys (paths relative to the config file)::
 """
 from __future__ import annotations
 
+import math
 import os
 import tomllib
 from dataclasses import dataclass, field
@@ -34,10 +35,10 @@ from millflow.grid import SizeGrid
 
 __all__ = ["FitConfig", "load_config", "read_b_matrix"]
 
-_TABLES = {"data", "grid", "model", "params", "optimizer", "validation", "output", "candidates"}
+_TABLES = {"data", "grid", "model", "params", "optimizer", "validation", "output", "candidates", "weights"}
 _MODEL_KEYS = {"mode", "rate", "breakage", "classification", "rate_process", "param_process", "screen_column",
-               "tau_column", "n_tanks", "transport", "transport_params", "where", "b_matrix_csv", "b_kind",
-               "t10_table_csv", "t10", "x0_mm", "objective", "label"}
+               "ball_column", "tau_column", "n_tanks", "transport", "transport_params", "where", "b_matrix_csv",
+               "b_kind", "t10_table_csv", "t10", "x0_mm", "objective", "label", "transport_fit"}
 _OPT_KEYS = {"global", "starts", "popsize", "maxiter", "seed"}
 
 
@@ -54,6 +55,17 @@ class FitConfig:
     plots: bool = True
     candidates: list = field(default_factory=list)   # [(label, ModelSpec, params)]
     label: str = "model"
+    tracer: object = None                             # DataFrame condition, time_s, F (mode "mill")
+    kind_weights: dict = field(default_factory=dict)  # [weights]: data kind -> weight
+
+    def model(self, spec: ModelSpec | None = None, grid: SizeGrid | None = None):
+        """The :class:`ForwardModel` of this config (or of a candidate ``spec``), with its
+        tracer rows and weights per data kind."""
+        from millflow.fitting.models import ForwardModel
+        spec = self.spec if spec is None else spec
+        tracer = self.tracer if spec.mode == "mill" else None
+        return ForwardModel(spec, self.data, grid if grid is not None else self.grid, tracer=tracer,
+                            kind_weights=self.kind_weights)
 
 
 def read_b_matrix(path, grid: SizeGrid, kind: str = "b") -> np.ndarray:
@@ -88,9 +100,11 @@ def _spec(table: dict, where: str, rel=None, grid_of=None) -> tuple[str, ModelSp
     unknown = set(table) - _MODEL_KEYS
     if unknown:
         raise InputError(f"{where}: unknown keys {sorted(unknown)}; expected some of {sorted(_MODEL_KEYS)}")
-    kw = {k: table[k] for k in ("mode", "rate", "breakage", "screen_column", "tau_column", "objective", "n_tanks",
-                                "transport", "where")
+    kw = {k: table[k] for k in ("mode", "rate", "breakage", "screen_column", "ball_column", "tau_column", "objective",
+                                "n_tanks", "transport", "where")
           if k in table}
+    if "transport_fit" in table:
+        kw["transport_fit"] = tuple(table["transport_fit"])
     if "transport_params" in table:
         if not isinstance(table["transport_params"], dict):
             raise InputError(f"{where}: transport_params must be a table, e.g. [model.transport_params] n = 10")
@@ -190,6 +204,38 @@ def load_config(path, data_dir: str | None = None) -> FitConfig:
         cp = c.pop("params", {})
         lab, sp = _spec(c, f"{path} [[candidates]] #{k + 1}", rel, grid_of)
         cands.append((lab, sp, default_parameters(sp, cp)))
+    tracer = read_tracer_table(rel(d["tracer"])) if "tracer" in d else None
+    if tracer is not None and spec.mode != "mill":
+        raise InputError(f"{path} [data] tracer: tracer data need [model] mode = 'mill' (mode is {spec.mode!r})")
+    weights = {str(k): float(v) for k, v in cfg.get("weights", {}).items()}
+    bad = [k for k, v in weights.items() if not (math.isfinite(v) and v >= 0)]
+    if bad:
+        raise InputError(f"{path} [weights] {bad[0]} = {weights[bad[0]]!r}: expected a finite weight >= 0")
     return FitConfig(path, data, spec, params, grid, opt, val.get("hold_out"),
-                     rel(out.get("dir", "fit-results")), bool(out.get("plots", True)), cands, label)
+                     rel(out.get("dir", "fit-results")), bool(out.get("plots", True)), cands, label, tracer, weights)
+
+
+def read_tracer_table(path):
+    """Tracer F(t) table (CSV): columns ``condition``, ``time_s`` or ``time_min``, ``F``
+    (fraction of a pulse that has left by t, 0..1, or a step response)."""
+    import pandas as pd
+    if not os.path.isfile(path):
+        raise InputError(f"{path}: tracer table not found")
+    try:
+        t = pd.read_csv(path)
+    except (ValueError, pd.errors.ParserError) as exc:
+        raise InputError(f"{path}: cannot read the tracer table as CSV ({exc})") from exc
+    if "time_min" in t.columns and "time_s" not in t.columns:
+        t = t.assign(time_s=pd.to_numeric(t.time_min, errors="coerce") * 60.0)
+    missing = [c for c in ("condition", "time_s", "F") if c not in t.columns]
+    if missing:
+        raise InputError(f"{path}: columns {missing} missing; expected condition, time_s (or time_min), F")
+    for col in ("time_s", "F"):
+        v = pd.to_numeric(t[col], errors="coerce")
+        if v.isna().any():
+            row = int(v.isna().to_numpy().argmax())
+            raise InputError(f"{path}: row {row + 2}, column {col}: {t[col].iloc[row]!r} is not a number")
+        t[col] = v.astype(float)
+    t["condition"] = t["condition"].astype(str)
+    return t[["condition", "time_s", "F"]]
 

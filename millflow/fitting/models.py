@@ -12,10 +12,15 @@ Parameters (positive ones in logs, named ``ln_...``):
 
 - rate ``power`` (eq. 5): ``ln_A0``, ``alpha``;  ``austin`` (eq. 7 without ball size):
   ``ln_A0``, ``alpha``, ``ln_mu`` (ln of mu0/x0), ``Lambda``. With process parameters
+  ``austin_ball`` (eq. 7 with its ball-size terms): also ``xi`` and ``eta``, the ball
+  size x_b [mm] from the process column ``ball_column`` and x_b0 its geometric mean
+  over the conditions. With process parameters
   (eq. 10) A = exp(ln_A0) prod_k (p_k/p_ref_k)^a_k, one exponent ``a_<column>`` each,
   p_ref the geometric mean over the conditions (it decorrelates ln_A0 from the a_k).
 - breakage ``normalized`` (eq. 6): ``phi``, ``gamma``, ``beta``; ``single``: B = r^gamma
-  (eq. 6 with phi = 1): ``gamma``; ``fixed``: a given b matrix, nothing fitted (the
+  (eq. 6 with phi = 1): ``gamma``; ``non_normalized`` (eq. 8): ``phi`` (phi0 at the
+  top of the grid), ``gamma``, ``beta``, ``theta`` (phi_j = phi0 (x_1/x_j)^theta; members
+  whose phi_j leaves [0, 1] are outside the domain); ``fixed``: a given b matrix, nothing fitted (the
   hybrid, semi-back-calculation method; fixing phi, gamma, beta with ``vary=False``
   does the same for eq. 6).
 - classification ``screen``: d_i* = 1 / (1 + (x_i / (c50 * screen))^n), parameters
@@ -36,8 +41,10 @@ Parameters (positive ones in logs, named ``ln_...``):
   ``tau_column`` or 1), classification d_i* as above placed by ``where`` (None: the
   mill's default, the discharge for cells and the axis for plug flow and axial
   dispersion; ``"cells"`` = every cell outlet, as ``well_mixed`` with ``n_tanks``).
-  Locations ``product``, ``holdup`` (mill content) and ``cell_K`` (content of cell K,
-  1-based, cell transports). Evaluated member by member and condition by condition by
+  Locations ``product``, ``holdup`` (mill content), ``cell:K`` (content of cell K,
+  1-based, cell transports; ``cell_K`` is accepted as an alias) and ``z:Y`` (content at
+  the fractional axial position Y, plug flow and axial dispersion), spelled as
+  :func:`millflow.steady_mill` reads them. Evaluated member by member and condition by condition by
   :class:`millflow.mill.Mill` (``steady_mill`` for hold-up samples): exact, but much
   slower than the vectorised modes (milliseconds per member and condition instead of
   one array operation for the whole population): prefer local fits from a good start
@@ -54,16 +61,23 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from millflow.batch import batch_grind_population
+from millflow.breakage.distributions import breakage_population
+from millflow.breakage.rates import X0_DEFAULT, austin_rates_population, power_law_rates_population
+from millflow.classifiers import screen_discharge, screen_power_discharge
 from millflow.errors import InputError, SolverError
 from millflow.fitting.data import PSDData
 from millflow.grid import SizeGrid
+from millflow.mill.well_mixed import well_mixed_population, well_mixed_population_geometric
 from millflow.psd import from_sieves
 
-__all__ = ["Parameter", "ModelSpec", "ForwardModel", "RATE_FORMS", "BREAKAGE_FORMS", "MODES",
+__all__ = ["Parameter", "ModelSpec", "ForwardModel", "RATE_FORMS", "BREAKAGE_FORMS", "MODES", "canonical_location",
            "CLASSIFICATIONS", "TRANSPORTS", "default_parameters"]
 
-RATE_FORMS = {"power": ("ln_A0", "alpha"), "austin": ("ln_A0", "alpha", "ln_mu", "Lambda")}
-BREAKAGE_FORMS = {"normalized": ("phi", "gamma", "beta"), "single": ("gamma",), "fixed": ()}
+RATE_FORMS = {"power": ("ln_A0", "alpha"), "austin": ("ln_A0", "alpha", "ln_mu", "Lambda"),
+              "austin_ball": ("ln_A0", "alpha", "ln_mu", "Lambda", "xi", "eta")}
+BREAKAGE_FORMS = {"normalized": ("phi", "gamma", "beta"), "single": ("gamma",), "fixed": (),
+                  "non_normalized": ("phi", "gamma", "beta", "theta")}
 MODES = ("batch", "plug_flow", "well_mixed", "mill")
 #: Transport models of mode "mill": name -> (rtd class name, required, optional parameters).
 TRANSPORTS = {
@@ -74,12 +88,31 @@ TRANSPORTS = {
     "plug_flow": ("PlugFlow", (), ()),
 }
 _CELL_TRANSPORTS = ("perfect_mixing", "tanks_in_series", "recirculating_cells")
+#: Transport parameters that mode "mill" can fit: name -> (fit parameter, transports).
+TRANSPORT_FIT = {"tau": ("ln_tau", tuple(TRANSPORTS)), "pe": ("ln_pe", ("axial_dispersion",)),
+                 "r": ("r", ("recirculating_cells",))}
+_AXIAL_TRANSPORTS = ("plug_flow", "axial_dispersion")
+
+
+def canonical_location(loc) -> str:
+    """One spelling of a sampling location: ``cell:K`` (content of cell K, 1-based) and
+    ``z:Y`` (fractional axial position), as :func:`millflow.steady_mill` reads them;
+    the fit's earlier spelling ``cell_K`` is accepted as an alias."""
+    loc = str(loc)
+    if loc.startswith("cell_") and loc[5:].isdigit():
+        return "cell:" + loc[5:]
+    return loc
 CLASSIFICATIONS = {None: (), "screen": ("ln_c50", "ln_sharp"), "screen_power": ("n_screen",)}
 
 _DEFAULTS = {  # value, min, max
     "ln_A0": (0.0, -12.0, 12.0), "alpha": (1.0, -2.0, 4.0), "ln_mu": (1.0, -5.0, 8.0), "Lambda": (3.0, 0.5, 8.0),
     "phi": (0.5, 0.0, 1.0), "gamma": (1.0, 0.05, 4.0), "beta": (4.0, 1.0, 10.0),
     "ln_c50": (0.0, -4.0, 1.5), "ln_sharp": (1.0, -1.0, 3.5), "n_screen": (2.0, 0.0, 12.0),
+    # theta > 0 can lift phi_j = phi0 (x_1/x_j)^theta above 1 at fine sizes (outside eq. 8's domain)
+    "xi": (0.0, -3.0, 3.0), "eta": (0.0, -3.0, 3.0), "theta": (0.0, -1.0, 0.0),
+    # fitted transport (mode "mill", transport_fit): tau [s] in logs, Peclet number in logs,
+    # recirculation ratio r
+    "ln_tau": (6.0, 0.0, 11.5), "ln_pe": (2.0, -2.0, 6.0), "r": (1.0, 0.0, 10.0),
 }
 
 
@@ -112,9 +145,16 @@ class ModelSpec:
         (e.g. ``{"n": 10}``, ``{"pe": 8.0}``, ``{"n": 5, "r": 1.0}``); stored as sorted pairs.
     where : mode "mill": where classification acts (None: the mill's default), see
         :func:`millflow.mill.steady_mill`.
+    transport_fit : mode "mill": transport parameters fitted with S and B (issue 15 §3),
+        a subset of :data:`TRANSPORT_FIT` for the transport: "tau" (parameter ``ln_tau``,
+        tau [s]; with a ``tau_column`` it scales the column: tau_c = exp(ln_tau) *
+        column_c / geometric mean), "pe" (``ln_pe``, axial dispersion) and "r" (``r``,
+        recirculation ratio of recirculating cells). The number of cells n stays fixed
+        (an integer: compare fits with different n instead).
     rate, breakage, classification : form names (classification None or "screen").
     rate_process : process-table columns entering A by eq. 10.
     screen_column : process column holding the screen opening [mm] for "screen".
+    ball_column : process column holding the ball size [mm] for rate "austin_ball".
     tau_column : process column holding tau [s] for continuous modes (None: tau = 1).
     x0_m : reference size of eq. 5 [m].
     b_matrix : (N, N) fractional b on the numerical grid for breakage "fixed".
@@ -129,14 +169,16 @@ class ModelSpec:
     rate_process: tuple = ()
     param_process: tuple = ()
     screen_column: str = "screen_mm"
+    ball_column: str = "ball_mm"
     tau_column: str | None = None
-    x0_m: float = 1e-3
+    x0_m: float = X0_DEFAULT
     n_tanks: int = 1
     b_matrix: np.ndarray | None = field(default=None, compare=False)
     objective: str = "cumulative"
     transport: str | None = None
     transport_params: tuple = ()
     where: str | None = None
+    transport_fit: tuple = ()
 
     def __post_init__(self):
         for key, val, ok in (("mode", self.mode, MODES), ("rate", self.rate, RATE_FORMS),
@@ -169,7 +211,11 @@ class ModelSpec:
             raise InputError(f"model.transport_params = {self.transport_params!r}: expected a dict "
                              "name -> value") from exc
         object.__setattr__(self, "transport_params", tp)
+        fitted = tuple(str(v) for v in self.transport_fit)
+        object.__setattr__(self, "transport_fit", fitted)
         if self.mode != "mill":
+            if fitted:
+                raise InputError(f"model.transport_fit needs mode = 'mill' (mode is {self.mode!r})")
             if self.transport is not None or tp or self.where is not None:
                 raise InputError(f"model.transport, transport_params and where need mode = 'mill' "
                                  f"(mode is {self.mode!r})")
@@ -185,16 +231,24 @@ class ModelSpec:
                              + (f"unknown {unknown}; " if unknown else "") + (f"missing {missing}; " if missing else "")
                              + f"expected {list(required)} (required) and {list(optional)} (optional); "
                              "tau comes from tau_column")
+        for name in fitted:
+            if name not in TRANSPORT_FIT or self.transport not in TRANSPORT_FIT[name][1]:
+                ok = [k for k, (_, trs) in TRANSPORT_FIT.items() if self.transport in trs]
+                raise InputError(f"model.transport_fit: {name!r} cannot be fitted for transport {self.transport!r}; "
+                                 f"expected some of {ok}")
+        if "pe" in fitted and "pe" not in names:
+            object.__setattr__(self, "transport_params", tuple(sorted(tp + (("pe", 1.0),))))
         self.make_transport(1.0)  # parameter values checked by rtd
         if self.where is not None and self.classification is None:
             raise InputError("model.where is given but there is no classification")
 
-    def make_transport(self, tau: float):
-        """The rtd transport model of mode "mill" with mean residence time ``tau``."""
+    def make_transport(self, tau: float, **fitted):
+        """The rtd transport model of mode "mill" with mean residence time ``tau`` [s]
+        (``fitted``: values of fitted transport parameters, e.g. pe=8.0, r=1.0)."""
         import rtd
         cls = getattr(rtd, TRANSPORTS[self.transport][0])
         try:
-            return cls(float(tau), **dict(self.transport_params))
+            return cls(float(tau), **{**dict(self.transport_params), **fitted})
         except (rtd.RTDError, TypeError, ValueError) as exc:
             raise InputError(f"model.transport = {self.transport!r} with transport_params "
                              f"{dict(self.transport_params)}: {exc}") from exc
@@ -209,12 +263,15 @@ class ModelSpec:
         for name in [f"a_{p}" for p in self.rate_process] + list(self.base_names[1:]):
             names.append(name)
             names += [f"{name}_{col}" for par, col in self.param_process if par == name]
+        names += [TRANSPORT_FIT[k][0] for k in self.transport_fit]
         return tuple(names)
 
     def label(self) -> str:
         parts = [self.mode, f"rate={self.rate}", f"B={self.breakage}"]
         if self.mode == "mill":
-            parts.insert(1, f"transport={self.transport}" + "".join(f",{k}={v}" for k, v in self.transport_params))
+            parts.insert(1, f"transport={self.transport}" + "".join(f",{k}={v}" for k, v in self.transport_params
+                                                                    if k not in self.transport_fit)
+                         + "".join(f",{k}=fitted" for k in self.transport_fit))
         if self.classification:
             parts.append(f"class={self.classification}")
         if self.rate_process:
@@ -239,7 +296,8 @@ def default_parameters(spec: ModelSpec, overrides: dict | None = None) -> dict:
         v = float(o.get("value", min(max(v, lo), hi)))
         out[name] = Parameter(name, v, lo, hi, bool(o.get("vary", True)))
     if overrides:
-        raise InputError(f"params: {sorted(overrides)} are not parameters of this model; expected {list(spec.param_names)}")
+        raise InputError(f"params: {sorted(overrides)} are not parameters of this model; "
+                         f"expected {list(spec.param_names)}")
     return out
 
 
@@ -263,8 +321,10 @@ class ForwardModel:
     shape (n_data,) or (P, n_data), in the order of ``self.y``.
     """
 
-    def __init__(self, spec: ModelSpec, data: PSDData, grid: SizeGrid | None = None, conditions=None):
+    def __init__(self, spec: ModelSpec, data: PSDData, grid: SizeGrid | None = None, conditions=None, *,
+                 tracer=None, kind_weights: dict | None = None):
         self.spec, self.data = spec, data
+        self.tracer, self.kind_weights = tracer, dict(kind_weights or {})
         self.grid = grid if grid is not None else auto_grid(data)
         self.conditions = list(conditions) if conditions is not None else data.conditions
         unknown = [c for c in self.conditions if c not in data.conditions]
@@ -276,14 +336,77 @@ class ForwardModel:
         self._proc = self._process_matrix()
         samples = data.samples(self.conditions)
         self._build_groups(samples)
-        # eq. 6 ratio r = x_{i-1}/x_j on the strict lower triangle
-        i, j = np.tril_indices(self.n, -1)
-        self._ti, self._tj = i, j
-        self._logr = np.log(x[i - 1] / x[j])
-        self._strict_lower = np.tril(np.ones((self.n, self.n)), -1)
-        self._logx = np.log(x / spec.x0_m)
+        self._build_tracer()
+        # eq. 6 on a geometric grid (fixed ratio to rounding): eq. 3 by O(N) recurrences
+        log_ratio = np.log(x[:-1] / x[1:])
+        geometric = x.size > 1 and float(np.ptp(log_ratio)) <= 1e-12 * float(log_ratio.mean())
+        self._ratio = (float(np.exp(log_ratio.mean())) if geometric and spec.breakage in ("normalized", "single")
+                       else None)
 
     # ----------------------------------------------------------------- compilation
+    def _build_tracer(self):
+        """Tracer rows (mode "mill"): measured F(t), the fraction of a pulse that has
+        left by time t (or a step response), columns ``condition``, ``time_s``, ``F``.
+        They join the PSD rows in one objective; ``kind_weights`` (data kind -> weight,
+        default 1: F and cumulative passing are both fractions of order one with
+        comparable measurement noise) scales each kind's rows. Kinds: the PSD location
+        kinds ``product``, ``holdup``, ``cell``, ``z`` (and ``mill`` for batch) and
+        ``tracer``."""
+        kinds = np.array([self._kind(self.groups[g][1]) for g in range(len(self.groups))
+                          for _ in range(self.group_slices[g + 1] - self.group_slices[g])], dtype=object)
+        unknown = set(self.kind_weights) - set(kinds) - {"tracer"}
+        if unknown:
+            raise InputError(f"kind_weights: {sorted(unknown)} are not data kinds of this fit; "
+                             f"expected some of {sorted(set(kinds) | {'tracer'})}")
+        self._tracer = []
+        y_t, w_t = [], []
+        if self.tracer is not None:
+            if self.spec.mode != "mill":
+                raise InputError("tracer data need mode = 'mill' (the transport model predicts them)")
+            t = self.tracer
+            missing = [c for c in ("condition", "time_s", "F") if c not in t.columns]
+            if missing:
+                raise InputError(f"tracer table: columns {missing} missing; expected condition, time_s, F")
+            for cond, grp in t.groupby("condition", sort=False):
+                if cond not in self.conditions:
+                    continue  # a condition left out (validation folds)
+                times = grp.time_s.to_numpy(float)
+                F = grp.F.to_numpy(float)
+                if not (np.isfinite(times).all() and (times >= 0).all() and np.isfinite(F).all()):
+                    raise InputError(f"tracer table, condition {cond!r}: time_s must be finite >= 0 and F finite")
+                self._tracer.append((self.conditions.index(cond), times))
+                y_t.append(F)
+                w_t.append(np.full(F.size, 1.0))
+        w = np.array([self.kind_weights.get(k, 1.0) for k in kinds], dtype=float)
+        self.y_psd = self.y
+        self.weights = np.concatenate([self.weights * w] + [v * self.kind_weights.get("tracer", 1.0) for v in w_t])
+        self.y = np.concatenate([self.y] + y_t)
+        self.data_kind = np.concatenate([kinds, np.full(sum(v.size for v in y_t), "tracer", dtype=object)])
+
+    @staticmethod
+    def _kind(loc: str) -> str:
+        return loc.split(":")[0] if ":" in loc else loc
+
+    def transport_values(self, p):
+        """Per member and condition: tau [s] (P, C) and the fitted transport parameters
+        (name -> (P,)) of mode "mill"."""
+        spec = self.spec
+        col = self._proc[spec.tau_column] if spec.tau_column else np.ones(len(self.conditions))
+        n_pop = next(iter(p.values())).shape[0]
+        if "tau" in spec.transport_fit:
+            scale = col / float(np.exp(np.log(col).mean())) if spec.tau_column else col
+            tau = np.exp(p["ln_tau"])[:, None] * scale[None, :]
+        else:
+            tau = np.broadcast_to(col, (n_pop, col.size))
+        extra = {}
+        if "pe" in spec.transport_fit:
+            extra["pe"] = np.exp(p["ln_pe"])
+        if "r" in spec.transport_fit:
+            extra["r"] = p["r"]
+        return tau, extra
+
+    def _transport(self, tau, extra, k):
+        return self.spec.make_transport(float(tau), **{n: float(v[k]) for n, v in extra.items()})
     def _feed(self, cond):
         size, P = self.data.feed(cond)
         keep = size > 0
@@ -297,6 +420,8 @@ class ForwardModel:
         cols = list(spec.rate_process) + [col for _, col in spec.param_process]
         if spec.classification in ("screen", "screen_power"):
             cols.append(spec.screen_column)
+        if spec.rate == "austin_ball":
+            cols.append(spec.ball_column)
         if spec.tau_column:
             cols.append(spec.tau_column)
         out = {}
@@ -310,19 +435,22 @@ class ForwardModel:
             out[col] = v
         # references: geometric mean over all conditions of the data (not just these)
         self._ref = {c: float(np.exp(np.log(proc[c].to_numpy(dtype=float)).mean()))
-                     for c in list(spec.rate_process) + [col for _, col in spec.param_process]}
+                     for c in list(spec.rate_process) + [col for _, col in spec.param_process]
+                     + ([spec.ball_column] if spec.rate == "austin_ball" else [])}
         return out
 
     def _build_groups(self, samples):
         groups, rows, ys, ws, sizes, conds = [], [], [], [], [], []
         cond_index = {c: k for k, c in enumerate(self.conditions)}
         for (cond, loc, t), grp in samples.groupby(["condition", "location", "time_s"], sort=False):
+            loc = canonical_location(loc)
             if self.spec.mode == "mill":
                 self._check_mill_location(loc, cond)
             elif self.spec.mode != "batch" and loc not in ("product", "holdup"):
                 raise InputError(f"location {loc!r} of condition {cond!r}: a {self.spec.mode} mill predicts "
                                  "'product' and (well_mixed) 'holdup' samples")
-            if loc == "holdup" and self.spec.mode != "mill" and (self.spec.mode != "well_mixed" or self.spec.n_tanks != 1):
+            if loc == "holdup" and self.spec.mode != "mill" and (
+                    self.spec.mode != "well_mixed" or self.spec.n_tanks != 1):
                 raise InputError("location 'holdup' needs mode well_mixed with n_tanks = 1")
             groups.append((cond_index[cond], loc, float(t)))
             ys.append(grp.passing.to_numpy())
@@ -354,6 +482,16 @@ class ForwardModel:
                     W[r, g * N + (N - k - 1)] += u
                 r += 1
         self._W, self._const = W, const
+        # the same interpolation as two gathers: each row has at most two weights
+        rows = np.arange(W.shape[0])
+        if (np.count_nonzero(W, axis=1) > 2).any():
+            raise SolverError("internal: an interpolation row with more than two weights")
+        rest = W.copy()
+        self._i1 = np.argmax(rest != 0, axis=1)
+        self._w1 = rest[rows, self._i1].copy()
+        rest[rows, self._i1] = 0.0
+        self._i2 = np.argmax(rest != 0, axis=1)
+        self._w2 = rest[rows, self._i2].copy()
         if self.spec.objective == "fractional":
             D = np.zeros((y_cum.size, y_cum.size))
             for g in range(G):
@@ -376,9 +514,19 @@ class ForwardModel:
         if loc in ("product", "holdup"):
             return
         cells = {"perfect_mixing": 1}.get(spec.transport) or dict(spec.transport_params).get("n")
-        ok = "'product', 'holdup'" + (f" or 'cell_K' (K = 1..{int(cells)})" if spec.transport in _CELL_TRANSPORTS else "")
-        k = loc[5:] if loc.startswith("cell_") else ""
-        if not (spec.transport in _CELL_TRANSPORTS and k.isdigit() and 1 <= int(k) <= int(cells)):
+        axial = spec.transport in _AXIAL_TRANSPORTS
+        ok = "'product', 'holdup'" + (f" or 'cell:K' (K = 1..{int(cells)})" if spec.transport in _CELL_TRANSPORTS
+                                      else "") + (" or 'z:Y' (0 <= Y <= 1)" if axial else "")
+        good = False
+        if loc.startswith("cell:") and spec.transport in _CELL_TRANSPORTS:
+            k = loc[5:]
+            good = k.isdigit() and 1 <= int(k) <= int(cells)
+        elif loc.startswith("z:") and axial:
+            try:
+                good = 0.0 <= float(loc[2:]) <= 1.0
+            except ValueError:
+                good = False
+        if not good:
             raise InputError(f"location {loc!r} of condition {cond!r}: a mill with transport {spec.transport!r} "
                              f"predicts {ok}")
 
@@ -395,8 +543,10 @@ class ForwardModel:
         proc = self.data.process
         return {"mode": s.mode, "rate": s.rate, "breakage": s.breakage, "classification": s.classification,
                 "rate_process": list(s.rate_process), "param_process": [list(p) for p in s.param_process],
-                "tau_column": s.tau_column, "x0_m": s.x0_m, "n_tanks": s.n_tanks, "transport": s.transport,
-                "transport_params": dict(s.transport_params), "param_names": list(s.param_names),
+                "tau_column": s.tau_column, "ball_column": s.ball_column if s.rate == "austin_ball" else None,
+                "x0_m": s.x0_m, "n_tanks": s.n_tanks, "transport": s.transport,
+                "transport_params": dict(s.transport_params), "transport_fit": list(s.transport_fit),
+                "param_names": list(s.param_names),
                 "grid_upper_m": [float(v) for v in self.x], "process_ref": dict(self._ref),
                 "process": {str(c): {str(k): float(v) for k, v in proc.loc[c].items()
                                      if isinstance(v, (int, float, np.floating, np.integer))}
@@ -426,52 +576,52 @@ class ForwardModel:
         return any(par == name for par, _ in self.spec.param_process)
 
     def rates(self, p):
-        """S (P, C, N) [1/s] (or tau*S if no tau column)."""
+        """S (P, C, N) [1/s] (or tau*S if no tau column): eq. 5 or 7 with A (and
+        exponents) per condition by eq. 10, from :mod:`millflow.breakage.rates`."""
         lnA = p["ln_A0"][:, None].copy()
         for col in self.spec.rate_process:
             lnA = lnA + self.cond_param(p, f"a_{col}") * np.log(self._proc[col] / self._ref[col])[None, :]
-        logS = lnA[:, :, None] + self.cond_param(p, "alpha")[:, :, None] * self._logx[None, None, :]
-        S = np.exp(np.minimum(logS, 600.0))
+        A = np.exp(np.minimum(lnA, 600.0))
+        alpha = self.cond_param(p, "alpha")
+        x0 = self.spec.x0_m
         if self.spec.rate == "austin":
-            mu_rel = self._logx[None, :] - p["ln_mu"][:, None]
-            S = S / (1.0 + np.exp(np.minimum(p["Lambda"][:, None] * mu_rel, 600.0)))[:, None, :]
-        S[..., -1] = 0.0
-        return S
+            mu0 = np.exp(p["ln_mu"])[:, None] * x0
+            return austin_rates_population(self.x, A, alpha, mu0, p["Lambda"][:, None], x0=x0)
+        if self.spec.rate == "austin_ball":  # eq. 7 with x_b per condition, x_b0 the geometric mean
+            col = self.spec.ball_column
+            mu0 = np.exp(p["ln_mu"])[:, None] * x0
+            return austin_rates_population(self.x, A, alpha, mu0, p["Lambda"][:, None], p["xi"][:, None],
+                                           self._proc[col] * 1e-3, self._ref[col] * 1e-3, p["eta"][:, None], x0=x0)
+        return power_law_rates_population(self.x, A, alpha, x0)
+
+    def _eq6(self, p):
+        """phi, gamma, beta of eq. 6 shaped (P, 1) or (P, C) (gamma per condition)."""
+        gamma = self.cond_param(p, "gamma") if self._depends("gamma") else p["gamma"][:, None]
+        if self.spec.breakage == "single":
+            return 1.0, gamma, gamma
+        return p["phi"][:, None], gamma, p["beta"][:, None]
 
     def frac_b(self, p, n_pop):
-        """Fractional b, (P, N, N), or (P, C, N, N) when gamma depends on the process."""
+        """Fractional b, (P, N, N), or (P, C, N, N) when gamma depends on the process
+        (eq. 6 from :func:`millflow.breakage.distributions.breakage_population`)."""
         N = self.n
         if self.spec.breakage == "fixed":
             return np.broadcast_to(np.asarray(self.spec.b_matrix, float), (n_pop, N, N))
-        lead = (n_pop,)
-        gamma = p["gamma"][:, None]
+        gamma = p["gamma"]
         if self._depends("gamma"):
-            lead = (n_pop, len(self.conditions))
-            gamma = self.cond_param(p, "gamma")[:, :, None]
-        if self.spec.breakage == "single":
-            vals = np.exp(gamma * self._logr)
-        else:
-            phi, beta = p["phi"], p["beta"]
-            if len(lead) == 2:
-                phi, beta = phi[:, None], beta[:, None]
-            phi, beta = phi[..., None], beta[..., None]
-            vals = phi * np.exp(gamma * self._logr) + (1 - phi) * np.exp(beta * self._logr)
-        # outside the physical domain of eq. 6 (0 <= phi <= 1, exponents > 0) B is not a
-        # distribution: return NaN so that the bounds check names the offending corner
-        bad = ~(gamma > 0)
-        if self.spec.breakage == "normalized":
-            bad = bad | ~((phi >= 0) & (phi <= 1) & (beta > 0))
-        vals = np.where(bad, np.nan, vals)
-        B = np.zeros(lead + (N, N))
-        B[..., self._ti, self._tj] = vals
-        k = np.arange(N - 1)
-        B[..., k + 1, k] = 1.0
-        b = B.copy()
-        b[..., :-1, :] -= B[..., 1:, :]
-        return b * self._strict_lower
+            gamma = self.cond_param(p, "gamma")
+        if self.spec.breakage == "single":  # B = r^gamma: eq. 6 with phi = 1
+            return breakage_population(self.x, 1.0, gamma, gamma, kind="b")
+        phi, beta = p["phi"], p["beta"]
+        theta = p["theta"] if self.spec.breakage == "non_normalized" else 0.0
+        if gamma.ndim == 2:
+            phi, beta = phi[:, None], beta[:, None]
+            theta = theta[:, None] if np.ndim(theta) else theta
+        return breakage_population(self.x, phi, gamma, beta, theta, kind="b")
 
     def discharge(self, p, n_pop):
-        """Normalised discharge d* (P, C, N), ones without classification."""
+        """Normalised discharge d* (P, C, N), ones without classification; the curves
+        of :mod:`millflow.classifiers` (``screen_discharge``, ``screen_power_discharge``)."""
         C = len(self.conditions)
         if self.spec.classification is None:
             return np.ones((n_pop, C, self.n))
@@ -480,12 +630,9 @@ class ForwardModel:
             # normalised so that d* = 1 at x = x0 for the geometric-mean screen: ln_A0 is
             # then the rate at x0 for a typical screen, which decorrelates it from n_screen
             ref = float(np.exp(np.log(self.data.process[self.spec.screen_column].to_numpy(float)).mean())) * 1e-3
-            z = self.cond_param(p, "n_screen")[:, :, None] * (self._logx[None, None, :] + np.log(ref / screen)[None, :, None])
-            return np.exp(-np.clip(z, -600.0, 600.0))
+            return screen_power_discharge(self.x, self.cond_param(p, "n_screen"), self.spec.x0_m * screen / ref)
         d50 = np.exp(p["ln_c50"])[:, None] * screen[None, :]
-        sharp = np.exp(p["ln_sharp"])[:, None, None]
-        z = sharp * (np.log(self.x)[None, None, :] - np.log(d50)[:, :, None])
-        return 1.0 / (1.0 + np.exp(np.minimum(z, 600.0)))
+        return screen_discharge(self.x, d50, np.exp(p["ln_sharp"])[:, None])
 
     def predict_grid(self, theta):
         """Mass fractions (P, G, N) on the grid for every sample group."""
@@ -493,16 +640,23 @@ class ForwardModel:
         n_pop = theta.shape[0]
         p = self._unpack(theta)
         S = self.rates(p)
-        b = self.frac_b(p, n_pop)
         mode = self.spec.mode
+        b = None if (mode == "well_mixed" and self._ratio is not None) else self.frac_b(p, n_pop)
         tau = self._proc[self.spec.tau_column] if self.spec.tau_column else np.ones(len(self.conditions))
         out = np.empty((n_pop, len(self.groups), self.n))
         if mode == "well_mixed":
             d = self.discharge(p, n_pop)
-            s_eff = S * tau[None, :, None] / d / self.spec.n_tanks
             prod = self._feeds
-            for _ in range(self.spec.n_tanks):  # equal well-mixed tanks in series, tau/n each
-                prod = _well_mixed(s_eff, b, prod)
+            tau_k = tau[None, :] / self.spec.n_tanks
+            if b is None:  # eq. 6 on a geometric grid: the O(N) recurrences of eq. 3
+                phi, gamma, beta = self._eq6(p)
+            else:
+                b_pc = b if b.ndim == 4 else b[:, None]
+            for _ in range(self.spec.n_tanks):  # equal well-mixed tanks in series, tau/n each (eq. 3)
+                if b is None:
+                    prod = well_mixed_population_geometric(S, prod, phi, gamma, beta, self._ratio, tau_k, d)
+                else:
+                    prod = well_mixed_population(S, b_pc, prod, tau_k, d)
             for g, (c, loc, _) in enumerate(self.groups):
                 if loc == "holdup":
                     m = prod[:, c] / d[:, c]
@@ -511,25 +665,111 @@ class ForwardModel:
                     out[:, g] = prod[:, c]
         elif mode == "mill":
             d = self.discharge(p, n_pop) if self.spec.classification else None
-            self._predict_mill(S, b, d, tau, out)
+            tau_pc, extra = self.transport_values(p)
+            if self._chain_cells() is not None:
+                self._predict_chain(S, b, d, tau_pc, out)
+            elif self.spec.transport == "recirculating_cells" and self.spec.where in (None, "discharge", "cells"):
+                self._predict_network(S, b, d, tau_pc, extra, out)
+            else:
+                self._predict_mill(S, b, d, tau_pc, extra, out)
         else:
             for c in range(len(self.conditions)):
                 gsel = [g for g, grp in enumerate(self.groups) if grp[0] == c]
                 t = np.array([self.groups[g][2] for g in gsel]) if mode == "batch" else np.full(len(gsel), tau[c])
-                out[:, gsel] = _batch(S[:, c], b[:, c] if b.ndim == 4 else b, self._feeds[c], t)
+                # eq. 4 by the core's population solve: exact also for nearly equal rates
+                out[:, gsel] = batch_grind_population(S[:, c], b[:, c] if b.ndim == 4 else b, self._feeds[c], t)
         return out
 
-    def _predict_mill(self, S, b, d, tau, out):
+    def _chain_cells(self):
+        """Number of equal well-mixed cells in a row for transports that are such a chain
+        (perfect mixing, tanks in series with integer n), else None."""
+        spec = self.spec
+        if spec.transport == "perfect_mixing":
+            return 1
+        n = dict(spec.transport_params).get("n")
+        if spec.transport == "tanks_in_series" and float(n) == int(n) and spec.where in (None, "discharge", "cells"):
+            return int(n)
+        return None
+
+    def _predict_chain(self, S, b, d, tau, out):
+        """Mode "mill" for a chain of equal well-mixed cells, vectorised over the population
+        and the conditions: eq. 3 per cell (tau/n each) by
+        :func:`millflow.mill.well_mixed.well_mixed_population`, classification at the
+        discharge (the last cell's outflow) or at every cell outlet (``where="cells"``).
+        Cell content per unit feed rate is tau_k p_k / d (classified outlet) or tau_k p_k."""
+        n = self._chain_cells()
+        b_pc = b if b.ndim == 4 else b[:, None]
+        ones = np.ones_like(S)
+        stream = np.broadcast_to(self._feeds, S.shape)
+        contents = []
+        for k in range(n):
+            classified = d is not None and (self.spec.where == "cells" or k == n - 1)
+            dk = d if classified else ones
+            stream = well_mixed_population(S, b_pc, stream, tau / n, dk)
+            contents.append(stream / dk)
+        for g, (c, loc, _) in enumerate(self.groups):
+            if loc == "product":
+                m = stream[:, c]
+            elif loc == "holdup":
+                m = sum(h[:, c] for h in contents)
+            else:  # cell:K
+                m = contents[int(loc[5:]) - 1][:, c]
+            out[:, g] = m / m.sum(axis=1, keepdims=True)
+
+    def _predict_network(self, S, b, d, tau, extra, out):
+        """Mode "mill" for recirculating cells, vectorised over the population and the
+        conditions (:func:`millflow.mill.cells.solve_cells_population`: a batched n x n
+        solve per class); one network per member and condition when transport
+        parameters are fitted. Members outside rtd's domain (e.g. r < 0) give NaN."""
+        from millflow.mill.cells import network_of, solve_cells_population
+        n_pop, C = S.shape[:2]
+        nets = np.empty((n_pop, C), dtype=object)
+        bad = np.zeros((n_pop, C), dtype=bool)
+        fitted = bool(self.spec.transport_fit)
+        for c in range(C):
+            for k in range(n_pop if fitted else 1):
+                try:
+                    net = network_of(self._transport(tau[k, c], extra, k))
+                except InputError:
+                    net, bad[k, c] = None, True
+                if fitted:
+                    nets[k, c] = net
+                else:
+                    nets[:, c] = [net] * n_pop
+        if bad.any():  # a valid placeholder, then NaN
+            ok = next(v for v in nets.ravel() if v is not None) if (~bad).any() else None
+            if ok is None:
+                out[:] = np.nan
+                return
+            nets[bad] = ok
+        b_pc = b if b.ndim == 4 else b[:, None]
+        where = "cells" if self.spec.where == "cells" else "discharge"
+        prod, hold = solve_cells_population(S, b_pc, self._feeds[None], nets, d, where)
+        for g, (c, loc, _) in enumerate(self.groups):
+            if loc == "product":
+                m = prod[:, c]
+            elif loc == "holdup":
+                m = hold[:, c].sum(axis=1)
+            else:  # cell:K
+                m = hold[:, c, int(loc[5:]) - 1]
+            with np.errstate(invalid="ignore"):
+                out[:, g] = m / m.sum(axis=1, keepdims=True)
+        out[bad.any(axis=1)] = np.nan
+
+    def _predict_mill(self, S, b, d, tau, extra, out):
         """Mode "mill": one :class:`~millflow.mill.Mill` per member and condition (slow path)."""
         from millflow.mill import Mill, steady_mill
         spec = self.spec
-        transports = [spec.make_transport(t) for t in tau]
+        fixed = not spec.transport_fit
         loc_of = {"product": "discharge", "holdup": "holdup"}
-        for c, tr in enumerate(transports):
+        for c in range(len(self.conditions)):
             gsel = [g for g, grp in enumerate(self.groups) if grp[0] == c]
             locs = [self.groups[g][1] for g in gsel]
             only_product = all(loc == "product" for loc in locs)
-            specs = [loc_of.get(loc) or "cell:" + loc[5:] for loc in locs]
+            specs = [loc_of.get(loc, loc) for loc in locs]
+            zs = sorted({float(loc[2:]) for loc in locs if loc.startswith("z:")})
+            kw = {"positions": zs} if zs else {}
+            tr = self._transport(tau[0, c], extra, 0) if fixed else None
             for k in range(S.shape[0]):
                 Sk = S[k, c]
                 bk = b[k, c] if b.ndim == 4 else b[k]
@@ -537,10 +777,16 @@ class ForwardModel:
                 if not (np.isfinite(Sk).all() and np.isfinite(bk).all() and (dk is None or np.isfinite(dk).all())):
                     out[k, gsel] = np.nan  # outside the model's domain: reported, not solved
                     continue
+                if not fixed:
+                    try:
+                        tr = self._transport(tau[k, c], extra, k)
+                    except InputError:
+                        out[k, gsel] = np.nan
+                        continue
                 if only_product:
                     out[k, gsel] = Mill(Sk, bk, tr, dk, spec.where).product(self._feeds[c])
                 else:
-                    ds = steady_mill(Sk, bk, self._feeds[c], tr, dk, where=spec.where, locations=specs)
+                    ds = steady_mill(Sk, bk, self._feeds[c], tr, dk, where=spec.where, locations=specs, **kw)
                     vals = ds["sample"].values
                     for r, (g, loc) in enumerate(zip(gsel, locs)):
                         out[k, g] = ds["product"].values if loc == "product" else vals[r]
@@ -549,7 +795,8 @@ class ForwardModel:
         """Cumulative passing of the grid solution, interpolated to every measured row; (P, rows)."""
         M = self.predict_grid(theta)
         P = np.cumsum(M[..., ::-1], axis=-1)[..., ::-1]
-        return P.reshape(P.shape[0], -1) @ self._W.T + self._const
+        flat = P.reshape(P.shape[0], -1)
+        return flat[:, self._i1] * self._w1 + flat[:, self._i2] * self._w2 + self._const
 
     def predict(self, theta):
         theta = np.asarray(theta, dtype=float)
@@ -557,7 +804,25 @@ class ForwardModel:
         Y = self._cum_at_rows(theta)
         if self._D is not None:
             Y = self._apply_D(Y)
+        if self._tracer:
+            Y = np.concatenate([Y, self.predict_tracer(np.atleast_2d(theta))], axis=1)
         return Y[0] if single else Y
+
+    def predict_tracer(self, theta):
+        """Predicted tracer F(t) of every tracer row, (P, rows): the transport's cdf."""
+        theta = np.atleast_2d(np.asarray(theta, dtype=float))
+        p = self._unpack(theta)
+        tau, extra = self.transport_values(p)
+        out = []
+        for c, times in self._tracer:
+            rows = np.empty((theta.shape[0], times.size))
+            for k in range(theta.shape[0]):
+                try:
+                    rows[k] = self._transport(tau[k, c], extra, k).cdf(times)
+                except InputError:
+                    rows[k] = np.nan  # transport parameters outside rtd's domain
+            out.append(rows)
+        return np.concatenate(out, axis=1) if out else np.empty((theta.shape[0], 0))
 
     def predict_cum(self, theta):
         """Cumulative passing at every measured row (the README metric's model values)."""
@@ -567,71 +832,12 @@ class ForwardModel:
         spec = self.spec
         if spec.breakage == "fixed":
             raise InputError("a fixed b matrix belongs to one grid; give it on the refined grid to refine")
-        return ForwardModel(spec, self.data, grid, self.conditions)
+        return ForwardModel(spec, self.data, grid, self.conditions, tracer=self.tracer, kind_weights=self.kind_weights)
 
     def for_conditions(self, conditions) -> "ForwardModel":
-        return ForwardModel(self.spec, self.data, self.grid, conditions)
+        return ForwardModel(self.spec, self.data, self.grid, conditions, tracer=self.tracer,
+                            kind_weights=self.kind_weights)
 
     def __repr__(self):
         return (f"ForwardModel({self.spec.label()}, {len(self.conditions)} conditions, {self.n_data} values, "
                 f"grid {self.n} classes)")
-
-
-def _well_mixed(s, b, feeds):
-    """Eq. 3 for a population: (I - K(s)) p = f with K = (b - I) diag(s), s = tau S / d*.
-
-    s (P, C, N), b (P, N, N) or (P, C, N, N), feeds (C, N) -> products (P, C, N). Forward substitution
-    vectorised over population and conditions: p_i = (f_i + sum_j b_ij s_j p_j)/(1 + s_i);
-    every term is non-negative, so nothing cancels.
-    """
-    n_pop, C, N = s.shape
-    f = np.broadcast_to(feeds, (n_pop, C, N))
-    q = np.zeros((n_pop, C, N))
-    p = np.empty((n_pop, C, N))
-    for i in range(N):
-        if i == 0:
-            acc = f[:, :, 0]
-        elif b.ndim == 4:
-            acc = f[:, :, i] + np.einsum("pcj,pcj->pc", b[:, :, i, :i], q[:, :, :i])
-        else:
-            acc = f[:, :, i] + np.einsum("pj,pcj->pc", b[:, i, :i], q[:, :, :i])
-        p[:, :, i] = acc / (1.0 + s[:, :, i])
-        q[:, :, i] = s[:, :, i] * p[:, :, i]
-    return p
-
-
-_CANCEL_TOL = 1e-8
-
-
-def _batch(S, b, feed, t):
-    """exp(K t) feed for a population: S (P, N), b (P, N, N), feed (N,), t (T,) -> (P, T, N).
-
-    Eigenvectors of A = -K for distinct rates by the stable row recurrence of
-    :mod:`millflow.linalg`, vectorised over the population; members whose rounding
-    estimate eps |X| |X^-1 f| exceeds 1e-8 (close rates) are recomputed one by one by
-    the exact clustered method (:func:`millflow.batch.batch_grind`).
-    """
-    n_pop, N = S.shape
-    A = -b * S[:, None, :]
-    X = np.broadcast_to(np.eye(N), (n_pop, N, N)).copy()
-    with np.errstate(divide="ignore", invalid="ignore", over="ignore"):
-        for i in range(1, N):
-            r = np.matmul(A[:, i:i + 1, :i], X[:, :i, :i])[:, 0]
-            X[:, i, :i] = r / (S[:, :i] - S[:, i:i + 1])
-        w = np.linalg.solve(X, np.broadcast_to(feed, (n_pop, N))[:, :, None])[:, :, 0]
-        E = np.exp(-S[:, None, :] * t[None, :, None]) * w[:, None, :]
-        M = np.matmul(E, X.transpose(0, 2, 1))
-        bad = ~np.isfinite(M).all(axis=(1, 2))
-        cancel = np.finfo(float).eps * np.matmul(np.abs(X), np.abs(w)[:, :, None])[:, :, 0].max(axis=1)
-    bad |= ~(cancel <= _CANCEL_TOL)
-    invalid = ~(np.isfinite(b).all(axis=(1, 2)) & np.isfinite(S).all(axis=1))
-    M[invalid] = np.nan  # parameters outside the model's domain: reported, not solved
-    bad &= ~invalid
-    if bad.any():
-        from millflow.batch import batch_grind
-        for k in np.flatnonzero(bad):
-            try:
-                M[k] = batch_grind(S[k], b[k], feed, t)
-            except Exception as exc:  # noqa: BLE001 - reported as a solver failure
-                raise SolverError(f"batch solve failed for a parameter vector: {exc}") from exc
-    return M

@@ -16,11 +16,11 @@ from millflow.flowsheet.graph import Flowsheet, Stream
 from millflow.flowsheet.io import from_dict, load, loads
 from millflow.flowsheet.results import circulating_loads, save, stream_table, summary, to_dataset, unit_table
 from millflow.flowsheet.solve import TEAR_METHODS, FlowsheetSolution, solve
-from millflow.flowsheet.units import (CLASSIFIER_PORTS, TRANSPORTS, UNIT_TYPES, Classifier, Feed, Mill, Mixer,
+from millflow.flowsheet.units import (CLASSIFIER_PORTS, TRANSPORTS, UNIT_TYPES, Classifier, Feed, Mill, MillUnit, Mixer,
                                       Product, Splitter)
 
 __all__ = [
     "Flowsheet", "Stream", "load", "loads", "from_dict", "solve", "FlowsheetSolution", "TEAR_METHODS",
     "to_dataset", "summary", "stream_table", "unit_table", "circulating_loads", "save",
-    "Feed", "Mill", "Classifier", "Mixer", "Splitter", "Product", "UNIT_TYPES", "TRANSPORTS", "CLASSIFIER_PORTS",
+    "Feed", "MillUnit", "Mill", "Classifier", "Mixer", "Splitter", "Product", "UNIT_TYPES", "TRANSPORTS", "CLASSIFIER_PORTS",
 ]

@@ -20,10 +20,10 @@ from millflow.breakage import AustinRate, NonNormalizedBreakage, NormalizedBreak
 from millflow.classifiers import CURVES
 from millflow.errors import GridError, InputError, MillflowError
 from millflow.flowsheet.graph import Flowsheet, Stream
-from millflow.flowsheet.units import (TRANSPORTS, UNIT_TYPES, Classifier, Feed, Mill, Mixer,
+from millflow.flowsheet.units import (TRANSPORTS, UNIT_TYPES, Classifier, Feed, MillUnit, Mixer,
                                       Product, Splitter)
 from millflow.grid import SizeGrid
-from millflow.psd import from_sieves
+from millflow.psd import from_distribution, from_sieves, gates_gaudin_schuhmann, rosin_rammler
 
 __all__ = ["load", "loads", "from_dict", "DIMENSIONS"]
 
@@ -185,20 +185,22 @@ def _feed_psd(t: _Table, grid: SizeGrid) -> np.ndarray:
             t.finish("form, x63_um, n")
             if n <= 0:
                 raise InputError(f"{t.where}.n = {n!r}: expected > 0")
-            P = -np.expm1(-(grid.x / x63) ** n)
+
+            def cdf(x):
+                return rosin_rammler(x, x63, n)
         else:
             xmax = t.quantity("xmax", "length")
             m = t.plain("m", kind=float)
             t.finish("form, xmax_um, m")
             if m <= 0:
                 raise InputError(f"{t.where}.m = {m!r}: expected > 0")
-            P = np.minimum(grid.x / xmax, 1.0) ** m
-        if P[0] < 1 - 1e-4:
-            raise GridError(f"{t.where}: the size grid does not cover the feed: {100 * (1 - P[0]):.3g} % of it is "
-                            f"coarser than grid.top = {grid.x[0] * 1e6:.6g} um (at most 0.01 % is lumped into "
-                            "class 1); raise grid.top_um")
-        P = P / P[0]  # the <= 0.01 % above the top edge is lumped into class 1
-        return from_sieves(grid.x, P, grid) if grid.n >= 2 else np.ones(1)
+
+            def cdf(x):
+                return gates_gaudin_schuhmann(x, xmax, m)
+        try:  # at most 0.01 % above the top edge is lumped into class 1 (psd.from_distribution)
+            return from_distribution(grid, cdf, where=t.where)
+        except GridError as exc:
+            raise GridError(str(exc).replace("does not cover the PSD", "does not cover the feed")) from exc
     raise InputError(f"{t.where}.form = {form!r}: unknown feed PSD form; valid: ggs, rosin_rammler, sieves")
 
 
@@ -292,7 +294,7 @@ def _kinetics(t: _Table) -> dict:
     return out
 
 
-def _mill(name: str, t: _Table, materials: dict) -> Mill:
+def _mill(name: str, t: _Table, materials: dict) -> MillUnit:
     """A mill table: breakage from its material (or its own), transport, tau or hold-up."""
     mat_name = t.plain("material", None, kind=str)
     mat = {}
@@ -346,7 +348,7 @@ def _mill(name: str, t: _Table, materials: dict) -> Mill:
     t.finish("type, material, rate, breakage, transport, tau_min, holdup_t, power_kW, classification, kinetics, "
              "or by dimensions: diameter_m, length_m, ball_filling, critical_speed_fraction, ball_size_mm, ... "
              "(docs/scaleup.md)")
-    unit = _wrap(f"units.{name}", Mill, name, rate, brk, model, tparams, tau, holdup, cls, power, kin)
+    unit = _wrap(f"units.{name}", MillUnit, name, rate, brk, model, tparams, tau, holdup, cls, power, kin)
     _wrap(f"units.{name}", TRANSPORTS[model], tau or 1.0, **tparams)
     return unit
 

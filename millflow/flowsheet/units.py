@@ -26,7 +26,7 @@ from millflow.classifiers import efficiency, mill_discharge_rates
 from millflow.errors import InputError, SolverError
 
 __all__ = [
-    "Feed", "Mill", "Classifier", "Mixer", "Splitter", "Product", "UNIT_TYPES", "TRANSPORTS",
+    "Feed", "MillUnit", "Mill", "Classifier", "Mixer", "Splitter", "Product", "UNIT_TYPES", "TRANSPORTS",
     "CLASSIFIER_PORTS", "mill_transfer_matrix",
 ]
 
@@ -78,7 +78,7 @@ class Feed:
 
 
 @dataclass(frozen=True)
-class Mill:
+class MillUnit:
     """Continuous mill: breakage (``rate``, ``breakage``) with a transport model and optional
     discharge classification.
 
@@ -324,9 +324,13 @@ class Product:
 
 
 #: Unit types by the ``type`` name used in flowsheet files.
+#: The earlier name of :class:`MillUnit` (kept so existing scripts run; ``millflow.Mill``
+#: is the library's mill, this is the flowsheet unit that holds one).
+Mill = MillUnit
+
 UNIT_TYPES = {
     "feed": Feed,
-    "mill": Mill,
+    "mill": MillUnit,
     "hydrocyclone": Classifier,
     "screen": Classifier,
     "air_separator": Classifier,

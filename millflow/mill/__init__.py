@@ -7,6 +7,7 @@ scene, :func:`transient_mill` the dynamics. Modules, one job each:
 
 - :mod:`~millflow.mill.steady`: the scene (validation, method choice) and the steady
   solve, ``Mill``;
+- :mod:`~millflow.mill.well_mixed`: the perfectly mixed mill, eq. 3 (one mill or a population);
 - :mod:`~millflow.mill.segregated`: segregated flow and plug flow (eq. 4 in contact
   time) through the spectral decomposition of the breakage matrix;
 - :mod:`~millflow.mill.cells`: compartment networks (tanks, recirculating cells),

@@ -24,7 +24,7 @@ is solved exactly class by class: N solves with the banded n x n matrix
 S_i I - T^i, a column-diagonally dominant M-matrix (no pivoting happens, the solution
 stays non-negative). A chain of cells without back-mixing (tanks in series) is solved
 cell by cell instead: each cell is eq. (3) with tau_k = V_k / Q, one lower-triangular
-solve per cell (:func:`millflow.linalg.solve_well_mixed`).
+solve per cell (:func:`millflow.mill.well_mixed.solve_well_mixed`).
 """
 from __future__ import annotations
 
@@ -42,7 +42,7 @@ from millflow.linalg import breakage_matrix
 _gtsv = lapack.get_lapack_funcs("gtsv", dtype=np.float64)
 _trtrs = lapack.get_lapack_funcs("trtrs", dtype=np.float64)
 
-__all__ = ["CellSolution", "solve_cells", "network_of", "is_chain", "cell_operators"]
+__all__ = ["CellSolution", "solve_cells", "solve_cells_population", "network_of", "is_chain", "cell_operators"]
 
 
 @dataclass(frozen=True)
@@ -237,3 +237,59 @@ def solve_cells(S, b, feed, net, d=None, where: str = "discharge", *, kernel: st
     if is_chain(net):
         return _solve_chain(S, b, feed, net, d, where)
     return _solve_block(S, b, feed, net, d, where, kernel)
+
+
+def solve_cells_population(S, b, feed, nets, d=None, where="discharge"):
+    """The block solve of :func:`solve_cells` for many members (and conditions) at once.
+
+    S : (*L, N) rates [1/s]; b : (*Lb, N, N) broadcasting against L; feed : (*Lf, N);
+    nets : an array (shape L, dtype object) of rtd.CompartmentNetwork, one per member
+    and condition (they may differ: fitted tau or recirculation ratio); d : (*L, N) or
+    None; where : "discharge" or "cells".
+
+    Class by class, (S_i I - T^i) m_i = (1 - beta) u f_i + sum_{j<i} b_ij S_j m_j for
+    every member at once (a batched dense n x n solve per class), then the product
+    p_i = sum_l H_il (o_l/V_l) m_il + beta f_i. Returns (product (*L, N), hold-up
+    (*L, n, N) per unit feed rate [s]). The same equations as :func:`solve_cells`, to
+    rounding (tests/millflow/fitting/test_fit_mill.py).
+    """
+    S = np.asarray(S, dtype=float)
+    lead, n_cls = S.shape[:-1], S.shape[-1]
+    nets = np.asarray(nets, dtype=object).reshape(lead)
+    flat_nets = nets.ravel()
+    n = flat_nets[0].n
+    if any(net.n != n for net in flat_nets):
+        raise SolverError("cells population: every member needs the same number of cells")
+    L = int(np.prod(lead, dtype=int))
+    V = np.array([np.asarray(net.volumes, float) for net in flat_nets])  # (L, n)
+    F = np.array([np.asarray(net.flows, float) for net in flat_nets])  # (L, n, n)
+    offdiag = F / V[:, np.newaxis, :]
+    drain = F.sum(axis=1) / V
+    exit_rate = np.array([np.asarray(net.outlet, float) for net in flat_nets]) / V
+    bypass = np.array([float(net.bypass) for net in flat_nets])
+    inlet = (1.0 - bypass)[:, np.newaxis] * np.array([np.asarray(net.inlet, float) for net in flat_nets])
+    Sf = S.reshape(L, n_cls)
+    bf = np.broadcast_to(np.asarray(b, dtype=float), lead + (n_cls, n_cls)).reshape(L, n_cls, n_cls)
+    ff = np.broadcast_to(np.asarray(feed, dtype=float), lead + (n_cls,)).reshape(L, n_cls)
+    if d is None:
+        G = H = np.ones((L, n_cls, 1))
+    else:
+        dd = np.broadcast_to(np.asarray(d, dtype=float), lead + (n_cls,)).reshape(L, n_cls, 1)
+        mask = classified_cells(n, where)
+        G = np.where(mask[np.newaxis, np.newaxis, :], dd, 1.0)
+        H = G if where not in (None, "discharge") else np.broadcast_to(dd, (L, n_cls, n))
+    G, H = np.broadcast_to(G, (L, n_cls, n)), np.broadcast_to(H, (L, n_cls, n))
+    holdup = np.empty((L, n_cls, n))
+    q = np.zeros((L, n_cls, n))  # S_j m_j: breakage flow out of class j in each cell
+    eye = np.eye(n)
+    with np.errstate(over="ignore", invalid="ignore"):
+        for i in range(n_cls):
+            rhs = inlet * ff[:, i, np.newaxis]
+            if i:
+                rhs = rhs + np.einsum("lj,ljc->lc", bf[:, i, :i], q[:, :i])
+            diag = Sf[:, i, np.newaxis] + G[:, i] * drain + H[:, i] * exit_rate
+            M = eye * diag[:, :, np.newaxis] - offdiag * G[:, i, np.newaxis, :]
+            holdup[:, i] = np.linalg.solve(M, rhs[:, :, np.newaxis])[:, :, 0]
+            q[:, i] = Sf[:, i, np.newaxis] * holdup[:, i]
+    product = np.einsum("lic,lic->li", H * exit_rate[:, np.newaxis, :], holdup) + bypass[:, np.newaxis] * ff
+    return product.reshape(lead + (n_cls,)), np.moveaxis(holdup, 1, 2).reshape(lead + (n, n_cls))

@@ -39,7 +39,7 @@ from scipy.integrate import quad_vec, solve_ivp
 
 from millflow import checks
 from millflow.errors import InputError, SolverError
-from millflow.linalg import solve_well_mixed
+from millflow.mill.well_mixed import solve_well_mixed
 from millflow.mill.axial import _bernoulli, solve_axial_grid
 from millflow.nonlinear.batch import batch_nonlinear
 from millflow.nonlinear.kinetics import Kinetics

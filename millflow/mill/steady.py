@@ -45,10 +45,10 @@ import xarray as xr
 import rtd
 from millflow import checks
 from millflow.errors import InputError, SolverError
-from millflow.linalg import solve_well_mixed
 from millflow.mill.axial import solve_axial
 from millflow.mill.cells import network_of, solve_cells
 from millflow.mill.segregated import plug_flow, segregated, segregated_quadrature
+from millflow.mill.well_mixed import solve_well_mixed
 
 __all__ = ["METHODS", "steady_mill", "transfer_matrix", "choose_method", "WHERE"]
 

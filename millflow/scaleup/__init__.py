@@ -16,5 +16,6 @@ from millflow.scaleup.uncertainty import delta_method, monte_carlo
 
 __all__ = ["Circuit", "FittedBreakage", "MillDesign", "ScaleUp", "ScaleupResult", "austin_factors",
            "austin_power", "ball_charge_mass", "bond_rowland_power", "charge_arm", "critical_speed",
-           "delta_method", "fit_from_dict", "gross_power", "herbst_fuerstenau_rates", "hogg_fuerstenau_power", "load_fit",
+           "delta_method", "fit_from_dict", "gross_power", "herbst_fuerstenau_rates", "hogg_fuerstenau_power",
+           "load_fit",
            "mill_power", "monte_carlo", "predict_plant", "specific_rates"]

@@ -69,7 +69,9 @@ def predict_plant(su, target_p80_m=None, methods=("delta", "mc"), n_draws: int =
     mlist = list(res)
     ds = xr.Dataset(coords={"size": ("size", np.arange(1, N + 1), {"long_name": "size class (1 = coarsest)"}),
                             "x": ("size", su.x, {"units": "m", "long_name": "upper size of the class"}),
-                            "estimator": ("estimator", mlist, {"long_name": "band method (delta method or Monte Carlo); not named method: DataArray.sel has a method argument"})})
+                            "estimator": ("estimator", mlist,
+                                          {"long_name": "band method (delta method or Monte Carlo)"})})
+    # (the dimension is not named "method": DataArray.sel has an argument of that name)
     P0 = np.cumsum(point["product"][::-1])[::-1]
     ds["passing"] = ("size", P0, {"units": "1", "long_name": "product cumulative passing at the estimate"})
     ds["feed_passing"] = ("size", np.cumsum(su.feed[::-1])[::-1], {"units": "1", "long_name": "fresh feed passing"})

@@ -17,6 +17,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from millflow.breakage.distributions import breakage_population
+from millflow.breakage.rates import austin_rates_population, power_law_rates_population
 from millflow.errors import InputError
 
 __all__ = ["FittedBreakage", "load_fit", "fit_from_dict"]
@@ -125,36 +127,26 @@ class FittedBreakage:
         lnA = p["ln_A0"] + math.log(A_factor)
         for c in self.spec.get("rate_process", []):
             lnA = lnA + p[f"a_{c}"] * math.log(float(process[c]) / float(self.spec["process_ref"][c]))
-        logx = np.log(np.asarray(x, float) / float(self.spec["x0_m"]))
-        S = np.exp(np.minimum(lnA[:, None] + p["alpha"][:, None] * logx[None, :], 600.0))
-        if self.spec["rate"] == "austin":
-            z = p["Lambda"][:, None] * (logx[None, :] - p["ln_mu"][:, None] - math.log(mu_factor))
-            S = S / (1.0 + np.exp(np.minimum(z, 600.0)))
-        S[:, -1] = 0.0
+        x0 = float(self.spec["x0_m"])
+        A = np.exp(np.minimum(lnA, 600.0))
+        if self.spec["rate"] == "austin":  # eq. 7 (mu scaled by the scale-up factor)
+            mu0 = np.exp(p["ln_mu"]) * x0 * mu_factor
+            S = austin_rates_population(x, A, p["alpha"], mu0, p["Lambda"], x0=x0)
+        else:  # eq. 5
+            S = power_law_rates_population(x, A, p["alpha"], x0)
         return S if np.ndim(theta) > 1 else S[0]
 
     def frac_b(self, theta, x) -> np.ndarray:
         """Fractional b (..., N, N) of eq. 6 at sizes x [m] (normalised: B_ij depends on
-        x_{i-1}/x_j only, carried unchanged between mills)."""
+        x_{i-1}/x_j only, carried unchanged between mills), from
+        :func:`millflow.breakage.distributions.breakage_population`."""
         t = np.atleast_2d(np.asarray(theta, float))
         p = {n: t[:, k] for k, n in enumerate(self.names)}
         x = np.asarray(x, float)
-        N = x.size
-        i, j = np.tril_indices(N, -1)
-        logr = np.log(x[i - 1] / x[j])
-        g = p["gamma"][:, None]
         if self.spec["breakage"] == "single":
-            vals = np.exp(g * logr)
+            b = breakage_population(x, 1.0, p["gamma"], p["gamma"], kind="b")
         else:
-            phi, beta = p["phi"][:, None], p["beta"][:, None]
-            vals = phi * np.exp(g * logr) + (1 - phi) * np.exp(beta * logr)
-        B = np.zeros((t.shape[0], N, N))
-        B[:, i, j] = vals
-        k = np.arange(N - 1)
-        B[:, k + 1, k] = 1.0
-        b = B.copy()
-        b[:, :-1, :] -= B[:, 1:, :]
-        b = np.tril(b, -1)
+            b = breakage_population(x, p["phi"], p["gamma"], p["beta"], kind="b")
         return b if np.ndim(theta) > 1 else b[0]
 
 

@@ -86,7 +86,8 @@ def _aspect_correlation(corr, entry, mill: MillDesign, src):
     _check_keys(corr, {"parameter", "coefficient", "exponent", "source"}, "transport.from_aspect_ratio", src)
     missing = [k for k in ("parameter", "coefficient", "exponent", "source") if k not in corr]
     if missing:
-        raise InputError(f"{src}: transport.from_aspect_ratio: missing {missing} (value = coefficient * (L/D)^exponent, "
+        raise InputError(f"{src}: transport.from_aspect_ratio: missing {missing} "
+                         f"(value = coefficient * (L/D)^exponent, "
                          "source names where the correlation comes from)")
     name = corr["parameter"]
     if name not in entry.required + entry.optional:

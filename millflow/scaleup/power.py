@@ -20,7 +20,6 @@ from __future__ import annotations
 
 import math
 
-import numpy as np
 
 from millflow.errors import InputError
 
@@ -82,7 +81,8 @@ def ball_charge_mass(diameter_m, length_m, ball_filling, ball_density_kg_m3=7800
     eps = float(bed_porosity)
     if not (0 < eps < 1):
         raise InputError(f"bed_porosity = {eps!r}: expected 0 < eps < 1")
-    return math.pi * D * D * L / 4 * float(ball_filling) * _positive(ball_density_kg_m3, "ball_density_kg_m3") * (1 - eps)
+    rho_b = _positive(ball_density_kg_m3, "ball_density_kg_m3")
+    return math.pi * D * D * L / 4 * float(ball_filling) * rho_b * (1 - eps)
 
 
 def bond_rowland_power(diameter_m, length_m, ball_filling, critical_speed_fraction, ball_size_mm,

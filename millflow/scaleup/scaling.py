@@ -85,7 +85,8 @@ def austin_factors(lab: dict, plant: dict, **overrides) -> dict:
         try:
             D = _positive(m["diameter_m"], f"{where}.diameter_m")
             d = _positive(m["ball_size_mm"], f"{where}.ball_size_mm")
-            J, phi, U = float(m["ball_filling"]), float(m["critical_speed_fraction"]), float(m.get("powder_filling", 1.0))
+            J, phi = float(m["ball_filling"]), float(m["critical_speed_fraction"])
+            U = float(m.get("powder_filling", 1.0))
         except KeyError as exc:
             raise InputError(f"{where}: missing key {exc.args[0]!r} (needed by the Austin scale-up factors)") from None
         check_operation(phi, J, U, where)

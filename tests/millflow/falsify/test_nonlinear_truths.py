@@ -10,7 +10,7 @@ from millflow.cli import main
 from millflow.errors import InputError
 from millflow.falsify import AggregationTruth, PopulationTruth, SlowingDownTruth, batch_design, continuous_design
 from millflow.falsify.config import parse_config
-from millflow.linalg import solve_well_mixed
+from millflow.mill.well_mixed import solve_well_mixed
 
 TIMES = [30.0, 60.0, 120.0, 240.0, 480.0, 960.0]
 

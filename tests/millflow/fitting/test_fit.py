@@ -19,7 +19,7 @@ from millflow.fitting.estimate import compare_models, fit
 from millflow.fitting.models import ForwardModel, ModelSpec, Parameter, default_parameters
 from millflow.fitting.statistics import f_test, information_criteria, jacobian, parameter_statistics
 from millflow.grid import SizeGrid
-from millflow.linalg import solve_well_mixed
+from millflow.mill.well_mixed import solve_well_mixed
 
 
 # ----------------------------------------------------------------------------- data
@@ -260,6 +260,6 @@ def test_benchmark_global_5p_fit_recovers_truth():
     by `millflow bench fit`, not asserted: a timed test fails on a loaded machine."""
     from millflow.bench.fit import run
 
-    (row,) = run(quick=False)
+    (row,) = run(quick=False, knife=False)
     assert row["runtime_s"] > 0 and "20 LSQ starts" in row["method"], row
     assert row["max_abs_error"] < 0.1

@@ -58,19 +58,39 @@ def test_mill_mode_equals_well_mixed_and_tanks(cls):
 
 
 def test_mill_mode_cell_samples():
-    """Without classification the last of n tanks holds what it discharges: cell_n = product."""
-    d = _data(["c1"], ["cell_1", "cell_3", "product"], PROC)
+    """Without classification the last of n tanks holds what it discharges: cell:n = product.
+    Locations are spelled as steady_mill reads them (cell:K); the old cell_K is an alias."""
+    d = _data(["c1"], ["cell:1", "cell_3", "product"], PROC)
     m = ForwardModel(ModelSpec(mode="mill", transport="tanks_in_series", transport_params={"n": 3},
                                tau_column="tau_s"), d, GRID)
     M = m.predict_grid(np.array([-3.5, 1.0, 0.4, 0.8, 3.0]))[0]
     g = {loc: k for k, (_, loc, _) in enumerate(m.groups)}
-    np.testing.assert_allclose(M[g["cell_3"]], M[g["product"]], atol=1e-12)
-    assert M[g["cell_1"]][0] > M[g["cell_3"]][0]  # coarser near the feed end
-    with pytest.raises(InputError, match="cell_4.*'product', 'holdup' or 'cell_K' \\(K = 1..3\\)"):
-        ForwardModel(m.spec, _data(["c1"], ["cell_4"], PROC), GRID)
-    with pytest.raises(InputError, match="predicts 'product', 'holdup'$"):
+    assert set(g) == {"cell:1", "cell:3", "product"}
+    np.testing.assert_allclose(M[g["cell:3"]], M[g["product"]], atol=1e-12)
+    assert M[g["cell:1"]][0] > M[g["cell:3"]][0]  # coarser near the feed end
+    with pytest.raises(InputError, match="cell:4.*'product', 'holdup' or 'cell:K' \\(K = 1..3\\)"):
+        ForwardModel(m.spec, _data(["c1"], ["cell:4"], PROC), GRID)
+    with pytest.raises(InputError, match="predicts 'product', 'holdup' or 'z:Y' \\(0 <= Y <= 1\\)$"):
         ForwardModel(ModelSpec(mode="mill", transport="axial_dispersion", transport_params={"pe": 5}),
-                     _data(["c1"], ["cell_1"], PROC), GRID)
+                     _data(["c1"], ["cell:1"], PROC), GRID)
+
+
+def test_mill_mode_axial_samples_match_steady_mill():
+    """Samples at axial positions z:Y are predicted by steady_mill's profile (issue 15 §3)."""
+    import rtd
+    from millflow.breakage import NormalizedBreakage, PowerLawRate
+    from millflow.mill import steady_mill
+    d = _data(["c1"], ["z:0.5", "product"], PROC)
+    m = ForwardModel(ModelSpec(mode="mill", transport="plug_flow", tau_column="tau_s"), d, GRID)
+    theta = np.array([-3.5, 1.0, 0.4, 0.8, 3.0])
+    M = m.predict_grid(theta)[0]
+    g = {loc: k for k, (_, loc, _) in enumerate(m.groups)}
+    x = m.grid.x
+    tau = float(m._proc["tau_s"][0])
+    ds = steady_mill(PowerLawRate(np.exp(-3.5), 1.0)(x), NormalizedBreakage(0.4, 0.8, 3.0)(x), m._feeds[0],
+                     rtd.PlugFlow(tau), positions=[0.5], locations=["z:0.5"])
+    np.testing.assert_allclose(M[g["z:0.5"]], ds["sample"].values[0], rtol=0, atol=1e-12)  # same solver
+    assert M[g["z:0.5"]][0] > M[g["product"]][0]  # coarser halfway along
 
 
 def test_mill_mode_names_are_validated():
@@ -161,3 +181,49 @@ def test_b_matrix_csv_config_round_trip(tmp_path):
     np.savetxt(tmp_path / "notb.csv", B, delimiter=",")
     with pytest.raises(InputError, match="notb.csv.*sums to"):
         load_config(_write_config(tmp_path, "notb.csv", "b"))  # a cumulative B given as b
+
+
+@pytest.mark.parametrize("where", [None, "cells"])
+def test_mill_mode_chain_is_vectorised_and_equals_the_mill(where):
+    """Issue 15 §3: mode "mill" with a chain of cells (tanks in series) is evaluated for
+    the whole population at once (eq. 3 per cell); it equals one Mill/steady_mill per
+    member and condition (the general path) to rounding: both are forward substitutions
+    of the same triangular systems (1e-12 on mass fractions <= 1)."""
+    d = _data(["c1", "c2"], ["cell:1", "cell:2", "holdup", "product"], PROC)
+    m = ForwardModel(ModelSpec(mode="mill", transport="tanks_in_series", transport_params={"n": 3},
+                               classification="screen", where=where, tau_column="tau_s"), d, GRID)
+    assert m._chain_cells() == 3
+    rng = np.random.default_rng(3)
+    theta = np.column_stack([rng.uniform(-6, -3, 4), rng.uniform(0.5, 1.5, 4), rng.uniform(0.2, 0.8, 4),
+                             rng.uniform(0.5, 1.2, 4), rng.uniform(2.5, 5, 4), rng.uniform(-1, 0.5, 4),
+                             rng.uniform(0.5, 2.5, 4)])
+    fast = m.predict_grid(theta)
+    p = m._unpack(theta)
+    slow = np.empty_like(fast)
+    tau, extra = m.transport_values(p)
+    m._predict_mill(m.rates(p), m.frac_b(p, 4), m.discharge(p, 4), tau, extra, slow)
+    np.testing.assert_allclose(fast, slow, rtol=0, atol=1e-12)
+
+
+@pytest.mark.parametrize("where", [None, "cells"])
+def test_mill_mode_recirculating_cells_vectorised_equals_the_mill(where):
+    """Recirculating cells (not a chain) with fitted tau and r: the population path
+    (a batched n x n solve per class) equals one steady_mill per member and condition
+    to rounding (the same block equations; 1e-12 on mass fractions <= 1)."""
+    d = _data(["c1", "c2"], ["cell:1", "cell:3", "holdup", "product"], PROC)
+    m = ForwardModel(ModelSpec(mode="mill", transport="recirculating_cells", transport_params={"n": 4},
+                               transport_fit=("tau", "r"), classification="screen", where=where,
+                               tau_column="tau_s"), d, GRID)
+    rng = np.random.default_rng(5)
+    theta = np.column_stack([rng.uniform(-6, -3, 4), rng.uniform(0.5, 1.5, 4), rng.uniform(0.2, 0.8, 4),
+                             rng.uniform(0.5, 1.2, 4), rng.uniform(2.5, 5, 4), rng.uniform(-1, 0.5, 4),
+                             rng.uniform(0.5, 2.5, 4), rng.uniform(4.0, 6.0, 4), rng.uniform(0.0, 3.0, 4)])
+    fast = m.predict_grid(theta)
+    p = m._unpack(theta)
+    slow = np.empty_like(fast)
+    tau, extra = m.transport_values(p)
+    m._predict_mill(m.rates(p), m.frac_b(p, 4), m.discharge(p, 4), tau, extra, slow)
+    np.testing.assert_allclose(fast, slow, rtol=0, atol=1e-12)
+    theta[1, -1] = -1.0  # r < 0: outside rtd's domain, that member only
+    got = m.predict_grid(theta)
+    assert np.isnan(got[1]).all() and np.isfinite(got[[0, 2, 3]]).all()

@@ -149,7 +149,7 @@ def test_python_api_without_toml():
     # the same objects the file reader builds, in SI units
     from millflow.breakage import NormalizedBreakage, PowerLawRate
     from millflow.errors import InputError
-    from millflow.flowsheet import Classifier, Feed, Flowsheet, Mill, Mixer, Product, Splitter, Stream
+    from millflow.flowsheet import Classifier, Feed, Flowsheet, MillUnit, Mixer, Product, Splitter, Stream
     from millflow.grid import SizeGrid
 
     grid = SizeGrid.geometric(4e-3, 2 ** 0.5, 20)
@@ -157,7 +157,7 @@ def test_python_api_without_toml():
     feed[:3] = [0.2, 0.5, 0.3]
     units = {
         "f": Feed("f", 10.0, feed), "mix": Mixer("mix"),
-        "mill": Mill("mill", PowerLawRate(0.02, 1.0, 1e-3), NormalizedBreakage(0.5, 0.8, 3.0),
+        "mill": MillUnit("mill", PowerLawRate(0.02, 1.0, 1e-3), NormalizedBreakage(0.5, 0.8, 3.0),
                      "tanks_in_series", {"n": 3}, tau=300.0),
         "cyc": Classifier("cyc", "hydrocyclone", "whiten", {"d50c": 2e-4, "alpha": 2.0, "beta": 0.4, "bypass": 0.2}),
         "split": Splitter("split", {"back": 0.3, "out": 0.7}), "p": Product("p"),
@@ -172,7 +172,7 @@ def test_python_api_without_toml():
     with pytest.raises(InputError, match="fractions summing to 1"):
         Splitter("s", {"a": 0.5, "b": 0.6})
     with pytest.raises(InputError, match="exactly one of tau"):
-        Mill("m", PowerLawRate(0.02, 1.0), NormalizedBreakage(0.5, 0.8, 3.0))
+        MillUnit("m", PowerLawRate(0.02, 1.0), NormalizedBreakage(0.5, 0.8, 3.0))
 
 
 def test_nearly_closed_loop_is_reported():

@@ -10,7 +10,7 @@ import rtd
 from millflow.breakage import b_from_B, normalized_B, power_law_rates
 from millflow.errors import SolverError
 from millflow.grid import SizeGrid
-from millflow.linalg import solve_well_mixed
+from millflow.mill.well_mixed import solve_well_mixed
 from millflow.mill import nonlinear as nl
 from millflow.mill.axial import solve_axial_grid
 from millflow.mill.segregated import segregated

@@ -8,6 +8,8 @@ exact unit conversions of the published constants and exact geometry (see each t
 """
 import math
 
+from hypothesis import given, settings
+from hypothesis import strategies as st
 import numpy as np
 import pytest
 
@@ -258,9 +260,6 @@ def test_bench_suite_runs_quick():
         lo, hi = r["p80_band_um"]
         assert 0 < lo < hi and r["throughput_band_tph"][0] < r["throughput_band_tph"][1]
 
-
-from hypothesis import given, settings
-from hypothesis import strategies as st
 
 
 @settings(max_examples=40, deadline=None)

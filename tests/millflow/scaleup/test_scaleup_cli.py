@@ -30,7 +30,8 @@ def fit_json(tmp_path_factory):
 
     psd, proc = mk.tables(np.random.default_rng(5))
     spec = ModelSpec(mode="batch", breakage="normalized", rate_process=("speed",))
-    model = ForwardModel(spec, psd_data_from_frames(psd, proc, strict=False), SizeGrid.between(4e-3, 4e-3 / 2 ** 7.5, 2 ** 0.25))
+    grid = SizeGrid.between(4e-3, 4e-3 / 2 ** 7.5, 2 ** 0.25)
+    model = ForwardModel(spec, psd_data_from_frames(psd, proc, strict=False), grid)
     params = default_parameters(spec, {n: {"value": v} for n, v in mk.TRUTH.items()})
     res = fit(model, params, global_search=False, starts=1, grid_check=False)
     d = tmp_path_factory.mktemp("fit")
@@ -160,7 +161,8 @@ def test_transport_shape_from_a_stated_aspect_ratio_correlation(fit_json, tmp_pa
 
 
 def test_aspect_ratio_correlation_needs_its_source(fit_json, tmp_path, capsys):
-    corr = 'model = "axial_dispersion"\n[transport.from_aspect_ratio]\nparameter = "pe"\ncoefficient = 2.5\nexponent = 1.0'
+    corr = ('model = "axial_dispersion"\n[transport.from_aspect_ratio]\n'
+            'parameter = "pe"\ncoefficient = 2.5\nexponent = 1.0')
     plant = _plant(tmp_path, ('model = "tanks_in_series"\nn = 3', corr))
     assert main(["scaleup", str(fit_json), "--to", str(plant), "--out", str(tmp_path / "o")]) == 2
     assert "source" in capsys.readouterr().err
