@@ -267,6 +267,33 @@ def _curve_params(t: _Table, curve: str, skip=()) -> dict:
 
 
 # --------------------------------------------------------------- units
+def _kinetics(t: _Table) -> dict:
+    """A mill's [kinetics] table (issue 12): aggregation and/or fines cushioning.
+
+    aggregation = "constant" (sum, product, shear), aggregation_beta0_per_s = ...,
+    x_ref_um = ... (the kernel's reference size); cushion_lambda = -1.0, fines_um = ...
+    """
+    from millflow.nonlinear import KERNELS
+
+    out = {}
+    kern = t.plain("aggregation", None, kind=str)
+    if kern is not None:
+        if kern not in KERNELS:
+            raise InputError(f"{t.where}.aggregation = {kern!r}: unknown kernel; valid: {', '.join(sorted(KERNELS))}")
+        out["aggregation_kernel"] = kern
+        out["aggregation_beta0"] = t.quantity("aggregation_beta0", "rate", allow_zero=True)
+        out["x_ref_m"] = t.quantity("x_ref", "length")
+    lam = t.plain("cushion_lambda", None, kind=float)
+    if lam is not None:
+        out["cushion_lambda"] = lam
+        out["fines_m"] = t.quantity("fines", "length")
+    t.finish("aggregation, aggregation_beta0_per_s, x_ref_um, cushion_lambda, fines_um")
+    if not out:
+        raise InputError(f"{t.where}: empty; give aggregation (with aggregation_beta0_<unit>, x_ref_<unit>) "
+                         "and/or cushion_lambda (with fines_<unit>)")
+    return out
+
+
 def _mill(name: str, t: _Table, materials: dict) -> MillUnit:
     """A mill table: breakage from its material (or its own), transport, tau or hold-up."""
     mat_name = t.plain("material", None, kind=str)
@@ -317,10 +344,11 @@ def _mill(name: str, t: _Table, materials: dict) -> MillUnit:
         ct = t.sub("classification")
         curve = ct.plain("curve", kind=str)
         cls = {"curve": curve, **_curve_params(ct, curve)}
-    t.finish("type, material, rate, breakage, transport, tau_min, holdup_t, power_kW, classification, "
+    kin = _kinetics(t.sub("kinetics")) if "kinetics" in t.data else None
+    t.finish("type, material, rate, breakage, transport, tau_min, holdup_t, power_kW, classification, kinetics, "
              "or by dimensions: diameter_m, length_m, ball_filling, critical_speed_fraction, ball_size_mm, ... "
              "(docs/scaleup.md)")
-    unit = _wrap(f"units.{name}", MillUnit, name, rate, brk, model, tparams, tau, holdup, cls, power)
+    unit = _wrap(f"units.{name}", MillUnit, name, rate, brk, model, tparams, tau, holdup, cls, power, kin)
     _wrap(f"units.{name}", TRANSPORTS[model], tau or 1.0, **tparams)
     return unit
 

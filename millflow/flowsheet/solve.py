@@ -18,6 +18,15 @@ size, and the smallest singular value of each I - G_k then names the streams and
 of the loop (the support of the null vector) in a :class:`~millflow.errors.SolverError`
 instead of returning huge numbers.
 
+Mills with non-linear kinetics (aggregation, population-dependent rates; issue 12) are
+not linear maps of their feed: each is torn on its inlet flow vector. For given inlet
+vectors their products are computed (:meth:`~millflow.flowsheet.units.Mill.product_flows`,
+Newton on the mill's steady state) and enter the linear system as sources; the inlet
+vectors that system returns are iterated to a fixed point by vector Wegstein (default),
+substitution or Newton (scipy root, hybr), the change measured as
+max |x_new - x| / sum(x_new). A hold-up mill with non-linear kinetics needs no second
+tear (its throughput is the sum of its torn inlet vector).
+
 Nonlinear units (a mill given by its hold-up, tau = holdup / throughput) are torn on
 their throughput: the linear system is solved for given throughputs, and the
 throughputs are updated by Wegstein's method (default), direct substitution or
@@ -73,8 +82,9 @@ def _unit_blocks(fs, throughputs):
     return blocks, infos
 
 
-def assemble(fs, blocks):
-    """Sparse matrix A = I - T and source vector s (size-major ordering) of the flowsheet."""
+def assemble(fs, blocks, extra_sources=None):
+    """Sparse matrix A = I - T and source vector s (size-major ordering) of the flowsheet;
+    ``extra_sources`` (stream -> flows) adds constant sources (torn non-linear mills)."""
     names = fs.stream_names
     S, N = len(names), fs.grid.n
     sidx = {n: k for k, n in enumerate(names)}
@@ -103,6 +113,8 @@ def assemble(fs, blocks):
                     rows.append(r * S + o)
                     cols.append(c * S + i)
                     vals.append(-B[r, c])
+    for stream, flows in (extra_sources or {}).items():
+        rhs[kk * S + sidx[stream]] += flows
     rows.append(np.arange(N * S))
     cols.append(np.arange(N * S))
     vals.append(np.ones(N * S))
@@ -154,9 +166,9 @@ def check_exits(fs, blocks) -> None:
     )
 
 
-def _linear_solve(fs, blocks):
+def _linear_solve(fs, blocks, extra_sources=None):
     t0 = time.perf_counter()
-    A, rhs = assemble(fs, blocks)
+    A, rhs = assemble(fs, blocks, extra_sources)
     S, N = len(fs.streams), fs.grid.n
     try:
         # size-major order makes A block lower triangular with M-matrix diagonal blocks
@@ -272,6 +284,9 @@ def solve(fs, *, method="wegstein", tol: float = 1e-13, maxiter: int = 200) -> F
     else:
         raise InputError(f"method = {method!r}: expected a name ({', '.join(TEAR_METHODS)}) or a callable")
 
+    kin = [n for n, u in fs.units.items() if getattr(u, "kinetic_nonlinear", False)]
+    if kin:
+        return _solve_kinetic(fs, kin, method, tol, maxiter, t0)
     torn = [n for n, u in fs.units.items() if getattr(u, "nonlinear", False)]
     names = fs.stream_names
 
@@ -308,6 +323,108 @@ def solve(fs, *, method="wegstein", tol: float = 1e-13, maxiter: int = 200) -> F
     solver = dict(lin)
     solver["structure"] = "nonlinear: tear iterations on mill throughputs" if torn else "all linear: one linear solve"
     solver["tear"] = tear_report
+    return FlowsheetSolution(flowsheet=fs, flows=flows, units=reports, solver=solver,
+                             runtime_s=time.perf_counter() - t0, unit_blocks=blocks)
+
+
+def _vector_err(gx, x):
+    return float(np.max(np.abs(gx - x)) / max(float(np.sum(np.abs(gx))), 1e-300))
+
+
+def _vector_substitution(g, x0, tol, maxiter):
+    x, hist = x0, []
+    for it in range(1, maxiter + 1):
+        gx = g(x)
+        hist.append(_vector_err(gx, x))
+        x = gx
+        if hist[-1] < tol:
+            return x, it, hist, True
+    return x, maxiter, hist, False
+
+
+def _vector_wegstein(g, x0, tol, maxiter, qmin=-5.0, qmax=0.0):
+    """Wegstein componentwise on a flow vector (bounded q), change relative to the total."""
+    x_prev, g_prev = x0, g(x0)
+    hist = [_vector_err(g_prev, x_prev)]
+    if hist[-1] < tol:
+        return g_prev, 1, hist, True
+    x = g_prev
+    for it in range(2, maxiter + 1):
+        gx = g(x)
+        hist.append(_vector_err(gx, x))
+        if hist[-1] < tol:
+            return gx, it, hist, True
+        dx = x - x_prev
+        with np.errstate(divide="ignore", invalid="ignore"):
+            s = np.where(dx != 0, (gx - g_prev) / dx, 0.0)
+            q = np.where(s != 1, s / (s - 1.0), 0.0)
+        q = np.clip(np.nan_to_num(q), qmin, qmax)
+        x_prev, g_prev = x, gx
+        x = np.maximum(q * x + (1.0 - q) * gx, 0.0)  # a flow cannot be negative: q-extrapolation is bounded at 0
+    return x, maxiter, hist, False
+
+
+def _vector_newton(g, x0, tol, maxiter):
+    from scipy.optimize import root
+
+    hist = []
+    scale = max(float(np.sum(x0)), 1e-300)
+
+    def f(x):
+        gx = g(np.maximum(x, 0.0))
+        hist.append(_vector_err(gx, x))
+        return (gx - x) / scale
+
+    sol = root(f, x0, method="hybr", options={"xtol": tol, "maxfev": maxiter * (x0.size + 1)})
+    return np.maximum(sol.x, 0.0), int(sol.nfev), hist, bool(hist and min(hist) < max(tol, 1e-12) * 100)
+
+
+_VECTOR_TEARS = {"wegstein": _vector_wegstein, "substitution": _vector_substitution, "newton": _vector_newton}
+
+
+def _solve_kinetic(fs, kin, method, tol, maxiter, t0):
+    """Tear the inlet flow vectors of the mills with non-linear kinetics (see the module)."""
+    others = [n for n, u in fs.units.items() if getattr(u, "nonlinear", False) and n not in kin]
+    if others:
+        raise InputError(f"units {', '.join(others)}: a hold-up mill with linear kinetics in the same flowsheet as "
+                         f"a mill with non-linear kinetics ({', '.join(kin)}) is not supported; give tau_<unit>")
+    if not isinstance(method, str) or method not in _VECTOR_TEARS:
+        raise InputError(f"method = {method!r}: the inlet-vector tear of non-linear mills takes one of "
+                         f"{', '.join(_VECTOR_TEARS)}")
+    names = fs.stream_names
+    N = fs.grid.n
+    blocks = {}
+    infos = {}
+    for name, unit in fs.units.items():
+        if name in kin:
+            blocks[name], infos[name] = {}, {}
+        else:
+            blocks[name], infos[name] = unit.blocks(fs.grid, None)
+    outlets = {u: fs.outlet(u, "out") for u in kin}
+    state = {}
+
+    def g(X):
+        extra = {}
+        for k, u in enumerate(kin):
+            extra[outlets[u]], infos[u] = fs.units[u].product_flows(fs.grid, X[k * N:(k + 1) * N])
+        flows, info = _linear_solve(fs, blocks, extra)
+        state.update(flows=flows, info=info)
+        return np.concatenate([sum(flows[names.index(s)] for s in fs.inlets(u)) for u in kin])
+
+    fresh = sum(u.solids * np.asarray(u.psd, float) for u in fs.units.values() if u.type == "feed")
+    X0 = np.concatenate([fresh for _ in kin])
+    X, its, hist, ok = _VECTOR_TEARS[method](g, X0, tol, maxiter)
+    if not ok:
+        raise SolverError(f"tear iterations on the inlet flows of {', '.join(kin)} (non-linear kinetics) did not "
+                          f"converge ({method}, {its} iterations, last relative change "
+                          f"{hist[-1] if hist else float('nan'):.3g})")
+    g(np.asarray(X))  # final consistent pass
+    flows, lin = state["flows"], state["info"]
+    reports = _unit_reports(fs, flows, infos)
+    solver = dict(lin)
+    solver["structure"] = "non-linear kinetics: tear iterations on the inlet flow vectors of " + ", ".join(kin)
+    solver["tear"] = {"method": method, "torn_units": kin, "torn": "inlet flow vector", "iterations": int(its),
+                      "converged": True, "residual_history": [float(h) for h in hist], "tolerance": tol}
     return FlowsheetSolution(flowsheet=fs, flows=flows, units=reports, solver=solver,
                              runtime_s=time.perf_counter() - t0, unit_blocks=blocks)
 

@@ -99,6 +99,12 @@ class MillUnit:
         (:func:`millflow.classifiers.mill_discharge_rates`).
     power : float or None
         Mill power draw [W], for the specific energy.
+    kinetics : dict or None
+        Non-linear kinetics (issue 12): ``aggregation_kernel`` (constant, sum, product,
+        shear) with ``aggregation_beta0`` [1/s] and ``x_ref_m`` [m]; ``cushion_lambda``
+        with ``fines_m`` [m] (S_i (1 + F)^lambda, F the mass fraction at or below fines_m).
+        Such a mill is not a linear map of its feed: the solver tears its inlet flow
+        vector (:mod:`millflow.flowsheet.solve`). No classification with it.
     """
 
     name: str
@@ -110,6 +116,7 @@ class MillUnit:
     holdup: float | None = None
     classification: dict | None = None
     power: float | None = None
+    kinetics: dict | None = None
     type: ClassVar[str] = "mill"
     max_inlets: ClassVar[int | None] = None
 
@@ -119,6 +126,58 @@ class MillUnit:
         if self.transport not in TRANSPORTS:
             raise InputError(f"units.{self.name}.transport: unknown model {self.transport!r}; "
                              f"valid names: {', '.join(sorted(TRANSPORTS))}")
+        if self.kinetics is not None and self.classification is not None:
+            raise InputError(f"units.{self.name}: non-linear kinetics with discharge classification is not "
+                             "supported; give one of kinetics, classification")
+
+    @property
+    def kinetic_nonlinear(self) -> bool:
+        """True when the mill declares non-linear kinetics (its product is not P @ feed)."""
+        return self.kinetics is not None
+
+    def nonlinear_kinetics(self, grid):
+        """:class:`millflow.nonlinear.Kinetics` of this mill on ``grid``."""
+        from millflow.nonlinear import KERNELS, Aggregation, kinetics
+
+        S, b = self.breakage_functions(grid)
+        k = self.kinetics
+        agg = None
+        if "aggregation_kernel" in k:
+            agg = Aggregation(KERNELS[k["aggregation_kernel"]](k["aggregation_beta0"]), k["x_ref_m"])
+        w, lam = None, 0.0
+        if "cushion_lambda" in k:
+            w = np.zeros((grid.n, grid.n))
+            w[:, grid.x <= k["fines_m"]] = 1.0
+            lam = k["cushion_lambda"]
+        return kinetics(S, b, w=w, lam=lam, aggregation=agg, grid=grid)
+
+    def product_flows(self, grid, inflow):
+        """Product flows [kg/s] for the inlet flows ``inflow`` [kg/s] (non-linear kinetics);
+        the aggregation overflow (coarser than the grid) is added to class 1 and reported."""
+        from millflow.mill import nonlinear as nl
+
+        t0 = time.perf_counter()
+        total = float(np.sum(inflow))
+        if not total > 0:
+            raise SolverError(f"units.{self.name}: the mill receives no solids (inflow {total!r} kg/s)")
+        tau = self.residence_time(total)
+        kin = self.nonlinear_kinetics(grid)
+        feed = np.asarray(inflow, float) / total
+        unit = f"units.{self.name}"
+        if self.transport == "perfect_mixing":
+            r = nl.well_mixed(kin, feed, tau, unit=unit)
+        elif self.transport == "tanks_in_series":
+            r = nl.tanks_in_series(kin, feed, tau, int(self.transport_params["n"]))
+        elif self.transport == "plug_flow":
+            r = nl.plug_flow(kin, feed, tau)
+        else:
+            r = nl.axial_dispersion(kin, feed, tau, float(self.transport_params["pe"]))
+        p = r.product.copy()
+        p[0] += r.overflow_mass
+        info = {"method": f"non-linear kinetics ({kin.describe()}): {r.method}", "error_estimate": r.error_estimate,
+                "residual": r.residual, "runtime_s": time.perf_counter() - t0, "tau_s": tau,
+                "overflow_kg_s": total * r.overflow_mass}
+        return total * p, info
 
     @property
     def ports(self) -> tuple[str, ...]:

@@ -13,7 +13,10 @@ scene, :func:`transient_mill` the dynamics. Modules, one job each:
 - :mod:`~millflow.mill.cells`: compartment networks (tanks, recirculating cells),
   one class at a time;
 - :mod:`~millflow.mill.axial`: the axial-dispersion PDE by finite volumes;
-- :mod:`~millflow.mill.transient`: the dynamic response.
+- :mod:`~millflow.mill.transient`: the dynamic response;
+- :mod:`~millflow.mill.nonlinear`: mills with non-linear kinetics (aggregation,
+  population-dependent rates; issue 12): perfect mixing by Newton, tanks in series,
+  plug flow, axial dispersion, and the two micromixing limits of any RTD.
 """
 from millflow.mill.composed import Mill
 from millflow.mill.steady import steady_mill, transfer_matrix

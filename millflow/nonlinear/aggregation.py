@@ -68,13 +68,15 @@ class AggregationOperator:
     G: sparse ((N + 1) N, N), G[tgt N + j, k] = g_tjk, the mass flux g N_j N_k of the
     ordered pair (j, k) into target t (0..N-1, or N for the overflow); symmetric in (j, k).
     One sparse product H = (G N) reshaped (N + 1, N) gives both the birth H N and its
-    derivative 2 H (per unit N). Cost O(N^2) per evaluation.
+    derivative 2 H (per unit N); the rate uses ``G_half``, each unordered pair once.
+    Cost O(N^2) per evaluation.
     """
 
     v: np.ndarray
     beta: np.ndarray
     kernel_name: str
     G: object
+    G_half: object
 
     @classmethod
     def build(cls, v, kernel: Kernel) -> "AggregationOperator":
@@ -107,7 +109,11 @@ class AggregationOperator:
         jj, kk = np.concatenate([J, J]), np.concatenate([K, K])
         keep = gb != 0.0
         G = csr_matrix((gb[keep], (tgt[keep] * n + jj[keep], kk[keep])), shape=((n + 1) * n, n))
-        return cls(v, beta, kernel.name, G)
+        # the rate needs each unordered pair once (half the entries): (j, k) with j <= k, doubled if j < k
+        half = keep & (jj <= kk)
+        gh = np.where(jj[half] < kk[half], 2.0, 1.0) * gb[half]
+        G_half = csr_matrix((gh, (tgt[half] * n + jj[half], kk[half])), shape=((n + 1) * n, n))
+        return cls(v, beta, kernel.name, G, G_half)
 
     @property
     def n(self) -> int:
@@ -116,7 +122,7 @@ class AggregationOperator:
     def rate(self, M) -> np.ndarray:
         """dM/dt of aggregation, (N + 1,): classes, then the overflow [1/s]."""
         N = M / self.v
-        birth = (self.G @ N).reshape(self.n + 1, self.n) @ N
+        birth = (self.G_half @ N).reshape(self.n + 1, self.n) @ N
         birth[: self.n] -= M * (self.beta @ N)
         return birth
 

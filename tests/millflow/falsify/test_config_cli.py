@@ -92,7 +92,7 @@ def test_cli_writes_the_folder_and_refuses_to_overwrite(tmp_path, capsys):
     assert "bias_coverage.png" not in {f.name for f in out.iterdir()}
 
 
-@pytest.mark.parametrize("name", ["tanks.toml", "slowing.toml"])
+@pytest.mark.parametrize("name", ["tanks.toml", "slowing.toml", "aggregation.toml", "population.toml"])
 def test_the_documented_configs_parse(name):
     from pathlib import Path
 

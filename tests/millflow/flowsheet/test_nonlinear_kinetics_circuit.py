@@ -1,0 +1,53 @@
+"""A mill with non-linear kinetics (aggregation, fines cushioning) inside a recycle
+circuit, declared in TOML: the solver tears the mill's inlet flow vector."""
+import numpy as np
+import pytest
+
+from millflow.errors import InputError
+from millflow.flowsheet import load, loads, solve
+from tests.paths import FLOWSHEETS
+
+FILE = FLOWSHEETS / "closed_circuit_aggregating_mill.toml"
+LINEAR = FLOWSHEETS / "closed_circuit_ball_mill.toml"
+
+
+def test_circuit_solves_and_closes_its_balances():
+    sol = solve(load(FILE), tol=1e-12)
+    fresh = 250 / 3.6  # 250 t/h in kg/s
+    assert abs(sol.flow("overflow").sum() - fresh) < 1e-9 * fresh  # everything fed leaves as product
+    assert all(r["mass_balance_error"] < 1e-12 for r in sol.units.values())
+    assert sol.solver["tear"]["torn"] == "inlet flow vector" and sol.solver["tear"]["converged"]
+    assert sol.units["ball_mill"]["residual"] <= 1e-12  # the mill's own Newton
+    # cushioning slows breakage: a higher circulating load than the linear circuit's
+    assert sol.flow("underflow").sum() > solve(load(LINEAR)).flow("underflow").sum() * 1.05
+
+
+def test_tear_methods_agree():
+    fs = load(FILE)
+    ref = solve(fs, method="newton", tol=1e-12).flows
+    for method in ("wegstein", "substitution"):
+        flows = solve(fs, method=method, tol=1e-12).flows
+        # tear tolerance 1e-12 relative to the total flow, times the loop gain (~3)
+        assert np.abs(flows - ref).max() < 1e-9 * ref.sum()
+
+
+def test_linear_physics_through_the_kinetic_path_equals_the_linear_circuit():
+    text = FILE.read_text().replace("aggregation_beta0_per_s = 1e-4", "aggregation_beta0_per_s = 0") \
+        .replace("cushion_lambda = -1.0", "cushion_lambda = 0.0")
+    sol = solve(loads(text), tol=1e-13)
+    lin = solve(load(LINEAR))
+    assert sol.solver["tear"] is not None
+    # the mill's Newton (1e-12) and the tear (1e-13 of the total) against one sparse solve
+    assert np.abs(sol.flows - lin.flows).max() < 1e-9 * lin.flows.sum()
+
+
+@pytest.mark.parametrize("edit, match", [
+    (('aggregation = "constant"', 'aggregation = "brownian"'), "units.ball_mill.kinetics.aggregation = 'brownian'"),
+    (("x_ref_um = 10\n", ""), r"units.ball_mill.kinetics: missing parameter x_ref_<unit>"),
+    (("fines_um = 75", "fines_um = 75\ncolour = 2"), "units.ball_mill.kinetics.colour: unknown key"),
+    (("power_kW = 3800", "power_kW = 3800\nclassification = {curve = \"screen\", d50_um = 500}"),
+     "non-linear kinetics with discharge classification"),
+])
+def test_bad_kinetics_tables(edit, match):
+    with pytest.raises(InputError, match=match):
+        loads(FILE.read_text().replace(*edit))
