@@ -8,20 +8,28 @@ found by listing that package, so adding a command is adding a module.
 from __future__ import annotations
 
 import argparse
+import contextlib
 import importlib
+import os
 import pkgutil
+import signal
 import sys
+import threading
+import warnings
 
-from millflow.errors import MillflowError
+from millflow.errors import MillflowError, OutputError, SolverError
 
 
 def build_parser() -> argparse.ArgumentParser:
     import millflow.commands as commands
+    from millflow import __version__
 
     parser = argparse.ArgumentParser(
         prog="millflow",
         description="Population-balance simulation of grinding mills and circuits.",
+        epilog="example: millflow run flowsheets/closed_circuit_ball_mill.toml",
     )
+    parser.add_argument("--version", action="version", version=f"millflow {__version__}")
     sub = parser.add_subparsers(dest="command", metavar="COMMAND")
     sub.required = True
     for info in sorted(pkgutil.iter_modules(commands.__path__), key=lambda m: m.name):
@@ -31,14 +39,66 @@ def build_parser() -> argparse.ArgumentParser:
     return parser
 
 
+class Terminated(BaseException):
+    """SIGTERM, raised in the main thread so that result folders are cleaned up."""
+
+
+def _on_sigterm(signum, frame):
+    raise Terminated()
+
+
+def _one_line_warning(message, category, filename, lineno, file=None, line=None):
+    """Warnings on the command line as one line each, without source locations."""
+    print(f"millflow: warning: {category.__name__}: {message}", file=sys.stderr if file is None else file)
+
+
 def main(argv: list[str] | None = None) -> int:
+    """Run one command; return its exit status.
+
+    0 success; 1 a failed solve (SolverError), results that could not be written
+    (OutputError), SIGTERM or an internal error; 2 bad input (any other MillflowError,
+    and argparse's usage errors); 130 SIGINT. Every failure is one line on stderr;
+    MILLFLOW_DEBUG=1 adds the traceback of an internal error.
+    """
     parser = build_parser()
     args = parser.parse_args(argv)
+    name = f"millflow {args.command}"
+    previous = signal.getsignal(signal.SIGTERM) if _main_thread() else None
+    if previous is not None:
+        signal.signal(signal.SIGTERM, _on_sigterm)
     try:
-        return int(args.func(args) or 0)
+        with warnings.catch_warnings():
+            warnings.showwarning = _one_line_warning
+            return int(args.func(args) or 0)
+    except (SolverError, OutputError) as err:
+        print(f"{name}: error: {err}", file=sys.stderr)
+        return 1
     except MillflowError as err:
-        print(f"millflow {args.command}: error: {err}", file=sys.stderr)
+        print(f"{name}: error: {err}", file=sys.stderr)
         return 2
+    except KeyboardInterrupt:
+        print(f"{name}: interrupted; no partial results were written", file=sys.stderr)
+        return 130
+    except Terminated:
+        print(f"{name}: terminated (SIGTERM); no partial results were written", file=sys.stderr)
+        return 1
+    except BrokenPipeError:  # output piped into a command that stopped reading (e.g. head)
+        with contextlib.suppress(OSError):
+            sys.stdout = open(os.devnull, "w")  # silence the flush at exit
+        return 0
+    except Exception as err:  # a bug: one line, not a traceback (MILLFLOW_DEBUG=1 shows it)
+        if os.environ.get("MILLFLOW_DEBUG"):
+            raise
+        print(f"{name}: internal error: {type(err).__name__}: {err} "
+              "(please report it; MILLFLOW_DEBUG=1 shows the traceback)", file=sys.stderr)
+        return 1
+    finally:
+        if previous is not None:
+            signal.signal(signal.SIGTERM, previous)
+
+
+def _main_thread() -> bool:
+    return threading.current_thread() is threading.main_thread()
 
 
 if __name__ == "__main__":

@@ -23,3 +23,8 @@ class BreakageError(InputError):
 
 class SolverError(MillflowError, RuntimeError):
     """A numerical method failed or could not reach the requested accuracy."""
+
+
+class OutputError(MillflowError, OSError):
+    """Results could not be written (read-only or full disk, a file where a folder is
+    expected, a missing parent folder). Nothing partial is left in the target."""

@@ -9,12 +9,8 @@ non-empty DIR is refused unless --overwrite. See docs/model-error.md.
 from __future__ import annotations
 
 import json
-import shutil
 import sys
-import tempfile
 from pathlib import Path
-
-from millflow.errors import InputError
 
 
 def add_parser(subparsers) -> None:
@@ -30,20 +26,17 @@ def add_parser(subparsers) -> None:
 
 
 def run(args) -> int:
+    from millflow.commands.output import check_target, staged_folder
     from millflow.falsify.config import load_config
     from millflow.falsify.plots import plot_sweep
 
     say = (lambda msg: None) if args.quiet else (lambda msg: print(f"[falsify] {msg}", file=sys.stderr, flush=True))
     cfg = load_config(args.config)
     out = Path(args.out) if args.out else Path(args.config).resolve().parent / "falsify-results"
-    if out.exists() and (not out.is_dir() or any(out.iterdir())) and not args.overwrite:
-        raise InputError(f"--out {str(out)!r} exists and is not empty; give --overwrite to replace it")
-    if not out.parent.is_dir():
-        raise InputError(f"--out {str(out)!r}: the parent folder does not exist")
+    check_target(out, overwrite=args.overwrite, input_path=args.config)  # before the study, not after
     res = cfg.run(progress=say)
     summary = res.summary()
-    tmp = Path(tempfile.mkdtemp(prefix=f".{out.name}.", dir=out.parent))
-    try:
+    with staged_folder(out, overwrite=args.overwrite, input_path=args.config, command="falsify") as tmp:
         res.dataset.to_netcdf(tmp / "results.nc")
         (tmp / "summary.json").write_text(json.dumps(summary, indent=2) + "\n", encoding="utf-8")
         table = res.dataset[["truth", "mean_estimate", "bias", "bias_se", "bias_pct", "coverage", "se_ratio"]]
@@ -52,15 +45,9 @@ def run(args) -> int:
         if not args.no_plots:
             plot_sweep(res.dataset, tmp / "bias_coverage.png")
             files.append("bias_coverage.png")
-        if out.exists():
-            shutil.rmtree(out) if out.is_dir() else out.unlink()
-        tmp.rename(out)
-    except BaseException:
-        shutil.rmtree(tmp, ignore_errors=True)
-        raise
     if args.json:
         print(json.dumps({**summary, "out": str(out), "files": files}))
-    else:
+    elif not args.quiet:
         print(res.text())
         print(f"files: {', '.join(files)} in {out}")
     return 0

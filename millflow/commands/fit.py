@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import json
 import sys
+from pathlib import Path
 
 
 def add_parser(subparsers) -> None:
@@ -20,10 +21,13 @@ def add_parser(subparsers) -> None:
     p.add_argument("--out", default=None, help="output folder (overrides output.dir of the config)")
     p.add_argument("--no-plots", action="store_true", help="do not write plots")
     p.add_argument("--quiet", action="store_true", help="no progress messages")
+    p.add_argument("--overwrite", action="store_true",
+                   help="replace an output folder that holds files millflow did not write")
     p.set_defaults(func=run)
 
 
 def run(args) -> int:
+    from millflow.commands.output import check_target, relocate, staged_folder
     from millflow.fitting.config import load_config
     from millflow.fitting.estimate import compare_models, fit
     from millflow.fitting.report import write_report
@@ -31,6 +35,8 @@ def run(args) -> int:
 
     say = (lambda msg: None) if args.quiet else (lambda msg: print(f"[fit] {msg}", file=sys.stderr, flush=True))
     cfg = load_config(args.config, data_dir=args.data_dir)
+    out_dir = Path(args.out or cfg.out_dir)
+    check_target(out_dir, overwrite=args.overwrite, input_path=args.config)  # before a long fit, not after
     model = cfg.model()
     say(f"{model}")
     result = fit(model, cfg.params, progress=say, **cfg.optimizer)
@@ -53,10 +59,9 @@ def run(args) -> int:
         prediction = leave_out(model, cfg.params, cfg.hold_out, progress=say, **cfg.optimizer)
         out["prediction"] = {c: {"rmse": v} for c, v in prediction["rmse"].items()}
         out["prediction_mean_rmse"] = prediction["mean_rmse"]
-    files = write_report(result, args.out or cfg.out_dir, prediction, plots=cfg.plots and not args.no_plots)
-    out["files"] = files
+    # print first: a failed write never loses a finished fit
     if args.json:
-        print(json.dumps(out, default=float))
+        print(json.dumps(out, default=float), flush=True)
     else:
         print(result.summary())
         if "discrimination" in out:
@@ -67,6 +72,11 @@ def run(args) -> int:
             for t in out["discrimination"]["f_tests"]:
                 print(f"  F test {t['small']} -> {t['big']}: F {t['F']:.3g}, p {t['p_value']:.3g}")
         if prediction:
-            print(f"prediction mean RMSE {prediction['mean_rmse']:.4f} over {len(prediction['rmse'])} held-out conditions")
-        print("wrote " + ", ".join(files))
+            print(f"prediction mean RMSE {prediction['mean_rmse']:.4f} "
+                  f"over {len(prediction['rmse'])} held-out conditions")
+        sys.stdout.flush()
+    with staged_folder(out_dir, overwrite=args.overwrite, input_path=args.config, command="fit") as tmp:
+        files = relocate(write_report(result, tmp, prediction, plots=cfg.plots and not args.no_plots), tmp, out_dir)
+    if not args.quiet:
+        print("wrote " + ", ".join(files), file=sys.stderr if args.json else sys.stdout)
     return 0

@@ -3,7 +3,9 @@
 Reads the CSV with :func:`rtd.read_tracer_csv` (``time_<unit>``, ``concentration`` or
 ``F``, optional ``inlet``), fits one model with :func:`rtd.fit` (least squares, standard
 errors from eq. 9), prints the estimates (or one JSON object with ``--json``) and writes
-a plot of data, fit and residuals next to the CSV (``<stem>_fit.png``) or to ``--out``.
+``fit.json`` and a plot of data, fit and residuals (``fit.png``) into the folder ``--out``
+(default ``<csv stem>-rtd/`` in the current folder; with ``--no-plots`` and no ``--out``
+nothing is written).
 tau is reported in the file's time unit. Errors in the file become InputError naming
 the file and the column.
 """
@@ -24,7 +26,8 @@ def add_parser(subparsers) -> None:
     p = subparsers.add_parser(
         "fit-rtd", help="fit an RTD model to tracer data",
         description="Fit a residence time distribution model to a tracer CSV "
-                    "(columns time_<unit>, concentration or F, optional inlet).")
+                    "(columns time_<unit>, concentration or F, optional inlet).",
+        epilog="example: millflow fit-rtd docs/examples/tracer_tis.csv --model tis --out tis-fit")
     p.add_argument("csv", metavar="TRACER.csv", help="tracer data file")
     p.add_argument("--model", choices=sorted(rtd.MODELS), default="tis",
                    help="model to fit (default: tis)")
@@ -35,9 +38,13 @@ def add_parser(subparsers) -> None:
     p.add_argument("--baseline", default=None, metavar="head|tail|VALUE",
                    help="subtract a baseline: median of the first/last 5 points or a value")
     p.add_argument("--json", action="store_true", help="print one JSON object")
-    p.add_argument("--out", default=None, metavar="PATH",
-                   help="plot file (default <csv stem>_fit.png next to the CSV)")
-    p.add_argument("--no-plot", action="store_true", help="do not write the plot")
+    p.add_argument("--out", default=None, metavar="DIR",
+                   help="output folder for fit.json and fit.png (default <csv stem>-rtd/)")
+    p.add_argument("--no-plots", "--no-plot", dest="no_plots", action="store_true",
+                   help="do not write the plot")
+    p.add_argument("--overwrite", action="store_true",
+                   help="replace an output folder that holds files millflow did not write")
+    p.add_argument("--quiet", action="store_true", help="print nothing but errors (and --json output)")
     p.set_defaults(func=run)
 
 
@@ -70,17 +77,23 @@ def run(args) -> int:
         raise InputError(f"{path}{col}: {err}") from None
     except rtd.RTDError as err:
         raise InputError(f"{path}: {err}") from None
-    plot = None
-    if not args.no_plot:
-        plot = Path(args.out) if args.out else path.with_name(f"{path.stem}_fit.png")
-        write_plot(result, plot, curve.time_unit, args.model)
+    out = Path(args.out) if args.out else (None if args.no_plots else Path.cwd() / f"{path.stem}-rtd")
+    plot = None if (out is None or args.no_plots) else out / "fit.png"
+    js = to_json(result, args.model, curve.time_unit, plot)
     if args.json:
-        print(json.dumps(to_json(result, args.model, curve.time_unit, plot)))
-    else:
+        print(json.dumps(js), flush=True)
+    elif not args.quiet:
         print(f"{path}: {args.model} fit, times in {curve.time_unit}")
-        print(result.summary())
-        if plot is not None:
-            print(f"plot: {plot}")
+        print(result.summary(), flush=True)
+    if out is not None:
+        from millflow.commands.output import staged_folder
+
+        with staged_folder(out, overwrite=args.overwrite, input_path=path, command="fit-rtd") as tmp:
+            (tmp / "fit.json").write_text(json.dumps(js, indent=1) + "\n", encoding="utf-8")
+            if plot is not None:
+                write_plot(result, tmp / "fit.png", curve.time_unit, args.model)
+        if not args.quiet and not args.json:
+            print(f"wrote {out}/ (fit.json{', fit.png' if plot is not None else ''})")
     return 0
 
 

@@ -1,4 +1,4 @@
-"""`millflow run FILE.toml [--out DIR] [--json] [--no-plots]`: solve a flowsheet file.
+"""`millflow run FILE.toml [--out DIR] [--json] [--no-plots] [--overwrite] [--quiet]`: solve a flowsheet.
 
 Prints a compact table (stream, t/h, P80, P50, % passing the named sizes), the
 circulating loads, mass balance, specific energy and run time, and writes results.nc,
@@ -20,6 +20,9 @@ def add_parser(subparsers) -> None:
     p.add_argument("--out", default=None, help="output folder (default: <file stem>-results)")
     p.add_argument("--json", action="store_true", help="print one JSON object instead of the table")
     p.add_argument("--no-plots", action="store_true", help="do not write the PNG plots")
+    p.add_argument("--overwrite", action="store_true",
+                   help="replace an output folder that holds files millflow did not write")
+    p.add_argument("--quiet", action="store_true", help="print nothing but errors (and --json output)")
     p.add_argument("--method", default="wegstein", help="tear method for nonlinear units (wegstein, newton, "
                                                         "substitution)")
     p.set_defaults(func=run)
@@ -68,19 +71,22 @@ def format_summary(s: dict, out_dir: str | None, written: list[str] | None = Non
 
 
 def run(args) -> int:
+    from millflow.commands.output import check_target, relocate, staged_folder
     from millflow.flowsheet import load, save, solve, summary
 
     path = Path(args.file)
+    out = Path(args.out) if args.out else Path.cwd() / f"{path.stem}-results"
+    check_target(out, overwrite=args.overwrite, input_path=path)  # before the work, not after
     fs = load(path)
     sol = solve(fs, method=args.method)
-    out = Path(args.out) if args.out else Path.cwd() / f"{path.stem}-results"
-    files = save(sol, out, plots=not args.no_plots)
     s = summary(sol)
+    with staged_folder(out, overwrite=args.overwrite, input_path=path, command="run") as tmp:
+        files = relocate(save(sol, tmp, plots=not args.no_plots).values(), tmp, out)
     s["output_dir"] = str(out)
-    s["files_written"] = [Path(f).name for f in files.values()]
+    s["files_written"] = [Path(f).name for f in files]
     if args.json:
         print(json.dumps(s))
-    else:
+    elif not args.quiet:
         try:
             shown = str(out.relative_to(Path.cwd()))
         except ValueError:

@@ -11,13 +11,14 @@ Writes scaleup.nc, scaleup_psd.csv, scaleup.json and scaleup.png into the output
 from __future__ import annotations
 
 import json
-import sys
 from pathlib import Path
 
 
 def add_parser(subparsers) -> None:
     p = subparsers.add_parser("scaleup", help="predict a plant mill/circuit from a lab fit, with uncertainty",
-                              description=__doc__.split("\n\n")[0])
+                              description=__doc__.split("\n\n")[0],
+                              epilog="example: millflow scaleup lab_fit.json --to examples/scaleup/plant.toml "
+                                     "--target-p80-um 150")
     p.add_argument("fit", help="result of 'millflow fit --json' (JSON file)")
     p.add_argument("--to", required=True, dest="plant", help="plant file (TOML, see docs/scaleup.md)")
     p.add_argument("--target-p80-um", type=float, default=None, help="target product P80 [um]: solve for throughput")
@@ -26,6 +27,9 @@ def add_parser(subparsers) -> None:
     p.add_argument("--draws", type=int, default=1000, help="Monte Carlo draws (default 1000)")
     p.add_argument("--method", choices=["both", "delta", "mc"], default="both", help="band method(s)")
     p.add_argument("--no-plots", action="store_true", help="do not write scaleup.png")
+    p.add_argument("--overwrite", action="store_true",
+                   help="replace an output folder that holds files millflow did not write")
+    p.add_argument("--quiet", action="store_true", help="print nothing but errors (and --json output)")
     p.set_defaults(func=run)
 
 
@@ -57,11 +61,14 @@ def format_summary(s: dict) -> str:
 
 
 def run(args) -> int:
-    from millflow.errors import SolverError
     from millflow.scaleup.api import predict_plant
     from millflow.scaleup.fitted import load_fit
     from millflow.scaleup.plantfile import load_plant
 
+    from millflow.commands.output import check_target, staged_folder
+
+    out = Path(args.out) if args.out else Path.cwd() / f"{Path(args.plant).stem}-scaleup"
+    check_target(out, overwrite=args.overwrite, input_path=args.plant)  # before the work, not after
     fit = load_fit(args.fit)
     su, notes = load_plant(args.plant, fit)
     target = None if args.target_p80_um is None else args.target_p80_um * 1e-6
@@ -69,24 +76,19 @@ def run(args) -> int:
         from millflow.errors import InputError
         raise InputError(f"--draws {args.draws}: expected >= 10")
     methods = {"both": ("delta", "mc"), "delta": ("delta",), "mc": ("mc",)}[args.method]
-    try:
-        res = predict_plant(su, target, methods=methods, n_draws=args.draws)
-    except SolverError as exc:
-        print(f"millflow scaleup: solve failed: {exc}", file=sys.stderr)
-        return 1
+    res = predict_plant(su, target, methods=methods, n_draws=args.draws)  # SolverError: exit 1 (cli.main)
     s = dict(res.summary)
     sc = res.scale
     s.update(title=notes["title"], fit=Path(args.fit).name, scaling=su.scaling, power_model=sc["power_model"],
              power_gross_kW=sc["plant_gross_kW"], holdup_kg=sc["plant_holdup_kg"], A_factor=sc["A"],
              mu_factor=sc["mu"], transport=notes["transport"], transport_params=notes["transport_params"],
              transport_source=notes["transport_source"])
-    out = Path(args.out) if args.out else Path.cwd() / f"{Path(args.plant).stem}-scaleup"
-    out.mkdir(parents=True, exist_ok=True)
-    files = _write(res, s, out, plots=not args.no_plots)
+    with staged_folder(out, overwrite=args.overwrite, input_path=args.plant, command="scaleup") as tmp:
+        files = _write(res, s, tmp, plots=not args.no_plots)
     s["files_written"] = [f.name for f in files]
     if args.json:
         print(json.dumps(s, default=float))
-    else:
+    elif not args.quiet:
         print(format_summary(s))
         print(f"wrote {out}/ ({', '.join(s['files_written'])})")
     return 0

@@ -79,17 +79,20 @@ def test_cli_writes_the_folder_and_refuses_to_overwrite(tmp_path, capsys):
     out = tmp_path / "res"
     assert main(["falsify", str(p), "--json", "--quiet", "--out", str(out)]) == 0
     js = json.loads(capsys.readouterr().out)
-    assert sorted(f.name for f in out.iterdir()) == sorted(js["files"])
+    assert sorted(f.name for f in out.iterdir()) == sorted(js["files"] + [".millflow-manifest.json"])
     assert {"results.nc", "summary.json", "summary.csv", "bias_coverage.png"} <= set(js["files"])
     assert [r["strength"] for r in js["strengths"]] == [1.0, 3.0]
     assert not [f for f in tmp_path.iterdir() if f.name.startswith(".res.")]  # temp folder renamed away
     import xarray as xr
     with xr.open_dataset(out / "results.nc") as ds:
         assert dict(ds.sizes) == {"strength": 2, "parameter": 3, "replicate": 2}
+    (out / "notes.txt").write_text("mine")  # a file millflow did not write: the folder is refused
     assert main(["falsify", str(p), "--quiet", "--out", str(out)]) == 2
-    assert "not empty" in capsys.readouterr().err
+    assert "did not write (notes.txt)" in capsys.readouterr().err
+    assert (out / "notes.txt").read_text() == "mine"
     assert main(["falsify", str(p), "--quiet", "--no-plots", "--out", str(out), "--overwrite"]) == 0
     assert "bias_coverage.png" not in {f.name for f in out.iterdir()}
+    assert main(["falsify", str(p), "--quiet", "--out", str(out)]) == 0  # its own folder: replaced
 
 
 @pytest.mark.parametrize("name", ["tanks.toml", "slowing.toml", "aggregation.toml", "population.toml"])

@@ -125,7 +125,8 @@ def test_cli_table_and_error(tmp_path, capsys, monkeypatch):
     assert (tmp_path / "closed_circuit_ball_mill-results" / "summary.json").exists()
     # the files line names what was written, and only that: no plots with --no-plots
     listed = out.split("results written to ")[1].split("(")[1].rstrip(")\n").split(", ")
-    assert sorted(listed) == sorted(p.name for p in (tmp_path / "closed_circuit_ball_mill-results").iterdir())
+    written = sorted(p.name for p in (tmp_path / "closed_circuit_ball_mill-results").iterdir())
+    assert sorted(listed + [".millflow-manifest.json"]) == written  # and millflow's manifest
     assert not any(name.endswith(".png") for name in listed)
     bad = tmp_path / "bad.toml"
     bad.write_text(CLOSED.read_text().replace('type = "hydrocyclone"', 'type = "cyclone"'))

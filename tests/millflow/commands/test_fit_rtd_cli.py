@@ -1,19 +1,20 @@
 """`millflow fit-rtd` on the example tracer file (TanksInSeries(12 min, 3), 2 % noise)."""
 import json
-from pathlib import Path
-
 import pytest
 
 from millflow.cli import main
+from tests import paths
 
-EXAMPLE = Path(__file__).resolve().parents[2] / "docs" / "examples" / "tracer_tis.csv"
+EXAMPLE = paths.DOCS / "examples" / "tracer_tis.csv"
 
 
 def test_fit_rtd_json_on_example(tmp_path, capsys):
-    plot = tmp_path / "fit.png"
-    code = main(["fit-rtd", str(EXAMPLE), "--model", "tis", "--json", "--out", str(plot)])
+    folder = tmp_path / "tis"
+    code = main(["fit-rtd", str(EXAMPLE), "--model", "tis", "--json", "--out", str(folder)])
     out = json.loads(capsys.readouterr().out)
-    assert code == 0 and plot.stat().st_size > 1000
+    assert code == 0 and (folder / "fit.png").stat().st_size > 1000
+    assert json.loads((folder / "fit.json").read_text()) == out  # --out is a folder: plot and JSON
+    assert out["plot"] == str(folder / "fit.png")
     assert {"model", "params", "ssr", "ser", "aic", "bic"} <= set(out)
     assert out["model"] == "tis" and out["time_unit"] == "min"
     tau, n = out["params"]["tau"], out["params"]["n"]
@@ -26,25 +27,28 @@ def test_fit_rtd_json_on_example(tmp_path, capsys):
                                           ("cells", {"tau", "n", "r", "dead", "bypass"}),
                                           ("cstr", {"tau"}), ("plug", {"tau"})])
 def test_fit_rtd_other_models_and_text_output(tmp_path, capsys, model, keys):
-    code = main(["fit-rtd", str(EXAMPLE), "--model", model, "--json", "--no-plot"])
+    code = main(["fit-rtd", str(EXAMPLE), "--model", model, "--json", "--no-plots"])
     out = json.loads(capsys.readouterr().out)
     assert code == 0 and set(out["params"]) == keys and out["plot"] is None
-    assert main(["fit-rtd", str(EXAMPLE), "--model", model, "--no-plot"]) == 0
+    assert main(["fit-rtd", str(EXAMPLE), "--model", model, "--no-plots"]) == 0
     text = capsys.readouterr().out
     assert "tau" in text and "AIC" in text
 
 
-def test_default_plot_next_to_csv(tmp_path, capsys):
+def test_default_folder_in_the_working_directory(tmp_path, capsys, monkeypatch):
+    monkeypatch.chdir(tmp_path)
     csv = tmp_path / "run1.csv"
     csv.write_text(EXAMPLE.read_text())
     assert main(["fit-rtd", str(csv)]) == 0
-    assert (tmp_path / "run1_fit.png").exists()
+    assert (tmp_path / "run1-rtd" / "fit.png").exists() and (tmp_path / "run1-rtd" / "fit.json").exists()
+    # nothing written beside the CSV, and --no-plots without --out writes nothing
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["run1-rtd", "run1.csv"]
 
 
 def test_bad_file_exits_2_naming_file_and_column(tmp_path, capsys):
     bad = tmp_path / "bad.csv"
     bad.write_text("time_s,concentration\n0,0\n1,2\n0.5,1\n2,0\n")
-    assert main(["fit-rtd", str(bad), "--no-plot"]) == 2
+    assert main(["fit-rtd", str(bad), "--no-plots"]) == 2
     err = capsys.readouterr().err
     assert "bad.csv" in err and "time_s" in err and "row 3" in err
     assert main(["fit-rtd", str(tmp_path / "missing.csv")]) == 2
@@ -60,13 +64,13 @@ def test_fit_rtd_with_inlet_column_and_step_file(tmp_path, capsys):
     pulse = tmp_path / "inlet.csv"
     pulse.write_text("time_s,concentration,inlet\n"
                      + "".join(f"{a},{b},{c}\n" for a, b, c in zip(t, out, inlet)))
-    assert main(["fit-rtd", str(pulse), "--json", "--no-plot"]) == 0
+    assert main(["fit-rtd", str(pulse), "--json", "--no-plots"]) == 0
     params = json.loads(capsys.readouterr().out)["params"]
     assert params["tau"]["value"] == pytest.approx(6.0, rel=1e-5)
     assert params["n"]["value"] == pytest.approx(2.5, rel=1e-5)
     step = tmp_path / "step.csv"
     f = rtd.AxialDispersion(4.0, 12.0).cdf(t)
     step.write_text("time_min,F\n" + "".join(f"{a},{b}\n" for a, b in zip(t, f)))
-    assert main(["fit-rtd", str(step), "--model", "ad-closed", "--json", "--no-plot"]) == 0
+    assert main(["fit-rtd", str(step), "--model", "ad-closed", "--json", "--no-plots"]) == 0
     params = json.loads(capsys.readouterr().out)["params"]
     assert params["pe"]["value"] == pytest.approx(12.0, rel=1e-5)
