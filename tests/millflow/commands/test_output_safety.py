@@ -87,7 +87,7 @@ def _failing_save(exc_factory):
     real = flowsheet_pkg.save
 
     def save(sol, out, *, plots=True):
-        files = real(sol, out, plots=plots)  # some files are complete when the failure comes
+        real(sol, out, plots=plots)  # some files are complete when the failure comes
         raise exc_factory()
     return save
 
