@@ -108,3 +108,15 @@ def test_newton_failure_names_unit_and_residual():
     with pytest.raises(SolverError, match=r"perfectly mixed mill: .*residual .* > tol") as exc:
         nl.well_mixed(kin, feed, TAU, max_iter=1)
     assert "\n" not in str(exc.value)
+
+
+def test_micromixing_with_a_tabulated_hazard_axial_dispersion():
+    # the axial-dispersion RTD has no closed-form survival: the hazard is tabulated and
+    # splined; with linear physics (zero kernel) both limits must be the exact RTD answer
+    grid, S, b, feed = _scene(30)
+    model = rtd.AxialDispersion(TAU, 10.0)
+    mm = nl.micromixing_bounds(_zero_kernel(grid, S, b), feed, model)
+    exact, _, _, _ = segregated(S, b, feed, model, holdup=False)
+    assert np.abs(mm.segregated - exact).max() < 1e-8  # quadrature / ODE at rtol 1e-9
+    assert np.abs(mm.max_mixedness - exact).max() < 1e-8
+    assert mm.info["hazard_interpolation_error"] < 1e-8
