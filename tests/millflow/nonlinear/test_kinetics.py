@@ -219,3 +219,19 @@ def test_fines_slowing_needs_all_three_parts():
         kinetics(S, b, kappa=lambda F: 1.0)
     with pytest.raises(InputError, match="zeros and ones"):
         kinetics(S, b, fines_mask=np.full(S.size, 0.5), kappa=lambda F: 1.0, dkappa=lambda F: 0.0)
+
+
+@settings(max_examples=30, deadline=None)
+@given(st.integers(0, 2 ** 32 - 1), st.floats(-2.0, 2.0), kernel_st)
+def test_every_term_together_conserves_mass(seed, lam, kernel):
+    grid, S, b, feed = _linear(25)
+    rng = np.random.default_rng(seed)
+    kin = kinetics(S, b, w=rng.random((25, 25)), lam=lam, aggregation=Aggregation(kernel, XREF), grid=grid,
+                   fines_mask=(grid.x < 3e-4).astype(float), kappa=lambda F: np.exp(-F), dkappa=lambda F: -np.exp(-F))
+    y = np.append(rng.random(25), rng.random())
+    r = kin.rate(y)
+    # breakage columns of b sum to 1 and aggregation births equal its losses: the total is
+    # zero to rounding of the gross fluxes (breakage S M plus aggregation losses)
+    gross = float(np.sum(kin.rates(y[:-1]) * y[:-1])) + float(np.abs(kin.aggregation.rate(y[:-1])).sum())
+    assert abs(r.sum()) <= 1e-13 * gross * 25
+    assert np.abs(kin.jacobian(y).sum(axis=0)).max() <= 1e-12 * np.abs(kin.jacobian(y)).sum()
