@@ -74,8 +74,11 @@ def _check(kin: Kinetics, feed, tau):
     return feed, float(tau)
 
 
-def _newton_cell(kin: Kinetics, y_in, tau, y0, *, tol, max_iter, unit):
-    """Solve F(y) = y_in - y + tau R(y) = 0; returns (y, residual, step, iterations, how)."""
+def _newton_cell(kin: Kinetics, y_in, tau, y0, *, tol, max_iter, unit,
+                 phases=("newton", "pseudo-transient", "newton")):
+    """Solve F(y) = y_in - y + tau R(y) = 0; returns (y, residual, step, iterations, how).
+    ``phases``: Newton, then (if it stalls) pseudo-transient continuation to residual
+    1e-6, then Newton again."""
     n1 = y_in.size
     eye = np.eye(n1)
 
@@ -92,9 +95,12 @@ def _newton_cell(kin: Kinetics, y_in, tau, y0, *, tol, max_iter, unit):
     f = F(y)
     res = float(np.abs(f).max())
     its = 0
-    how = "newton"
+    ran = []
     lu = None
-    for phase in ("newton", "pseudo-transient", "newton"):
+    for phase in phases:
+        if res <= tol:
+            break
+        ran.append(phase)
         dt = 0.1 * tau
         stalled = False
         while res > tol and its < max_iter:
@@ -130,7 +136,7 @@ def _newton_cell(kin: Kinetics, y_in, tau, y0, *, tol, max_iter, unit):
             break
         if phase == "newton" and not stalled and its >= max_iter:
             break
-        how = "newton + pseudo-transient"
+    how = " + ".join(ran) or "newton (start already converged)"
     if res > tol or not np.isfinite(res):
         raise SolverError(f"{unit}: the steady state did not converge: residual max|f - M + tau R(M)| = {res:.3g} "
                           f"> tol {tol:g} after {its} iterations ({kin.describe()})")
