@@ -14,6 +14,7 @@ type = "tanks_in_series" # tanks_in_series | axial_dispersion | recirculating_ce
 # aggregation: strength = beta0 [1/s]; kernel = "constant" (sum, product, shear);
 #   x_ref_um = reference size of the kernel's volumes (default the finest sieve)
 # population: strength = cushioning exponent; fines_um (default the middle sieve)
+# either, continuous designs: n_tanks = 3 (tanks in series instead of perfect mixing)
 strengths = [1, 2, 3, 5] # or strength = 3; n cells, Pe, n_screen, slowing-down s
 r = 1.0                  # recirculating_cells back-flow ratio
 [truth.params]           # breakage parameters of the truth (default BREAKAGE_TRUTH)
@@ -64,7 +65,7 @@ _NUM = (int, float)
 _TOP = {"replicates": int, "seed": int, "workers": int, "drift_replicates": int,
         "truth": dict, "assumed": dict, "design": dict, "noise": dict, "fit": dict}
 _TRUTH = {"type": str, "strength": _NUM, "strengths": list, "r": _NUM, "params": dict, "n_screen": _NUM,
-          "kernel": str, "x_ref_um": _NUM, "fines_um": _NUM}
+          "kernel": str, "x_ref_um": _NUM, "fines_um": _NUM, "n_tanks": int}
 _ASSUMED = {"mode": str, "rate": str, "breakage": str, "classification": str, "n_tanks": int, "transport": str,
             "transport_params": dict, "where": str, "params": dict}
 _DESIGN = {"tau_s": list, "tau_min": list, "times_s": list, "times_min": list, "top_size_um": _NUM,
@@ -205,6 +206,9 @@ def parse_config(raw: dict, src: str = "<config>") -> StudyConfig:
         raise InputError(f"{src}: truth.type = {ttype!r} needs a continuous design (design.tau_s or tau_min)")
     if ttype == "slowing_down" and not design.is_batch:
         raise InputError(f"{src}: truth.type = 'slowing_down' needs a batch design (design.times_s or times_min)")
+    if "n_tanks" in tr and (ttype not in ("aggregation", "population") or design.is_batch):
+        raise InputError(f"{src}: truth.n_tanks is only for truth.type = 'aggregation' or 'population' with a "
+                         "continuous design")
     for key, only in (("kernel", "aggregation"), ("x_ref_um", "aggregation"), ("fines_um", "population")):
         if key in tr and ttype != only:
             raise InputError(f"{src}: truth.{key} is only for truth.type = {only!r}")
@@ -237,10 +241,10 @@ def _truth_factory(ttype, tparams, tr, assumed, src):
     if ttype == "aggregation":
         kernel = tr.get("kernel", "constant")
         x_ref = float(tr["x_ref_um"]) * 1e-6 if "x_ref_um" in tr else None
-        return lambda s: AggregationTruth(s, tparams, kernel=kernel, x_ref_m=x_ref)
+        return lambda s: AggregationTruth(s, tparams, kernel=kernel, x_ref_m=x_ref, n_tanks=tr.get("n_tanks", 1))
     if ttype == "population":
         fines = float(tr["fines_um"]) * 1e-6 if "fines_um" in tr else None
-        return lambda s: PopulationTruth(s, tparams, fines_m=fines)
+        return lambda s: PopulationTruth(s, tparams, fines_m=fines, n_tanks=tr.get("n_tanks", 1))
     missing = [n for n in assumed.param_names if n not in tparams]
     if missing:
         raise InputError(f"{src}: truth.type = 'assumed' needs truth.params {missing}")

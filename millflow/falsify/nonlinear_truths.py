@@ -11,7 +11,8 @@ truth's breakage parameters.
 
 Batch designs are solved by :func:`millflow.nonlinear.batch_nonlinear`, continuous
 designs as perfectly mixed mills (:func:`millflow.mill.nonlinear.well_mixed`, Newton to
-1e-12) at each condition's ``tau_s``, so that the only model error is the kinetics.
+1e-12) at each condition's ``tau_s``, so that the only model error is the kinetics; or,
+with ``n_tanks`` > 1, as that many tanks in series (kinetic and RTD model error together).
 Mass that aggregation carries above the top class (the overflow) is coarser than every
 sieve: a measurement puts it on the top sieve, so it is added to class 1, as the oversize
 of the feed is (``from_sieves(oversize="lump")``); ``last_overflow`` records how much.
@@ -25,13 +26,13 @@ import numpy as np
 
 from millflow.errors import InputError, SolverError
 from millflow.falsify.truths import BREAKAGE_TRUTH, SlowingDownTruth
-from millflow.mill.nonlinear import well_mixed
+from millflow.mill.nonlinear import tanks_in_series, well_mixed
 from millflow.nonlinear import KERNELS, Aggregation, batch_nonlinear, kinetics
 
 __all__ = ["AggregationTruth", "PopulationTruth"]
 
 
-def _solve(kin, design, feed):
+def _solve(kin, design, feed, n_tanks: int = 1):
     """(G, N) truth mass fractions for every sample of the design; overflow lumped in class 1."""
     if design.is_batch:
         res = batch_nonlinear(kin, feed, np.asarray(design.times_s), rtol=1e-9, atol=1e-13)
@@ -43,12 +44,20 @@ def _solve(kin, design, feed):
     tau = dict(zip(design.conditions, design.process_dict()["tau_s"]))
     rows, over = [], 0.0
     for c in sorted(design.conditions):
-        r = well_mixed(kin, feed, float(tau[c]), unit=f"non-linear truth, condition {c!r}")
+        if n_tanks == 1:
+            r = well_mixed(kin, feed, float(tau[c]), unit=f"non-linear truth, condition {c!r}")
+        else:
+            r = tanks_in_series(kin, feed, float(tau[c]), n_tanks)
         p = r.product.copy()
         p[0] += r.overflow_mass
         over = max(over, r.overflow_mass)
         rows.extend(p for _ in sorted(design.locations))
     return np.array(rows), over
+
+
+def _check_tanks(n):
+    if not (isinstance(n, int) and not isinstance(n, bool) and n >= 1):
+        raise InputError(f"truth.n_tanks = {n!r}: expected an integer >= 1 (1: perfect mixing)")
 
 
 @dataclass
@@ -59,10 +68,12 @@ class AggregationTruth:
     params: dict = field(default_factory=lambda: dict(BREAKAGE_TRUTH))
     kernel: str = "constant"
     x_ref_m: float | None = None
+    n_tanks: int = 1
     name: str = "aggregation"
     last_overflow: float = 0.0
 
     def __post_init__(self):
+        _check_tanks(self.n_tanks)
         if not (math.isfinite(self.strength) and self.strength >= 0):
             raise InputError(f"truth.strength = {self.strength!r}: expected beta0 >= 0 [1/s] for aggregation")
         if self.kernel not in KERNELS:
@@ -72,7 +83,7 @@ class AggregationTruth:
         S, b, feed = SlowingDownTruth(0.0, self.params).linear_parts(design)
         x_ref = self.x_ref_m or float(design.sieves_m[-1])
         kin = kinetics(S[0], b, aggregation=Aggregation(KERNELS[self.kernel](self.strength), x_ref), grid=design.grid)
-        M, self.last_overflow = _solve(kin, design, feed)
+        M, self.last_overflow = _solve(kin, design, feed, self.n_tanks)
         return M
 
 
@@ -83,10 +94,12 @@ class PopulationTruth:
     strength: float = 0.0
     params: dict = field(default_factory=lambda: dict(BREAKAGE_TRUTH))
     fines_m: float | None = None
+    n_tanks: int = 1
     name: str = "population"
     last_overflow: float = 0.0
 
     def __post_init__(self):
+        _check_tanks(self.n_tanks)
         if not (math.isfinite(self.strength) and self.strength >= 0):
             raise InputError(f"truth.strength = {self.strength!r}: expected a cushioning exponent >= 0")
 
@@ -98,5 +111,5 @@ class PopulationTruth:
         w = np.zeros((n, n))
         w[:, design.grid.x <= fines] = 1.0  # classes whose upper size is at or below the fines size
         kin = kinetics(S[0], b, w=w, lam=-self.strength)
-        M, _ = _solve(kin, design, feed)
+        M, _ = _solve(kin, design, feed, self.n_tanks)
         return M

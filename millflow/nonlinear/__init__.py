@@ -11,8 +11,8 @@ from millflow.nonlinear.aggregation import Aggregation, AggregationOperator, piv
 from millflow.nonlinear.batch import NonlinearBatchResult, batch_nonlinear
 from millflow.nonlinear.kernels import (KERNELS, Kernel, KernelError, constant_kernel, product_kernel,
                                         shear_kernel, sum_kernel, user_kernel)
-from millflow.nonlinear.kinetics import Kinetics, PopulationRate, kinetics, slowing_down, theta_of
+from millflow.nonlinear.kinetics import FinesSlowing, Kinetics, PopulationRate, kinetics, slowing_down, theta_of
 
 __all__ = ["Aggregation", "AggregationOperator", "pivot_volumes", "NonlinearBatchResult", "batch_nonlinear",
            "KERNELS", "Kernel", "KernelError", "constant_kernel", "product_kernel", "shear_kernel", "sum_kernel",
-           "user_kernel", "Kinetics", "PopulationRate", "kinetics", "slowing_down", "theta_of"]
+           "user_kernel", "FinesSlowing", "Kinetics", "PopulationRate", "kinetics", "slowing_down", "theta_of"]

@@ -9,6 +9,8 @@ down with time, plus aggregation, as one right-hand side with its analytic Jacob
   w = 0 gives Phi = 1 exactly: the linear model of eq. 4 bit for bit.
 - A(M): fixed-pivot aggregation (:mod:`.aggregation`), with the overflow above the top
   class as state component N + 1.
+- slowing-down as a function of the fines, S_i = S_i0 kappa(F), F = mass fraction of the
+  fine classes (Austin), kappa and its derivative given by the user (:class:`FinesSlowing`);
 - time-dependent slowing-down S_i(t) = S_i0 kappa(t) (Austin): dM/dt = kappa(t) K M,
   solved exactly as the linear solution at theta(t) = int_0^t kappa (:func:`slowing_down`).
 
@@ -20,6 +22,7 @@ import math
 import time
 import warnings
 from dataclasses import dataclass
+from typing import Callable
 
 import numpy as np
 from scipy.integrate import quad
@@ -29,7 +32,7 @@ from millflow.batch import BatchResult, batch_solve
 from millflow.errors import InputError, SolverError
 from millflow.nonlinear.aggregation import Aggregation, AggregationOperator
 
-__all__ = ["PopulationRate", "Kinetics", "kinetics", "slowing_down", "theta_of"]
+__all__ = ["PopulationRate", "FinesSlowing", "Kinetics", "kinetics", "slowing_down", "theta_of"]
 
 
 @dataclass(frozen=True, eq=False)
@@ -61,6 +64,25 @@ class PopulationRate:
 
 
 @dataclass(frozen=True, eq=False)
+class FinesSlowing:
+    """Austin's slowing-down as a function of the fines: S_i = S_i0 kappa(F), F = sum_j
+    mask_j M_j the mass fraction of the fines (mask 1 on the fine classes), ``kappa`` a
+    callable of F (>= 0, finite) and ``dkappa`` its derivative (the analytic Jacobian)."""
+
+    mask: np.ndarray
+    kappa: Callable
+    dkappa: Callable
+
+    def values(self, M) -> tuple[float, float]:
+        F = float(self.mask @ M)
+        k, dk = float(self.kappa(F)), float(self.dkappa(F))
+        if not (math.isfinite(k) and k >= 0 and math.isfinite(dk)):
+            raise SolverError(f"fines slowing-down: kappa({F:.6g}) = {k!r}, kappa'({F:.6g}) = {dk!r}; "
+                              "expected kappa finite >= 0 and a finite derivative")
+        return k, dk
+
+
+@dataclass(frozen=True, eq=False)
 class Kinetics:
     """Breakage (k = S, b), optional population-dependent rates and aggregation.
 
@@ -71,6 +93,7 @@ class Kinetics:
     b: np.ndarray
     population: PopulationRate | None = None
     aggregation: AggregationOperator | None = None
+    fines: FinesSlowing | None = None
 
     @property
     def n(self) -> int:
@@ -79,20 +102,21 @@ class Kinetics:
     @property
     def is_linear(self) -> bool:
         """True when nothing non-linear is declared (the exact linear path applies)."""
-        return self.population is None and self.aggregation is None
+        return self.population is None and self.aggregation is None and self.fines is None
 
     def describe(self) -> str:
         parts = ["breakage"]
         if self.population is not None:
             parts.append(f"population-dependent rates (lambda {self.population.lam:g})")
+        if self.fines is not None:
+            parts.append("slowing-down kappa(fines)")
         if self.aggregation is not None:
             parts.append(f"aggregation ({self.aggregation.kernel_name} kernel)")
         return " + ".join(parts)
 
     def rates(self, M) -> np.ndarray:
-        if self.population is None:
-            return self.S
-        return self.S * self.population.phi(M)[0]
+        S = self.S if self.population is None else self.S * self.population.phi(M)[0]
+        return S if self.fines is None else S * self.fines.values(M)[0]
 
     def rate(self, y) -> np.ndarray:
         """R(y), (N + 1,) [1/s]."""
@@ -112,24 +136,34 @@ class Kinetics:
         M = y[:n]
         Jm = np.zeros((n + 1, n + 1))
         Bm = self.b - np.eye(n)
-        if self.population is None:
+        if self.population is None and self.fines is None:
             Jm[:n, :n] = Bm * self.S[None, :]
         else:
-            phi, base = self.population.phi(M)
-            S = self.S * phi
-            # dS_i/dM_m = k_i lambda base_i^(lambda-1) w_im
-            dS = (self.S * self.population.lam * base ** (self.population.lam - 1.0))[:, None] * self.population.w
+            S, dS = self.S.copy(), np.zeros((n, n))
+            if self.population is not None:
+                phi, base = self.population.phi(M)
+                # dS_i/dM_m = k_i lambda base_i^(lambda-1) w_im
+                dS = (self.S * self.population.lam * base ** (self.population.lam - 1.0))[:, None] * self.population.w
+                S = S * phi
+            if self.fines is not None:
+                k, dk = self.fines.values(M)
+                # product rule: d(S_i kappa(F))/dM_m = dS_i/dM_m kappa + S_i kappa'(F) mask_m
+                dS = dS * k + dk * S[:, None] * self.fines.mask[None, :]
+                S = S * k
             Jm[:n, :n] = Bm * S[None, :] + Bm @ (M[:, None] * dS)
         if self.aggregation is not None:
             Jm[:, :n] += self.aggregation.jacobian(M)
         return Jm
 
 
-def kinetics(S, b, *, w=None, lam: float = 0.0, aggregation=None, grid=None) -> Kinetics:
+def kinetics(S, b, *, w=None, lam: float = 0.0, aggregation=None, grid=None, fines_mask=None, kappa=None,
+             dkappa=None) -> Kinetics:
     """Checked :class:`Kinetics`: rates S [1/s] (N,), b (N, N) as eq. 4 (None with S = 0: no
     breakage); ``w``, ``lam`` of the
     population-dependent rates (None: first order); ``aggregation`` an
-    :class:`~.aggregation.Aggregation` (needs ``grid``) or an operator on N pivots."""
+    :class:`~.aggregation.Aggregation` (needs ``grid``) or an operator on N pivots;
+    ``fines_mask`` (N,) of 0/1, ``kappa`` and ``dkappa`` (callables of the fines fraction F):
+    slowing-down S_i0 kappa(F) (:class:`FinesSlowing`)."""
     if b is None:  # pure aggregation: no breakage; a placeholder b that S = 0 never uses
         S = np.asarray(S, float)
         if S.ndim != 1 or np.any(S != 0):
@@ -149,7 +183,17 @@ def kinetics(S, b, *, w=None, lam: float = 0.0, aggregation=None, grid=None) -> 
             raise InputError(f"aggregation: expected Aggregation or AggregationOperator, got {type(op).__name__}")
         if op.n != S.size:
             raise InputError(f"aggregation acts on {op.n} classes; the rates have {S.size}")
-    return Kinetics(S, b, pop, op)
+    fines = None
+    if kappa is not None or fines_mask is not None or dkappa is not None:
+        if kappa is None or dkappa is None or fines_mask is None:
+            raise InputError("fines slowing-down: give fines_mask, kappa and dkappa together")
+        if not (callable(kappa) and callable(dkappa)):
+            raise InputError("kappa and dkappa: expected callables of the fines fraction F")
+        mask = np.asarray(fines_mask, float)
+        if mask.shape != (S.size,) or not np.all((mask == 0) | (mask == 1)):
+            raise InputError(f"fines_mask: expected ({S.size},) zeros and ones (1 on the fine classes)")
+        fines = FinesSlowing(mask, kappa, dkappa)
+    return Kinetics(S, b, pop, op, fines)
 
 
 def theta_of(t, kappa) -> np.ndarray:

@@ -94,3 +94,17 @@ def test_population_study_through_the_cli(tmp_path, capsys):
     assert a3 > 5 * a0 and a3 > 5.0
     # the short-vs-long refits disagree far more than noise makes them at strength 0
     assert abs(rows[3.0]["drift_pct"]) > 3 * abs(rows[0.0]["drift_pct"])
+
+
+def test_nonlinear_truth_in_tanks_in_series():
+    d = continuous_design([60.0, 240.0], n_sieves=8)
+    one = PopulationTruth(1.0).mass_fractions(d)
+    three = PopulationTruth(1.0, n_tanks=3).mass_fractions(d)
+    assert np.allclose(three.sum(axis=1), 1.0, atol=1e-12)
+    # three tanks leave less of the top sizes than one perfect mixer at the same tau
+    assert np.all(three[:, :3].sum(axis=1) < one[:, :3].sum(axis=1))
+    with pytest.raises(InputError, match="n_tanks"):
+        PopulationTruth(1.0, n_tanks=0)
+    raw = tomllib.loads(BASE.replace("type = \"population\"", "type = \"population\"\nn_tanks = 3"))
+    with pytest.raises(InputError, match="truth.n_tanks is only for"):
+        parse_config(raw, "c.toml")  # BASE is a batch design

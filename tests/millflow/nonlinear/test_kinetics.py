@@ -177,3 +177,61 @@ def test_operator_size_must_match():
     op = AggregationOperator.build(np.array([4.0, 2.0, 1.0]), constant_kernel(1.0))
     with pytest.raises(InputError, match="3 classes"):
         kinetics(S, b, aggregation=op)
+
+
+# ------------------------------------------------------- slowing-down by the fines
+def _fines_kinetics(S, b, x, c, **extra):
+    mask = (x <= x[S.size // 2]).astype(float)
+    return kinetics(S, b, fines_mask=mask, kappa=lambda F: 1.0 / (1.0 + c * F),
+                    dkappa=lambda F: -c / (1.0 + c * F) ** 2, **extra), mask
+
+
+def test_fines_slowing_jacobian_with_every_term():
+    grid, S, b, feed = _linear(20)
+    rng = np.random.default_rng(3)
+    kin, _ = _fines_kinetics(S, b, grid.x, 4.0, w=rng.random((20, 20)), lam=0.6,
+                             aggregation=Aggregation(shear_kernel(0.01), XREF), grid=grid)
+    y = np.append(rng.random(20) / 10, 0.0)
+    J, Jfd = kin.jacobian(y), _fd_jacobian(kin.rate, y)
+    # central differences, h ~ 1e-7 (as above)
+    assert np.abs(J - Jfd).max() <= 1e-6 * np.abs(J).max()
+    assert "kappa(fines)" in kin.describe() and not kin.is_linear
+
+
+def test_fines_slowing_matches_a_time_transform_when_only_the_sink_is_fines():
+    # one class breaking into the sink, the sink the fines: F = 1 - M_1 and
+    # dM_1/dt = -S_1 M_1 / (1 + c (1 - M_1)). Separating, (1 + c (1 - M)) / M dM = -S_1 dt,
+    # integrated from M = 1: (1 + c) ln M_1 - c M_1 + c = -S_1 t (exact, implicit in M_1)
+    S = np.array([0.01, 0.0])
+    b = np.array([[0.0, 0.0], [1.0, 0.0]])
+    c = 3.0
+    kin = kinetics(S, b, fines_mask=[0.0, 1.0], kappa=lambda F: 1.0 / (1.0 + c * F),
+                   dkappa=lambda F: -c / (1.0 + c * F) ** 2)
+    t = np.array([30.0, 100.0, 300.0])
+    M1 = batch_nonlinear(kin, [1.0, 0.0], t, rtol=1e-10, atol=1e-14).M[:, 0]
+    # the implicit exact solution, evaluated at the computed M_1 (rtol 1e-10 solve)
+    assert np.allclose((1 + c) * np.log(M1) - c * M1 + c, -0.01 * t, rtol=1e-7, atol=1e-9)
+
+
+def test_fines_slowing_needs_all_three_parts():
+    grid, S, b, feed = _linear()
+    with pytest.raises(InputError, match="together"):
+        kinetics(S, b, kappa=lambda F: 1.0)
+    with pytest.raises(InputError, match="zeros and ones"):
+        kinetics(S, b, fines_mask=np.full(S.size, 0.5), kappa=lambda F: 1.0, dkappa=lambda F: 0.0)
+
+
+@settings(max_examples=30, deadline=None)
+@given(st.integers(0, 2 ** 32 - 1), st.floats(-2.0, 2.0), kernel_st)
+def test_every_term_together_conserves_mass(seed, lam, kernel):
+    grid, S, b, feed = _linear(25)
+    rng = np.random.default_rng(seed)
+    kin = kinetics(S, b, w=rng.random((25, 25)), lam=lam, aggregation=Aggregation(kernel, XREF), grid=grid,
+                   fines_mask=(grid.x < 3e-4).astype(float), kappa=lambda F: np.exp(-F), dkappa=lambda F: -np.exp(-F))
+    y = np.append(rng.random(25), rng.random())
+    r = kin.rate(y)
+    # breakage columns of b sum to 1 and aggregation births equal its losses: the total is
+    # zero to rounding of the gross fluxes (breakage S M plus aggregation losses)
+    gross = float(np.sum(kin.rates(y[:-1]) * y[:-1])) + float(np.abs(kin.aggregation.rate(y[:-1])).sum())
+    assert abs(r.sum()) <= 1e-13 * gross * 25
+    assert np.abs(kin.jacobian(y).sum(axis=0)).max() <= 1e-12 * np.abs(kin.jacobian(y)).sum()
