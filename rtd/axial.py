@@ -14,7 +14,8 @@ and each regime gets the method that is accurate there (theta = t/tau, q = Pe/2)
   ~1e-13 absolute accuracy; the period is chosen so that E(theta + T) < 1e-28.
 
 Where E is below ~e^-700 (very early times; late times for Pe > 1000) it is returned
-as 0, which also keeps the number of series terms to a few hundred. For Pe -> 0 E approaches exp(-theta)/tau (one perfect mixer), for
+as 0, which also keeps the number of series terms to a few hundred. For Pe -> 0 E
+approaches exp(-theta)/tau (one perfect mixer), for
 Pe -> inf a Gaussian of variance 2/Pe around theta = 1 (plug flow).
 """
 from __future__ import annotations
