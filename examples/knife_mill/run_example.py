@@ -77,8 +77,21 @@ def main(argv=None) -> int:
     ap.add_argument("--out", default=None, help="output folder (default: output.dir of the config)")
     ap.add_argument("--json", action="store_true")
     args = ap.parse_args(argv)
-
+    if not os.path.isdir(args.data_dir):
+        print(f"run_example.py: error: the SPRITE knife-mill data folder {args.data_dir} does not exist; it is "
+              "expected at ../shared/data/sprite-knife-mill beside the repository, or give its path as "
+              "the first argument", file=sys.stderr)
+        return 2
     sys.path.insert(0, REPO)
+    from millflow.errors import MillflowError
+    try:
+        return _run(args)
+    except MillflowError as err:
+        print(f"run_example.py: error: {err}", file=sys.stderr)
+        return 2
+
+
+def _run(args) -> int:
     from millflow.fitting.config import load_config
     from millflow.fitting.estimate import fit
     from millflow.fitting.models import ForwardModel
@@ -96,14 +109,17 @@ def main(argv=None) -> int:
     loo = None if args.no_loo else leave_out(model, cfg.params, "each", progress=say, **opt)
     nested = None
     if args.nested:
-        cands = {cfg.label: model, **{label: ForwardModel(spec, cfg.data, model.grid) for label, spec, _ in cfg.candidates}}
+        cands = {cfg.label: model,
+                 **{label: ForwardModel(spec, cfg.data, model.grid) for label, spec, _ in cfg.candidates}}
         cparams = {cfg.label: cfg.params, **{label: par for label, _, par in cfg.candidates}}
         nested = nested_leave_out(cands, cparams, "each", criterion="bic", progress=say, **opt)
     base = baseline_rmse(cfg.data)
     write_report(res, args.out or cfg.out_dir, loo, plots=cfg.plots)
     out = {
-        "n_params": res.n_params, "n_data": res.n_data, "in_sample_mean_rmse": float(np.mean(list(insample.values()))),
-        "loo_mean_rmse": None if loo is None else loo["mean_rmse"], "baseline_mean_rmse": float(np.mean(list(base.values()))),
+        "n_params": res.n_params, "n_data": res.n_data,
+        "in_sample_mean_rmse": float(np.mean(list(insample.values()))),
+        "loo_mean_rmse": None if loo is None else loo["mean_rmse"],
+        "baseline_mean_rmse": float(np.mean(list(base.values()))),
         "bar": 0.025, "params": {n: {"value": s["value"], "se": s["se"], "p_value": s["p_value"],
                                      "significant": s["significant"]} for n, s in res.stats["params"].items()},
         "nested_loo_mean_rmse": None if nested is None else nested["mean_rmse"],
