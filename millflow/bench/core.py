@@ -282,7 +282,8 @@ def work_precision(case: CoreCase, n: int, quick: bool) -> list[dict]:
                             or solves[-1], rep_exact)
     # solve_ms: BatchResult.runtime_s, the solve without batch_solve's input checks
     rows.append(_row(case, n, "exact", None, None, sec, res.M, ref,
-                     {"min_ms": 1e3 * _median_time.last_min, "solve_ms": 1e3 * statistics.median(r.runtime_s for r in solves),
+                     {"min_ms": 1e3 * _median_time.last_min,
+                      "solve_ms": 1e3 * statistics.median(r.runtime_s for r in solves),
                       "error_estimate": res.error_estimate, "cluster_gap": res.info.get("cluster_gap"),
                       "cluster_sizes": res.info.get("cluster_sizes"), **note}))
     for method in ODE_METHODS:
@@ -424,11 +425,12 @@ def format_table(rows: list[dict]) -> str:
     if tg:
         lines += ["", "Targets, exact path at N = 100 (ms, min_ms: median and fastest whole batch_solve call; "
                   "solve_ms: median without input checks; speed-up = cheapest ODE run with error >= exact's / exact)"]
-        head = f"{'case':<11}{'ms':>8}{'min_ms':>8}{'solve_ms':>9}{'target':>7}{'ok':>4}{'max_abs_err':>12}{'ok':>4}{'min_value':>11}{'ok':>4}" \
-               f"{'mass_err':>10}{'ok':>4}{'x BDF':>8}{'x Radau':>9}{'x LSODA':>9}"
+        head = f"{'case':<11}{'ms':>8}{'min_ms':>8}{'solve_ms':>9}{'target':>7}{'ok':>4}{'max_abs_err':>12}" \
+               f"{'ok':>4}{'min_value':>11}{'ok':>4}{'mass_err':>10}{'ok':>4}{'x BDF':>8}{'x Radau':>9}{'x LSODA':>9}"
         lines += [head, "-" * len(head)]
         for r in tg:
-            lines.append(f"{r['case']:<11}{r['median_ms']:>8.3f}{r['min_ms']:>8.3f}{r['solve_ms']:>9.3f}{r['target_ms']:>7.1f}{_fmt(r['time_ok'], '', 4)}"
+            lines.append(f"{r['case']:<11}{r['median_ms']:>8.3f}{r['min_ms']:>8.3f}{r['solve_ms']:>9.3f}"
+                         f"{r['target_ms']:>7.1f}{_fmt(r['time_ok'], '', 4)}"
                          f"{_fmt(r['max_abs_error'], '.1e', 12)}{_fmt(r['error_ok'], '', 4)}"
                          f"{_fmt(r['min_value'], '.1e', 11)}{_fmt(r['min_ok'], '', 4)}"
                          f"{_fmt(r['mass_balance_error'], '.1e', 10)}{_fmt(r['mass_ok'], '', 4)}"

@@ -28,7 +28,8 @@ DESCRIPTION = "global 5-parameter fit (DE + 20 local starts) to 8 times x 30 sie
 #: Parameters of the synthetic batch problems (ln_A0 is ln of A [1/s] at x0 = 1 mm).
 TRUTH = {"ln_A0": np.log(1.0 / 60.0), "alpha": 1.0, "phi": 0.4, "gamma": 0.8, "beta": 3.5}
 #: Bounds that separate the two branches of eq. 6 (gamma < beta), so the truth is unique.
-BOUNDS = {"ln_mu": (-3.0, 6.0), "Lambda": (1.0, 6.0), "ln_A0": (-9.0, 0.0), "alpha": (0.2, 2.5), "phi": (0.0, 1.0), "gamma": (0.1, 2.0), "beta": (2.2, 8.0)}
+BOUNDS = {"ln_mu": (-3.0, 6.0), "Lambda": (1.0, 6.0), "ln_A0": (-9.0, 0.0), "alpha": (0.2, 2.5), "phi": (0.0, 1.0),
+          "gamma": (0.1, 2.0), "beta": (2.2, 8.0)}
 
 
 def make_batch_problem(n_times: int = 8, n_sieves: int = 30, n_grid: int = 60, noise: float = 0.01,

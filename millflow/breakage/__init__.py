@@ -4,7 +4,8 @@ The public face of :mod:`millflow.breakage.rates` (eq. 5 power law, eq. 7 Austin
 rate with a maximum and ball-size dependence, eq. 10 process-parameter prefactor,
 form-free vectors) and :mod:`millflow.breakage.distributions` (eq. 6 normalized and
 eq. 8 non-normalized cumulative distributions, form-free B or b, conversions and
-validation) and :mod:`millflow.breakage.t10` (B from an ore's tn-t10 family). Sizes are upper class edges [m], rates [1/s]; class N is the sink:
+validation) and :mod:`millflow.breakage.t10` (B from an ore's tn-t10 family). Sizes are upper
+class edges [m], rates [1/s]; class N is the sink:
 S_N = 0 and column N of B and b is zero. A rate model is any callable ``x -> S``,
 a distribution model any callable ``x -> b``; the dataclasses here are such
 callables with validated parameters, and a user's own function plugs in the same way.

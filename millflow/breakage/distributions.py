@@ -447,7 +447,8 @@ class TabulatedBreakage:
         xs = as_sizes(x)
         if xs.size != self.b_matrix.shape[0]:
             raise BreakageError(
-                f"TabulatedBreakage is {self.b_matrix.shape[0]} x {self.b_matrix.shape[0]}; the grid has {xs.size} classes"
+                f"TabulatedBreakage is {self.b_matrix.shape[0]} x {self.b_matrix.shape[0]}; "
+                f"the grid has {xs.size} classes"
             )
 
     def b(self, x) -> np.ndarray:

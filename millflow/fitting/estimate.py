@@ -112,7 +112,8 @@ class FitResult:
     def summary(self) -> str:
         lines = [f"model: {self.model.spec.label()}",
                  f"n_data {self.n_data}, n_params {self.n_params}, SSR {self.ssr:.6g}, SER {self.ser:.4g}, "
-                 f"starts {self.starts}, spread {self.spread:.3g}, condition number {self.stats['condition_number']:.3g}",
+                 f"starts {self.starts}, spread {self.spread:.3g}, "
+                 f"condition number {self.stats['condition_number']:.3g}",
                  f"{'parameter':<16}{'value':>12}{'SEP':>11}{'p':>10}   95% interval          flags"]
         for name, s in self.stats["params"].items():
             lo, hi = s["ci95"]

@@ -111,7 +111,8 @@ def parameter_statistics(names, theta, J, ssr, n_data, lower=None, upper=None):
                 reasons.append("95% interval includes 0")
             if not s <= 0.5 * abs(v):
                 reasons.append("SEP > |value|/2")
-        at_bound = bool(lower is not None and (np.isclose(v, lower[k], atol=1e-8) or np.isclose(v, upper[k], atol=1e-8)))
+        at_bound = bool(lower is not None
+                        and (np.isclose(v, lower[k], atol=1e-8) or np.isclose(v, upper[k], atol=1e-8)))
         if at_bound:
             reasons.append("at a bound (statistics not valid there)")
         params[name] = {"value": v, "se": s, "t": float(tval), "p_value": pval, "ci95": ci,

@@ -22,5 +22,6 @@ from millflow.flowsheet.units import (CLASSIFIER_PORTS, TRANSPORTS, UNIT_TYPES, 
 __all__ = [
     "Flowsheet", "Stream", "load", "loads", "from_dict", "solve", "FlowsheetSolution", "TEAR_METHODS",
     "to_dataset", "summary", "stream_table", "unit_table", "circulating_loads", "save",
-    "Feed", "MillUnit", "Mill", "Classifier", "Mixer", "Splitter", "Product", "UNIT_TYPES", "TRANSPORTS", "CLASSIFIER_PORTS",
+    "Feed", "MillUnit", "Mill", "Classifier", "Mixer", "Splitter", "Product", "UNIT_TYPES", "TRANSPORTS",
+    "CLASSIFIER_PORTS",
 ]

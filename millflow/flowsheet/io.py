@@ -85,7 +85,8 @@ class _Table:
                 raise InputError(f"{self._at(wrong[0])}: unknown unit {wrong[0][len(base) + 1:]!r} for {base} "
                                  f"({dim}); expected one of {_suffixes(dim)}")
             if default is ...:
-                raise InputError(f"{self.where or 'top level'}: missing parameter {base}_<unit> ({dim}: {_suffixes(dim)})")
+                raise InputError(f"{self.where or 'top level'}: missing parameter {base}_<unit> "
+                                 f"({dim}: {_suffixes(dim)})")
             return default
         key = found[0]
         self.used.add(key)

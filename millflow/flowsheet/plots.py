@@ -43,7 +43,8 @@ def plot_classifiers(sol, ax):
         if unit.type == "classifier":
             c, label = unit.efficiency(fs.grid), f"{name} ({unit.kind}, {unit.curve}) to {unit.ports[0]}"
         elif unit.type == "mill" and unit.classification is not None:
-            c, label = unit.discharge_efficiency(fs.grid), f"{name} discharge ({unit.classification['curve']}), retained"
+            c = unit.discharge_efficiency(fs.grid)
+            label = f"{name} discharge ({unit.classification['curve']}), retained"
         if c is not None:
             ax.semilogx(x, c, label=label)
             n += 1

@@ -7,7 +7,8 @@ mass fractions and cumulative passing on the grid, P80, P50 and % passing named 
 error estimate, run time and mass balance error |out - in| / in. Circulating load of a
 unit with several outlets inside a recycle loop (classifier or splitter): the flow of
 its outlets that return into the loop divided by the flow of those that leave it; for a
-classifier whose coarse stream returns, coarse / fine (U/O of a closed-circuit cyclone). Specific energy of a mill [kWh/t] = power [kW] /
+classifier whose coarse stream returns, coarse / fine (U/O of a closed-circuit cyclone).
+Specific energy of a mill [kWh/t] = power [kW] /
 mill throughput [t/h]; of the circuit = total mill power / total product rate.
 
 :func:`to_dataset` keeps SI units (attributes ``units`` and ``long_name`` on every
@@ -38,7 +39,8 @@ def _percentile(grid, frac, q):
 
 
 def stream_properties(sol) -> dict:
-    """Per stream: ``solids_kg_s``, ``fraction``, ``cum_passing``, ``p80_m``, ``p50_m``, ``passing`` (at named sizes)."""
+    """Per stream: ``solids_kg_s``, ``fraction``, ``cum_passing``, ``p80_m``, ``p50_m``,
+    ``passing`` (at named sizes)."""
     fs = sol.flowsheet
     out = {}
     for k, name in enumerate(fs.stream_names):

@@ -128,7 +128,7 @@ def _size_gains(fs, blocks) -> np.ndarray:
     S, N = len(names), fs.grid.n
     sidx = {n: k for k, n in enumerate(names)}
     G = np.zeros((N, S, S))
-    for uname, unit in fs.units.items():
+    for uname in fs.units:
         ins = [sidx[i] for i in fs.inlets(uname)]
         for port, B in blocks[uname].items():
             B = np.asarray(B, dtype=float)

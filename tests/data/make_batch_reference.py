@@ -96,8 +96,9 @@ def reid(S, b, feed, times, dps):
     w = []
     for i in range(n):
         w.append(mp.mpf(feed[i]) - mp.fsum(X[i][k] * w[k] for k in range(i)))
-    return np.array([[float(mp.fsum(X[i][j] * w[j] * mp.exp(-s[j] * mp.mpf(t)) for j in range(i + 1))) for i in range(n)]
-                     for t in times])
+    def mass(i, t):
+        return float(mp.fsum(X[i][j] * w[j] * mp.exp(-s[j] * mp.mpf(t)) for j in range(i + 1)))
+    return np.array([[mass(i, t) for i in range(n)] for t in times])
 
 
 if __name__ == "__main__":

@@ -24,7 +24,6 @@ from millflow.mill.well_mixed import solve_well_mixed
 
 # ----------------------------------------------------------------------------- data
 def _frame(values=None, **extra):
-    sizes = [4e-3, 2e-3, 1e-3, 0.5e-3]
     feed = pd.DataFrame({"condition": "c", "location": "feed", "time_min": 0.0, "size_mm": [4, 2, 1, 0.5],
                          "passing": [1.0, 0.0, 0.0, 0.0]})
     vals = values if values is not None else [1.0, 0.6, 0.3, 0.1]

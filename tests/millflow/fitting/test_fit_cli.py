@@ -37,7 +37,8 @@ def _write_batch_case(tmp_path):
                                       "passing": np.linspace(1, 0, 12)}))
     proc = pd.DataFrame({"condition": list(speeds), "speed": list(speeds.values())})
     spec = ModelSpec(mode="batch", breakage="normalized", rate_process=("speed",))
-    model = ForwardModel(spec, psd_data_from_frames(pd.concat(rows), proc), SizeGrid.between(4e-3, 4e-3 / 2 ** 5.5, 2 ** 0.25))
+    grid = SizeGrid.between(4e-3, 4e-3 / 2 ** 5.5, 2 ** 0.25)
+    model = ForwardModel(spec, psd_data_from_frames(pd.concat(rows), proc), grid)
     theta = dict(ln_A0=np.log(1 / 200), a_speed=1.5, alpha=1.0, phi=0.4, gamma=0.8, beta=3.5)
     y = model.predict(np.array([theta[n] for n in model.param_names]))
     k = 0

@@ -86,10 +86,12 @@ def _class_loop_mpmath(S, b, feed, net, d, where, dps=40):
             M = mp.matrix(n, n)
             for k in range(n):
                 for l in range(n):
-                    M[k, l] = (mp.mpf(S[i]) + mp.mpf(G[i, k]) * mp.mpf(drain[k]) + mp.mpf(H[i, k]) * mp.mpf(exit_rate[k])
-                               if k == l else -mp.mpf(offdiag[k, l]) * mp.mpf(G[i, l]))
+                    diag = (mp.mpf(S[i]) + mp.mpf(G[i, k]) * mp.mpf(drain[k])
+                            + mp.mpf(H[i, k]) * mp.mpf(exit_rate[k]))
+                    M[k, l] = diag if k == l else -mp.mpf(offdiag[k, l]) * mp.mpf(G[i, l])
             rhs = mp.matrix([mp.mpf(inlet[k]) * mp.mpf(feed[i])
-                             + mp.fsum(mp.mpf(b[i, j]) * mp.mpf(S[j]) * hold[j][k] for j in range(i)) for k in range(n)])
+                             + mp.fsum(mp.mpf(b[i, j]) * mp.mpf(S[j]) * hold[j][k] for j in range(i))
+                             for k in range(n)])
             hold.append(mp.lu_solve(M, rhs))
         return np.array([[float(hold[i][k]) for i in range(S.size)] for k in range(n)])
 
