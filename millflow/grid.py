@@ -41,6 +41,13 @@ def class_label(i: int, x=None) -> str:
     return f"class {i + 1} (x = {float(x[i]):.6g} m)"
 
 
+#: Largest size a grid may hold [m]: 10 m, above any mill feed. Beyond it a size is a unit
+#: mistake, and rate laws such as A (x/x0)^alpha overflow; refusing it names the edge
+#: instead of returning infinities. (No lower limit: fine geometric grids reach far
+#: below a molecule harmlessly, every rate law underflowing to 0 there.)
+MAX_SIZE_M = 10.0
+
+
 def validate_edges(edges, name: str = "upper_m") -> np.ndarray:
     """Check that class edges are 1-D, finite, > 0 and strictly decreasing.
 
@@ -75,6 +82,11 @@ def validate_edges(edges, name: str = "upper_m") -> np.ndarray:
     if bad.size:
         k = bad[0]
         raise GridError(f"{name}[{k}] (edge {k + 1}) = {float(arr[k])!r} m: sizes must be > 0")
+    bad = np.flatnonzero(arr > MAX_SIZE_M)
+    if bad.size:
+        k = bad[0]
+        raise GridError(f"{name}[{k}] (edge {k + 1}) = {float(arr[k]):.6g} m: expected a particle size of at most "
+                        f"{MAX_SIZE_M:g} m (is the unit right?)")
     bad = np.flatnonzero(np.diff(arr) >= 0)
     if bad.size:
         k = bad[0] + 1
@@ -265,3 +277,6 @@ def _check_ratio(ratio) -> None:
 def _check_positive(value, name: str) -> None:
     if not (np.isfinite(value) and value > 0):
         raise GridError(f"{name} = {value!r}: expected a finite size > 0 [m]")
+    if value > MAX_SIZE_M:
+        raise GridError(f"{name} = {value:.6g} m: expected a particle size of at most {MAX_SIZE_M:g} m "
+                        "(is the unit right?)")

@@ -202,7 +202,17 @@ def fit(model, t, c=None, *, kind: str | None = None, inlet=None, vary=None,
                        "is an integer: fix it with n=... and compare fits)")
     if cls is PlugFlow and inlet is None:
         return _plug_by_moments(start, t, c, kind, mom, notes)
-    return _least_squares(start, names, t, c, kind, inlet, mom, notes, scale)
+    # The fit is scale-free: solve for c / peak (so curves in any concentration unit, 1e-90
+    # or 1e90, meet the same bounds and tolerances) and return A, SSR, SER, AIC, BIC, data,
+    # fitted curve and residuals in the data's units.
+    k = float(np.max(np.abs(c)))
+    res = _least_squares(start, names, t, c / k, kind, inlet, mom, notes, None if scale is None else scale / k)
+    if k == 1.0:
+        return res
+    shift = 2 * res.n_data * math.log(k)  # n ln(SSR/n) grows by n ln k^2
+    return dataclasses.replace(res, scale=res.scale * k, scale_se=res.scale_se * k, ssr=res.ssr * k * k,
+                               ser=res.ser * k, aic=res.aic + shift, bic=res.bic + shift, data=res.data * k,
+                               fitted=res.fitted * k, residuals=res.residuals * k)
 
 
 def _unpack(t, c, kind, inlet):

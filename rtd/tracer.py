@@ -12,6 +12,7 @@ the last descending points is added analytically, and the result says so.
 """
 from __future__ import annotations
 
+import io
 import math
 import re
 from dataclasses import dataclass, field
@@ -104,10 +105,19 @@ def check_tracer(t, c, kind: str = "pulse", column: str = "concentration",
         what = "repeated" if steps[i] == 0 else "decreasing (negative time step; unsorted rows?)"
         raise TracerError(f"column {time_column!r}: time {t[i + 1]:g} at data row {i + 2} is "
                           f"{what} after {t[i]:g}; expected strictly increasing times", time_column)
+    if t[0] < 0:
+        raise TracerError(f"column {time_column!r}: time {t[0]:g} at data row 1 is before the injection; "
+                          "expected times >= 0 measured from the injection (shift the clock)", time_column)
     peak = float(np.max(np.abs(c)))
     if peak == 0.0:
         raise TracerError(f"column {column!r}: all values are zero; expected a tracer response",
                           column)
+    if not 1e-100 <= peak <= 1e100:
+        raise TracerError(f"column {column!r}: peak {peak:.3g}; expected a peak between 1e-100 and 1e100 "
+                          "(rescale the column: the fit does not depend on the concentration unit)", column)
+    if float(np.max(c) - np.min(c)) <= 1e-12 * peak:
+        raise TracerError(f"column {column!r}: all values are equal ({c[0]:.6g}); expected a tracer "
+                          "response that changes with time", column)
     if kind == "pulse":
         limit = 5 * noise_level(c) + 0.01 * float(np.max(c))
         bad = np.flatnonzero(c < -limit)
@@ -117,6 +127,25 @@ def check_tracer(t, c, kind: str = "pulse", column: str = "concentration",
                               f"beyond the noise (limit -{limit:.3g}); expected concentrations "
                               ">= 0 (subtract the right baseline?)", column)
     return t, c
+
+
+def _utf8_text(path: Path) -> str:
+    """The file's text as UTF-8 (a byte-order mark is dropped); otherwise a TracerError
+    naming the file and the byte offset of the first byte that is not UTF-8."""
+    try:
+        raw = path.read_bytes()
+    except FileNotFoundError:
+        raise TracerError(f"{path}: no such file") from None
+    except OSError as err:
+        raise TracerError(f"{path}: cannot read the file ({err.strerror or err})") from None
+    if raw[:2] in (b"\xff\xfe", b"\xfe\xff"):
+        raise TracerError(f"{path}: the file is UTF-16 encoded; save it as UTF-8")
+    try:
+        return raw.decode("utf-8-sig")
+    except UnicodeDecodeError as err:
+        line = raw.count(b"\n", 0, err.start) + 1
+        raise TracerError(f"{path}: byte {err.start} (line {line}) is not UTF-8 "
+                          f"(0x{raw[err.start]:02x}); save the file as UTF-8") from None
 
 
 def read_tracer_csv(path, kind: str | None = None) -> TracerCurve:
@@ -131,10 +160,12 @@ def read_tracer_csv(path, kind: str | None = None) -> TracerCurve:
     import pandas as pd
 
     path = Path(path)
+    text = _utf8_text(path)
     try:
-        df = pd.read_csv(path, comment="#")
+        df = pd.read_csv(io.StringIO(text), comment="#")
     except (OSError, ValueError) as err:
-        raise TracerError(f"{path}: cannot read as CSV ({err})") from err
+        msg = " ".join(str(err).split())
+        raise TracerError(f"{path}: cannot read as CSV ({msg})") from None
     df.columns = [str(col).strip() for col in df.columns]
     times = [col for col in df.columns if TIME_COLUMN.match(col)]
     if len(times) != 1:

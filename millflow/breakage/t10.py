@@ -28,6 +28,7 @@ from scipy.interpolate import PchipInterpolator
 
 from millflow.breakage.distributions import b_from_B, validate_B
 from millflow.errors import BreakageError, InputError
+from millflow.inputs import read_csv
 from millflow.grid import as_sizes
 
 __all__ = ["T10Table", "read_t10_table", "t10_B", "T10Breakage"]
@@ -87,12 +88,11 @@ class T10Table:
 def read_t10_table(path) -> T10Table:
     """Read a tn-t10 table from CSV: a column ``t10`` and columns ``t2``, ``t4``, ``t25``,
     ``t50``, ``t75`` (any subset of t<n>), all as fractions in [0, 1]."""
-    import pandas as pd
 
     try:
-        df = pd.read_csv(path)
-    except FileNotFoundError:
-        raise InputError(f"t10 table {path}: file not found") from None
+        df = read_csv(path, "file")  # "<path>: file not found", encodings named
+    except InputError as exc:
+        raise InputError(f"t10 table {exc}") from None
     if "t10" not in df.columns:
         raise InputError(f"t10 table {path}: no column 't10' (columns: {list(df.columns)})")
     cols = [c for c in df.columns if c.startswith("t") and c[1:].isdigit() and c != "t10"]

@@ -50,6 +50,7 @@ import tomllib
 from dataclasses import dataclass
 
 from millflow.errors import InputError
+from millflow.inputs import read_text
 from millflow.falsify.design import batch_design, continuous_design
 from millflow.falsify.noise import make_noise
 from millflow.falsify.nonlinear_truths import AggregationTruth, PopulationTruth
@@ -118,10 +119,7 @@ def _numbers(vals, key: str, src: str) -> list:
 
 def load_config(path) -> StudyConfig:
     try:
-        with open(path, "rb") as fh:
-            raw = tomllib.load(fh)
-    except OSError as exc:
-        raise InputError(f"{path}: cannot read the config ({exc.strerror})") from exc
+        raw = tomllib.loads(read_text(path, "config"))
     except tomllib.TOMLDecodeError as exc:
         raise InputError(f"{path}: not valid TOML ({exc})") from exc
     return parse_config(raw, str(path))

@@ -29,6 +29,7 @@ import numpy as np
 
 from millflow.breakage import b_from_B, validate_b
 from millflow.errors import InputError
+from millflow.inputs import read_csv, read_text
 from millflow.fitting.data import PSDData, read_psd_table, read_sprite_folder
 from millflow.fitting.models import ModelSpec, auto_grid, default_parameters
 from millflow.grid import SizeGrid
@@ -154,8 +155,7 @@ def load_config(path, data_dir: str | None = None) -> FitConfig:
     if not os.path.isfile(path):
         raise InputError(f"{path}: config file not found")
     try:
-        with open(path, "rb") as fh:
-            cfg = tomllib.load(fh)
+        cfg = tomllib.loads(read_text(path, "config"))
     except tomllib.TOMLDecodeError as exc:
         raise InputError(f"{path}: not valid TOML ({exc})") from exc
     unknown = set(cfg) - _TABLES
@@ -222,7 +222,7 @@ def read_tracer_table(path):
     if not os.path.isfile(path):
         raise InputError(f"{path}: tracer table not found")
     try:
-        t = pd.read_csv(path)
+        t = read_csv(path, "tracer table")
     except (ValueError, pd.errors.ParserError) as exc:
         raise InputError(f"{path}: cannot read the tracer table as CSV ({exc})") from exc
     if "time_min" in t.columns and "time_s" not in t.columns:

@@ -26,6 +26,7 @@ import numpy as np
 import pandas as pd
 
 from millflow.errors import InputError
+from millflow.inputs import read_csv
 
 __all__ = ["PSDData", "read_psd_table", "read_process_table", "read_sprite_folder", "psd_data_from_frames"]
 
@@ -198,7 +199,9 @@ def _read(p):
     if not os.path.isfile(p):
         raise InputError(f"{p}: file not found")
     try:
-        return pd.read_csv(p)
+        return read_csv(p)
+    except InputError:
+        raise
     except Exception as exc:  # pandas raises many types for malformed CSV
         raise InputError(f"{p}: cannot read as CSV ({exc})") from exc
 
@@ -244,7 +247,7 @@ def read_sprite_folder(path) -> PSDData:
     feed_file = os.path.join(path, "JRS_input.csv")
     if not os.path.isfile(feed_file):
         raise InputError(f"{feed_file}: feed file not found")
-    feed = pd.read_csv(feed_file)
+    feed = read_csv(feed_file)
     for col in ("FSieves", "Feedmass"):
         if col not in feed.columns:
             raise InputError(f"{feed_file}: missing column {col!r}")
@@ -255,7 +258,7 @@ def read_sprite_folder(path) -> PSDData:
         if not m or not name.endswith(".csv"):
             continue
         stem = os.path.splitext(name)[0]
-        d = pd.read_csv(os.path.join(path, name))
+        d = read_csv(os.path.join(path, name))
         for col in ("ExpSieves", "Expmass"):
             if col not in d.columns:
                 raise InputError(f"{os.path.join(path, name)}: missing column {col!r}")

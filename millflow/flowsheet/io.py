@@ -23,6 +23,7 @@ from millflow.flowsheet.graph import Flowsheet, Stream
 from millflow.flowsheet.units import (TRANSPORTS, UNIT_TYPES, Classifier, Feed, MillUnit, Mixer,
                                       Product, Splitter)
 from millflow.grid import SizeGrid
+from millflow.inputs import read_text
 from millflow.psd import from_distribution, from_sieves, gates_gaudin_schuhmann, rosin_rammler
 
 __all__ = ["load", "loads", "from_dict", "DIMENSIONS"]
@@ -71,8 +72,9 @@ class _Table:
             raise InputError(f"{self._at(key)} = {v!r}: expected a string")
         return v
 
-    def quantity(self, base: str, dim: str, default=..., *, positive=True, allow_zero=False):
-        """Value of ``base_<suffix>`` in SI; error if written without a unit or missing."""
+    def quantity(self, base: str, dim: str, default=..., *, positive=True, allow_zero=False, array=False):
+        """Value of ``base_<suffix>`` in SI; error if written without a unit or missing.
+        A list of numbers only where ``array`` (sieve sizes, grid edges): elsewhere one number."""
         found = [k for k in self.data if k.startswith(base + "_") and k[len(base) + 1:] in DIMENSIONS[dim]]
         if base in self.data:
             raise InputError(f"{self._at(base)}: units of measure missing; write {base}_<unit> with one of "
@@ -90,7 +92,7 @@ class _Table:
             return default
         key = found[0]
         self.used.add(key)
-        v = _number(self.data[key], self._at(key), array_ok=True)
+        v = _number(self.data[key], self._at(key), array_ok=array)
         arr = np.asarray(v, dtype=float)
         if positive and (np.any(arr < 0) or (not allow_zero and np.any(arr == 0))):
             raise InputError(f"{self._at(key)} = {self.data[key]!r}: expected a value "
@@ -137,7 +139,7 @@ def _wrap(where: str, fun, *args, **kw):
 # ------------------------------------------------------------------------ grid
 def _grid(t: _Table) -> SizeGrid:
     if "edges_um" in t.data or "edges_mm" in t.data or "edges_m" in t.data:
-        edges = t.quantity("edges", "length")
+        edges = t.quantity("edges", "length", array=True)
         t.finish("edges_um")
         return _wrap("grid.edges", SizeGrid.from_edges, edges)
     top = t.quantity("top", "length")
@@ -160,11 +162,11 @@ def _grid(t: _Table) -> SizeGrid:
 def _feed_psd(t: _Table, grid: SizeGrid) -> np.ndarray:
     form = t.plain("form", kind=str)
     if form == "sieves":
-        size = t.quantity("size", "length")
+        size = t.quantity("size", "length", array=True)
         if "passing_pct" in t.data or "passing_frac" in t.data:
-            passing = t.quantity("passing", "fraction", allow_zero=True)
+            passing = t.quantity("passing", "fraction", allow_zero=True, array=True)
         else:
-            passing = t.quantity("passing", "fraction")  # raises the "units missing" error
+            passing = t.quantity("passing", "fraction", array=True)  # raises the "units missing" error
         t.finish("form, size_um, passing_pct")
         size, passing = np.atleast_1d(size), np.atleast_1d(passing)
         if size.shape != passing.shape:
@@ -397,7 +399,7 @@ def from_dict(data: dict, *, source: str = "<dict>") -> Flowsheet:
     passing = ()
     rep = top.sub("report", None)
     if rep is not None:
-        passing = tuple(np.atleast_1d(rep.quantity("passing", "length", ())))
+        passing = tuple(np.atleast_1d(rep.quantity("passing", "length", (), array=True)))
         rep.finish("passing_um")
     materials = {}
     mt = top.sub("materials", None)
@@ -447,4 +449,4 @@ def load(path) -> Flowsheet:
     p = Path(path)
     if not p.is_file():
         raise InputError(f"{p}: flowsheet file not found")
-    return loads(p.read_text(encoding="utf-8"), source=str(p))
+    return loads(read_text(p, "flowsheet file"), source=str(p))

@@ -20,6 +20,7 @@ import numpy as np
 from millflow.breakage.distributions import breakage_population
 from millflow.breakage.rates import austin_rates_population, power_law_rates_population
 from millflow.errors import InputError
+from millflow.inputs import read_text
 
 __all__ = ["FittedBreakage", "load_fit", "fit_from_dict"]
 
@@ -154,10 +155,7 @@ def load_fit(path) -> FittedBreakage:
     """Read a ``millflow fit --json`` result; one-line InputError naming what is missing."""
     src = str(path)
     try:
-        with open(path) as fh:
-            d = json.load(fh)
-    except FileNotFoundError:
-        raise InputError(f"{src}: file not found") from None
+        d = json.loads(read_text(path, "fit result (JSON)"))
     except json.JSONDecodeError as exc:
         raise InputError(f"{src}: not JSON ({exc.msg} at line {exc.lineno})") from None
     return fit_from_dict(d, src)

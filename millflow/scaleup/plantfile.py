@@ -14,6 +14,7 @@ from pathlib import Path
 import numpy as np
 
 from millflow.errors import GridError, InputError
+from millflow.inputs import read_text
 from millflow.grid import SizeGrid
 from millflow.psd import from_sieves
 from millflow.scaleup.fitted import FittedBreakage
@@ -177,9 +178,7 @@ def load_plant(path, fit: FittedBreakage) -> tuple[ScaleUp, dict]:
     path = Path(path)
     src = str(path)
     try:
-        d = tomllib.loads(path.read_text())
-    except FileNotFoundError:
-        raise InputError(f"{src}: file not found") from None
+        d = tomllib.loads(read_text(path, "plant file"))
     except tomllib.TOMLDecodeError as exc:
         raise InputError(f"{src}: not valid TOML ({exc})") from None
     unknown = sorted(set(d) - _TOP)

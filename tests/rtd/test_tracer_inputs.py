@@ -1,0 +1,55 @@
+"""Issue 10 §4-5: tracer files in other encodings, extreme scales, constant curves and
+times before the injection get one named error or the same answer as a plain file."""
+import codecs
+
+import numpy as np
+import pytest
+
+import rtd
+
+T = np.linspace(0.0, 60.0, 61)
+C = T * np.exp(-T / 10.0)  # TanksInSeries(tau = 20, n = 2) up to its area, exact values
+
+
+def _csv(path, c, t=T, prefix=b""):
+    text = "time_min,concentration\n" + "".join(f"{float(a)!r},{float(b)!r}\n" for a, b in zip(t, c))
+    path.write_bytes(prefix + text.encode("utf-8"))
+    return path
+
+
+@pytest.mark.parametrize("scale", [1e-90, 1e-8, 1.0, 1e8, 1e90])
+def test_fit_is_scale_free(tmp_path, scale):
+    res = rtd.fit("tis", rtd.read_tracer_csv(_csv(tmp_path / "c.csv", scale * C)))
+    # exact data: tau and n to the optimiser's tolerance (xtol 1e-10), whatever the unit
+    assert res.params["tau"][0] == pytest.approx(20.0, rel=1e-8)
+    assert res.params["n"][0] == pytest.approx(2.0, rel=1e-8)
+    # E(t) of TanksInSeries(20, 2) is 0.01 t e^(-t/10), so C = 100 E: the area A is 100 x scale
+    assert res.scale == pytest.approx(scale * 100.0, rel=1e-8)
+    assert np.allclose(res.fitted, scale * C, rtol=0, atol=1e-8 * scale * C.max())
+
+
+def test_byte_order_mark_is_read_as_utf8(tmp_path):
+    a = rtd.read_tracer_csv(_csv(tmp_path / "a.csv", C))
+    b = rtd.read_tracer_csv(_csv(tmp_path / "b.csv", C, prefix=codecs.BOM_UTF8))
+    assert np.array_equal(a.c, b.c) and np.array_equal(a.t, b.t)
+
+
+@pytest.mark.parametrize("raw, match", [
+    ("time_min,concentration\n0,0\n".encode("utf-16"), "UTF-16"),
+    (b"time_min,concentration\n# caf\xe9\n0,0\n1,1\n2,0\n", r"byte 28 \(line 2\) is not UTF-8"),
+])
+def test_other_encodings_are_named(tmp_path, raw, match):
+    p = tmp_path / "t.csv"
+    p.write_bytes(raw)
+    with pytest.raises(rtd.TracerError, match=match):
+        rtd.read_tracer_csv(p)
+
+
+@pytest.mark.parametrize("c, t, match", [
+    (np.ones_like(T), T, "all values are equal"),
+    (C, T - 10.0, "before the injection"),
+    (1e300 * C / C.max(), T, "expected a peak between"),
+])
+def test_curves_no_model_can_fit_are_refused(tmp_path, c, t, match):
+    with pytest.raises(rtd.TracerError, match=match):
+        rtd.read_tracer_csv(_csv(tmp_path / "t.csv", c, t))
