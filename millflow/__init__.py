@@ -17,7 +17,8 @@ from millflow.breakage import (
     normalized_B,
     power_law_rates,
 )
-from millflow.errors import BreakageError, GridError, InputError, MillflowError, SolverError
+from millflow.errors import (AccuracyWarning, BreakageError, GridError, InputError, MillflowError, OutputError,
+                             SolverError)
 from millflow.grid import SizeGrid
 from millflow.linalg import SpectralBlocks, breakage_matrix
 from millflow.mill import Mill, steady_mill, transfer_matrix
@@ -36,6 +37,8 @@ __all__ = [
     "PowerLawRate",
     "SizeGrid",
     "SolverError",
+    "AccuracyWarning",
+    "OutputError",
     "SpectralBlocks",
     "TabulatedBreakage",
     "TabulatedRate",

@@ -13,6 +13,7 @@ from dataclasses import dataclass, field
 import numpy as np
 import xarray as xr
 
+from millflow.mill.accuracy import check_accuracy
 from millflow.mill.steady import _check_feed, _scene, _solve, steady_mill, transfer_matrix
 from millflow.mill.transient import transient_mill
 
@@ -55,12 +56,20 @@ class Mill:
         """The method :meth:`steady` runs."""
         return self._scene.method
 
-    def product(self, feed, tol: float = 1e-8) -> np.ndarray:
+    def product(self, feed, tol: float = 1e-8, on_inaccuracy: str = "raise") -> np.ndarray:
         """Product flows (N,) or (N, m) for feed (N,) or (N, m): the fast path (inputs
         validated once at construction, no Dataset, the spectral decomposition of the
-        plug-flow and segregated paths kept after the first call)."""
+        plug-flow and segregated paths kept after the first call). Each feed column is
+        solved scaled to a unit total; ``tol`` and ``on_inaccuracy`` as :func:`steady_mill`."""
         feed = _check_feed(feed, self.S.size)
-        return _solve(self._scene, feed, tol=tol, holdup=False, cache=self._cache)["product"]
+        total = np.abs(feed).sum(axis=0)
+        scale = np.where((total > 0) & np.isfinite(total), total, 1.0)
+        solved = _solve(self._scene, feed / scale, tol=tol, holdup=False, cache=self._cache)
+        p = solved["product"]
+        mass = float(np.max(np.abs(p.sum(axis=0) - feed.sum(axis=0) / scale)))
+        check_accuracy("Mill.product", solved["method"], mass, float(solved["error"]), tol, on_inaccuracy,
+                       solved["extras"].get("advice"))
+        return p * scale
 
     def steady(self, feed, **kwargs) -> xr.Dataset:
         """:func:`steady_mill` for this mill."""

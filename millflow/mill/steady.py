@@ -45,6 +45,7 @@ import xarray as xr
 import rtd
 from millflow import checks
 from millflow.errors import InputError, SolverError
+from millflow.mill.accuracy import check_accuracy
 from millflow.mill.axial import solve_axial
 from millflow.mill.cells import network_of, solve_cells
 from millflow.mill.segregated import plug_flow, segregated, segregated_quadrature
@@ -308,7 +309,7 @@ def _triangular_error(p) -> float:
 
 
 def transfer_matrix(S, b, transport, d=None, *, where=None, dispersion=None, method=None,
-                    tol: float = 1e-8) -> np.ndarray:
+                    tol: float = 1e-8, on_inaccuracy: str = "raise") -> np.ndarray:
     """Transfer matrix P (N, N) of a linear mill: product = P @ feed.
 
     Columns sum to 1 (mass conserving). Perfect mixing and tanks in series are
@@ -323,7 +324,8 @@ def transfer_matrix(S, b, transport, d=None, *, where=None, dispersion=None, met
     b : (N, N) fractional breakage distribution.
     transport : rtd model, tau in s.
     d : (N,) normalised discharge rates d_i* > 0, or None (no classification).
-    where, dispersion, method, tol : as :func:`steady_mill`.
+    where, dispersion, method, tol, on_inaccuracy : as :func:`steady_mill` (each column is
+        the product of a unit feed: its sum's distance from 1 is its mass-balance error).
 
     Examples
     --------
@@ -333,7 +335,11 @@ def transfer_matrix(S, b, transport, d=None, *, where=None, dispersion=None, met
     [[0.333333, 0.0], [0.666667, 1.0]]
     """
     sc = _scene(S, b, transport, d, where, dispersion, method)
-    return _solve(sc, np.eye(sc.S.size), tol=tol, holdup=False)["product"]
+    solved = _solve(sc, np.eye(sc.S.size), tol=tol, holdup=False)
+    P = solved["product"]
+    check_accuracy("transfer_matrix", solved["method"], float(np.max(np.abs(P.sum(axis=0) - 1.0))),
+                   float(solved["error"]), tol, on_inaccuracy, solved["extras"].get("advice"))
+    return P
 
 
 # ------------------------------------------------------------------------ results
@@ -410,7 +416,8 @@ def _samples(ds: xr.Dataset, locations) -> xr.DataArray:
 
 
 def steady_mill(S, b, feed, transport, d=None, *, where=None, dispersion=None, method=None,
-                x=None, positions=None, locations=None, tol: float = 1e-8) -> xr.Dataset:
+                x=None, positions=None, locations=None, tol: float = 1e-8,
+                on_inaccuracy: str = "raise") -> xr.Dataset:
     """Steady state of a continuous mill (eqs. 1-3 with any rtd transport).
 
     Parameters
@@ -433,7 +440,11 @@ def steady_mill(S, b, feed, transport, d=None, *, where=None, dispersion=None, m
     positions : fractional axial positions in [0, 1] for profiles (plug, axial).
     locations : sampling locations ('discharge', 'feed', 'holdup', 'cell:K', 'z:Y'),
         a list or a dict name -> spec; gives variable ``sample`` (location, size).
-    tol : error target of the discretised axial path (max abs error of the product).
+    tol : tolerance relative to the total feed: the discretised paths refine until their
+        error estimate (max abs error of the product) is below it, and every path's
+        mass-balance error and error estimate are checked against it.
+    on_inaccuracy : "raise" (default): a result above ``tol`` raises SolverError;
+        "warn": it is returned with an AccuracyWarning.
 
     Returns
     -------
@@ -456,10 +467,20 @@ def steady_mill(S, b, feed, transport, d=None, *, where=None, dispersion=None, m
     feed = _check_feed(feed, sc.S.size)
     if feed.ndim != 1:
         raise InputError(f"feed has shape {feed.shape}; expected ({sc.S.size},) (use transfer_matrix for many feeds)")
-    solved = _solve(sc, feed, tol=tol)
-    prof = _profile(sc, feed, solved, positions)
+    # linear in the feed: solve for the feed scaled to a unit total and scale back, so the
+    # accuracy does not depend on the feed's unit or size
+    total = float(np.abs(feed).sum())
+    scale = total if 0 < total < np.inf else 1.0
+    solved = _solve(sc, feed / scale, tol=tol)
+    prof = _profile(sc, feed / scale, solved, positions)
+    check_accuracy("steady_mill", solved["method"], abs(solved["product"].sum() - feed.sum() / scale),
+                   float(solved["error"]), tol, on_inaccuracy, solved["extras"].get("advice"))
     runtime = time.perf_counter() - start
-    product, holdup = solved["product"], solved["holdup"]
+    product, holdup = solved["product"] * scale, solved["holdup"] * scale
+    if "cell_holdup" in solved:
+        solved["cell_holdup"] = solved["cell_holdup"] * scale
+    if prof is not None:
+        prof = (prof[0], prof[1] * scale)
     data = {
         "feed": ("size", feed, {"units": "feed units", "long_name": "feed flow"}),
         "product": ("size", product, {"units": "feed units", "long_name": "product (discharge) flow"}),
@@ -482,7 +503,7 @@ def steady_mill(S, b, feed, transport, d=None, *, where=None, dispersion=None, m
     ds = xr.Dataset(data, coords=coords)
     ds.attrs.update(
         method=solved["method"],
-        error_estimate=float(solved["error"]),
+        error_estimate=float(solved["error"]) * scale,
         runtime_s=float(runtime),
         mass_balance_error=float(abs(product.sum() - feed.sum())),
         transport=repr(transport),

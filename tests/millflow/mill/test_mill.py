@@ -12,7 +12,7 @@ from hypothesis import given, settings, strategies as st
 
 from millflow.batch import batch_grind
 from millflow.breakage import b_from_B, normalized_B, power_law_rates
-from millflow.errors import InputError
+from millflow.errors import AccuracyWarning, InputError, SolverError
 from millflow.grid import SizeGrid
 from millflow.mill import Mill, steady_mill, transfer_matrix
 from millflow.mill.axial import solve_axial, solve_axial_grid
@@ -124,8 +124,13 @@ def test_cancelling_eigenbasis_falls_back_or_says_so():
     S, b, f = _slow_rates(0.1, n=100)
     ds = steady_mill(S, b, f, rtd.AxialDispersion(TAU, 5.0))
     assert ds.attrs["method"] == "axial_fv" and "fallback" in ds.attrs
-    assert "advice" in steady_mill(S, b, f, rtd.AxialDispersion(TAU, 5.0, bc="open")).attrs
-    forced = steady_mill(S, b, f, rtd.TanksInSeries(TAU, 3), method="segregated")
+    with pytest.raises(SolverError, match="method='quadrature'"):  # the error says what to do
+        steady_mill(S, b, f, rtd.AxialDispersion(TAU, 5.0, bc="open"))
+    assert "advice" in steady_mill(S, b, f, rtd.AxialDispersion(TAU, 5.0, bc="open"), on_inaccuracy="warn").attrs
+    with pytest.raises(SolverError, match=r"segregated: .*above the tolerance 1e-08"):
+        steady_mill(S, b, f, rtd.TanksInSeries(TAU, 3), method="segregated")  # never silently
+    with pytest.warns(AccuracyWarning, match="error estimate"):
+        forced = steady_mill(S, b, f, rtd.TanksInSeries(TAU, 3), method="segregated", on_inaccuracy="warn")
     exact = steady_mill(S, b, f, rtd.TanksInSeries(TAU, 3))
     assert float(np.abs(forced["product"] - exact["product"]).max()) <= forced.attrs["error_estimate"]
 
