@@ -75,6 +75,10 @@ class FlowsheetSolution:
         return self.flows[self.flowsheet.stream_names.index(stream)]
 
 
+#: Default largest relative mass-balance error of a unit (each closes to ~1e-13 in practice).
+MASS_TOL = 1e-9
+
+
 def _unit_blocks(fs, throughputs):
     blocks, infos = {}, {}
     for name, unit in fs.units.items():
@@ -253,7 +257,8 @@ def _newton(g, x0, tol, maxiter):
 TEAR_METHODS = {"wegstein": _wegstein, "substitution": _substitution, "newton": _newton}
 
 
-def solve(fs, *, method="wegstein", tol: float = 1e-13, maxiter: int = 200) -> FlowsheetSolution:
+def solve(fs, *, method="wegstein", tol: float = 1e-13, maxiter: int = 200,
+          mass_tol: float = MASS_TOL) -> FlowsheetSolution:
     """Solve a flowsheet at steady state.
 
     Parameters
@@ -267,6 +272,9 @@ def solve(fs, *, method="wegstein", tol: float = 1e-13, maxiter: int = 200) -> F
         Relative tolerance on torn throughputs [-].
     maxiter : int
         Iteration limit of the tear method.
+    mass_tol : float
+        Largest relative mass-balance error of any unit; above it SolverError names the
+        unit (a solve that creates or loses mass never returns).
 
     Returns
     -------
@@ -286,7 +294,7 @@ def solve(fs, *, method="wegstein", tol: float = 1e-13, maxiter: int = 200) -> F
 
     kin = [n for n, u in fs.units.items() if getattr(u, "kinetic_nonlinear", False)]
     if kin:
-        return _solve_kinetic(fs, kin, method, tol, maxiter, t0)
+        return _solve_kinetic(fs, kin, method, tol, maxiter, t0, mass_tol)
     torn = [n for n, u in fs.units.items() if getattr(u, "nonlinear", False)]
     names = fs.stream_names
 
@@ -319,7 +327,7 @@ def solve(fs, *, method="wegstein", tol: float = 1e-13, maxiter: int = 200) -> F
         blocks, infos = _unit_blocks(fs, {})
         flows, lin = _linear_solve(fs, blocks)
 
-    reports = _unit_reports(fs, flows, infos)
+    reports = _unit_reports(fs, flows, infos, mass_tol)
     solver = dict(lin)
     solver["structure"] = "nonlinear: tear iterations on mill throughputs" if torn else "all linear: one linear solve"
     solver["tear"] = tear_report
@@ -382,7 +390,7 @@ def _vector_newton(g, x0, tol, maxiter):
 _VECTOR_TEARS = {"wegstein": _vector_wegstein, "substitution": _vector_substitution, "newton": _vector_newton}
 
 
-def _solve_kinetic(fs, kin, method, tol, maxiter, t0):
+def _solve_kinetic(fs, kin, method, tol, maxiter, t0, mass_tol=MASS_TOL):
     """Tear the inlet flow vectors of the mills with non-linear kinetics (see the module)."""
     others = [n for n, u in fs.units.items() if getattr(u, "nonlinear", False) and n not in kin]
     if others:
@@ -420,7 +428,7 @@ def _solve_kinetic(fs, kin, method, tol, maxiter, t0):
                           f"{hist[-1] if hist else float('nan'):.3g})")
     g(np.asarray(X))  # final consistent pass
     flows, lin = state["flows"], state["info"]
-    reports = _unit_reports(fs, flows, infos)
+    reports = _unit_reports(fs, flows, infos, mass_tol)
     solver = dict(lin)
     solver["structure"] = "non-linear kinetics: tear iterations on the inlet flow vectors of " + ", ".join(kin)
     solver["tear"] = {"method": method, "torn_units": kin, "torn": "inlet flow vector", "iterations": int(its),
@@ -429,7 +437,7 @@ def _solve_kinetic(fs, kin, method, tol, maxiter, t0):
                              runtime_s=time.perf_counter() - t0, unit_blocks=blocks)
 
 
-def _unit_reports(fs, flows, infos) -> dict:
+def _unit_reports(fs, flows, infos, mass_tol: float = MASS_TOL) -> dict:
     names = fs.stream_names
     tot = {n: math.fsum(flows[k]) for k, n in enumerate(names)}
     out = {}
@@ -444,6 +452,9 @@ def _unit_reports(fs, flows, infos) -> dict:
         rep = {"type": getattr(unit, "kind", unit.type), **infos[uname],
                "solids_in_kg_s": fin, "solids_out_kg_s": fout,
                "mass_balance_error": abs(fout - fin) / scale}
+        if not rep["mass_balance_error"] <= mass_tol:
+            raise SolverError(f"units.{uname}: mass balance error {rep['mass_balance_error']:.2g} "
+                              f"(in {fin:.6g} kg/s, out {fout:.6g} kg/s) above mass_tol {mass_tol:.2g}")
         if unit.type == "mill" and unit.power is not None and fin > 0:
             rep["power_kW"] = unit.power / 1e3
             rep["specific_energy_kWh_per_t"] = (unit.power / 1e3) / (fin * 3.6)

@@ -219,11 +219,18 @@ class MillUnit:
             if trapped.size:
                 raise SolverError(f"units.{self.name}: {grid.label(trapped[0])} is retained by the discharge "
                                   "classification and never breaks (S = 0): it can never leave the mill")
+            retained = np.flatnonzero(d <= 1e-12)
             d = np.maximum(d, 1e-12)  # c = 1 in floating point: retained, leaves only as breakage products
-        P, how = mill_transfer_matrix(S, b, TRANSPORTS[self.transport](tau, **self.transport_params), d)
+        try:
+            P, how = mill_transfer_matrix(S, b, TRANSPORTS[self.transport](tau, **self.transport_params), d)
+        except SolverError as exc:
+            raise SolverError(f"units.{self.name}: {exc}") from None
         err = float(np.max(np.abs(P.sum(axis=0) - 1.0)))
         info = {"method": how + ("" if d is None else ", discharge classification d*"), "error_estimate": err,
                 "runtime_s": time.perf_counter() - t0, "tau_s": tau}
+        if d is not None and retained.size:  # said, not silent: the floor is far below any rate that matters
+            info["note"] = (f"{retained.size} classes retained completely by the discharge (c = 1): their "
+                            "discharge rate d* is set to 1e-12; they leave as breakage products")
         return {"out": P}, info
 
 
