@@ -15,12 +15,14 @@ from __future__ import annotations
 import codecs
 import io
 import json
+import math
 import tomllib
 from pathlib import Path
 
 from millflow.errors import InputError
 
-__all__ = ["read_text", "read_toml", "read_json", "read_csv"]
+__all__ = ["read_text", "read_toml", "read_json", "read_csv", "number", "integer", "boolean", "string",
+           "table_of", "check_keys"]
 
 
 def read_text(path, what: str = "file") -> str:
@@ -78,3 +80,88 @@ def read_csv(path, what: str = "CSV file", **kw):
     except (pd.errors.ParserError, ValueError) as exc:
         msg = " ".join(str(exc).split())
         raise InputError(f"{Path(path)}: cannot read the {what}: {msg}") from None
+
+
+# ------------------------------------------------------------------ typed values
+def _show(v) -> str:
+    """A value as the user wrote it (no numpy reprs)."""
+    if hasattr(v, "item") and getattr(v, "ndim", 1) == 0:
+        v = v.item()
+    return repr(v)
+
+
+def number(table: dict, key: str, where: str, default=..., *, lo=None, hi=None, lo_open=False,
+           hi_open=False) -> float:
+    """A finite number (int or float, not a boolean, string or list) within the bounds."""
+    if key not in table:
+        if default is ...:
+            raise InputError(f"{where}: missing key {key!r}")
+        return default
+    v = table[key]
+    if isinstance(v, bool) or not isinstance(v, (int, float)):
+        raise InputError(f"{where}.{key} = {_show(v)}: expected a number")
+    v = float(v)
+    if not math.isfinite(v):
+        raise InputError(f"{where}.{key} = {_show(v)}: expected a finite number")
+    if lo is not None and (v <= lo if lo_open else v < lo):
+        raise InputError(f"{where}.{key} = {_show(table[key])}: expected {'>' if lo_open else '>='} {lo:g}")
+    if hi is not None and (v >= hi if hi_open else v > hi):
+        raise InputError(f"{where}.{key} = {_show(table[key])}: expected {'<' if hi_open else '<='} {hi:g}")
+    return v
+
+
+def integer(table: dict, key: str, where: str, default=..., *, lo=None, hi=None) -> int:
+    """A whole number (an int, not 2.7, a boolean or a string) within the bounds."""
+    if key not in table:
+        if default is ...:
+            raise InputError(f"{where}: missing key {key!r}")
+        return default
+    v = table[key]
+    if isinstance(v, bool) or not isinstance(v, int):
+        raise InputError(f"{where}.{key} = {_show(v)}: expected a whole number")
+    if (lo is not None and v < lo) or (hi is not None and v > hi):
+        rng = f">= {lo}" if hi is None else (f"<= {hi}" if lo is None else f"between {lo} and {hi}")
+        raise InputError(f"{where}.{key} = {v}: expected a whole number {rng}")
+    return v
+
+
+def boolean(table: dict, key: str, where: str, default=...) -> bool:
+    """true or false (not "no", 0 or 1)."""
+    if key not in table:
+        if default is ...:
+            raise InputError(f"{where}: missing key {key!r}")
+        return default
+    v = table[key]
+    if not isinstance(v, bool):
+        raise InputError(f"{where}.{key} = {_show(v)}: expected true or false")
+    return v
+
+
+def string(table: dict, key: str, where: str, default=..., *, choices=None) -> str:
+    """A string, one of ``choices`` if given."""
+    if key not in table:
+        if default is ...:
+            raise InputError(f"{where}: missing key {key!r}")
+        return default
+    v = table[key]
+    if not isinstance(v, str):
+        raise InputError(f"{where}.{key} = {_show(v)}: expected a string")
+    if choices is not None and v not in choices:
+        raise InputError(f"{where}.{key} = {v!r}: expected one of {', '.join(map(repr, choices))}")
+    return v
+
+
+def table_of(parent: dict, key: str, where: str) -> dict:
+    """A sub-table (empty if absent); anything else than a table is named."""
+    v = parent.get(key, {})
+    if not isinstance(v, dict):
+        raise InputError(f"{where}{key}: expected a table [{key}], got {_show(v)}")
+    return v
+
+
+def check_keys(table: dict, allowed, where: str) -> None:
+    """Refuse keys that are not in ``allowed`` (misspelt or misplaced keys are never dropped)."""
+    unknown = sorted(set(table) - set(allowed))
+    if unknown:
+        raise InputError(f"{where}: unknown key{'s' if len(unknown) > 1 else ''} {', '.join(unknown)}; "
+                         f"expected some of {', '.join(sorted(allowed))}")

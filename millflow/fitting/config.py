@@ -20,7 +20,6 @@ Tables and keys (paths relative to the config file)::
 """
 from __future__ import annotations
 
-import math
 import os
 import tomllib
 from dataclasses import dataclass, field
@@ -29,7 +28,7 @@ import numpy as np
 
 from millflow.breakage import b_from_B, validate_b
 from millflow.errors import InputError
-from millflow.inputs import read_csv, read_text
+from millflow.inputs import boolean, check_keys, integer, number, read_csv, read_text, string, table_of
 from millflow.fitting.data import PSDData, read_psd_table, read_sprite_folder
 from millflow.fitting.models import ModelSpec, auto_grid, default_parameters
 from millflow.grid import SizeGrid
@@ -163,7 +162,11 @@ def load_config(path, data_dir: str | None = None) -> FitConfig:
         raise InputError(f"{path}: unknown tables {sorted(unknown)}; expected some of {sorted(_TABLES)}")
     base = os.path.dirname(os.path.abspath(path))
     rel = lambda p: p if os.path.isabs(p) else os.path.normpath(os.path.join(base, p))  # noqa: E731
-    d = cfg.get("data", {})
+    where = f"{path}: "
+    d = table_of(cfg, "data", where)
+    check_keys(d, {"sprite_folder", "psd", "process", "tracer"}, f"{path} [data]")
+    for key in d:
+        string(d, key, f"{path} [data]")
     if data_dir is not None:
         data = read_sprite_folder(data_dir)
     elif "sprite_folder" in d:
@@ -172,14 +175,23 @@ def load_config(path, data_dir: str | None = None) -> FitConfig:
         data = read_psd_table(rel(d["psd"]), rel(d["process"]) if "process" in d else None)
     else:
         raise InputError(f"{path}: [data] needs 'psd' (and 'process') or 'sprite_folder'")
-    g = cfg.get("grid", {})
+    g = table_of(cfg, "grid", where)
+    gw = f"{path} [grid]"
+    check_keys(g, {"ratio", "top_mm", "bottom_mm"}, gw)
     grid = None
     if g:
-        ratio = float(g.get("ratio", 2 ** 0.25))
+        ratio = number(g, "ratio", gw, 2 ** 0.25, lo=1.0, lo_open=True)
         sizes = data.table.size_m[data.table.size_m > 0]
-        top = float(g["top_mm"]) * 1e-3 if "top_mm" in g else float(sizes.max()) * 1.0001
-        bottom = float(g["bottom_mm"]) * 1e-3 if "bottom_mm" in g else float(sizes.min()) / 2
-        grid = SizeGrid.between(top, bottom, ratio)
+        top = number(g, "top_mm", gw, None, lo=0.0, lo_open=True)
+        bottom = number(g, "bottom_mm", gw, None, lo=0.0, lo_open=True)
+        top = top * 1e-3 if top is not None else float(sizes.max()) * 1.0001
+        bottom = bottom * 1e-3 if bottom is not None else float(sizes.min()) / 2
+        if not bottom < top:
+            raise InputError(f"{gw}: bottom {bottom * 1e3:g} mm is not below top {top * 1e3:g} mm")
+        try:
+            grid = SizeGrid.between(top, bottom, ratio)
+        except InputError as exc:
+            raise InputError(f"{gw}: {exc}") from None
 
     def grid_of():  # a fixed b matrix belongs to the grid: make the automatic grid explicit
         nonlocal grid
@@ -188,31 +200,32 @@ def load_config(path, data_dir: str | None = None) -> FitConfig:
         return grid
 
     label, spec = _spec(cfg.get("model", {}), f"{path} [model]", rel, grid_of)
-    params = default_parameters(spec, cfg.get("params", {}))
-    opt = dict(cfg.get("optimizer", {}))
-    unknown = set(opt) - _OPT_KEYS
-    if unknown:
-        raise InputError(f"{path} [optimizer]: unknown keys {sorted(unknown)}; expected some of {sorted(_OPT_KEYS)}")
-    opt = {"global_search": bool(opt.get("global", True)), "starts": int(opt.get("starts", 20)),
-           "popsize": int(opt.get("popsize", 15)), "maxiter": int(opt.get("maxiter", 200)),
-           "seed": int(opt.get("seed", 0))}
-    val = cfg.get("validation", {})
-    out = cfg.get("output", {})
+    params = default_parameters(spec, table_of(cfg, "params", where), where=f"{path} [params]")
+    opt = table_of(cfg, "optimizer", where)
+    ow = f"{path} [optimizer]"
+    check_keys(opt, _OPT_KEYS, ow)
+    opt = {"global_search": boolean(opt, "global", ow, True), "starts": integer(opt, "starts", ow, 20, lo=1),
+           "popsize": integer(opt, "popsize", ow, 15, lo=1), "maxiter": integer(opt, "maxiter", ow, 200, lo=1),
+           "seed": integer(opt, "seed", ow, 0, lo=0)}
+    val = table_of(cfg, "validation", where)
+    check_keys(val, {"hold_out"}, f"{path} [validation]")
+    out = table_of(cfg, "output", where)
+    check_keys(out, {"dir", "plots"}, f"{path} [output]")
+    out_dir = string(out, "dir", f"{path} [output]", "fit-results")
+    plots = boolean(out, "plots", f"{path} [output]", True)
     cands = []
     for k, c in enumerate(cfg.get("candidates", [])):
         c = dict(c)
         cp = c.pop("params", {})
         lab, sp = _spec(c, f"{path} [[candidates]] #{k + 1}", rel, grid_of)
-        cands.append((lab, sp, default_parameters(sp, cp)))
+        cands.append((lab, sp, default_parameters(sp, cp, where=f"{path} [[candidates]] #{k + 1} params")))
     tracer = read_tracer_table(rel(d["tracer"])) if "tracer" in d else None
     if tracer is not None and spec.mode != "mill":
         raise InputError(f"{path} [data] tracer: tracer data need [model] mode = 'mill' (mode is {spec.mode!r})")
-    weights = {str(k): float(v) for k, v in cfg.get("weights", {}).items()}
-    bad = [k for k, v in weights.items() if not (math.isfinite(v) and v >= 0)]
-    if bad:
-        raise InputError(f"{path} [weights] {bad[0]} = {weights[bad[0]]!r}: expected a finite weight >= 0")
+    wt = table_of(cfg, "weights", where)
+    weights = {str(k): number(wt, k, f"{path} [weights]", lo=0.0) for k in wt}
     return FitConfig(path, data, spec, params, grid, opt, val.get("hold_out"),
-                     rel(out.get("dir", "fit-results")), bool(out.get("plots", True)), cands, label, tracer, weights)
+                     rel(out_dir), plots, cands, label, tracer, weights)
 
 
 def read_tracer_table(path):

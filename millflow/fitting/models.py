@@ -285,20 +285,30 @@ class ModelSpec:
         return " ".join(parts)
 
 
-def default_parameters(spec: ModelSpec, overrides: dict | None = None) -> dict:
+def default_parameters(spec: ModelSpec, overrides: dict | None = None, where: str = "params") -> dict:
     """Parameters of a spec with default values and bounds, updated by ``overrides``
-    (name -> dict with any of value, min, max, vary)."""
+    (name -> table with any of value, min, max (numbers), vary (true/false)). A varied
+    parameter needs min < max and its value inside; a fixed one may have min = max."""
+    from millflow.inputs import boolean, check_keys, number
+
     overrides = dict(overrides or {})
     out = {}
     for name in spec.param_names:
         v, lo, hi = _DEFAULTS.get(name, (0.0, -5.0, 5.0))
         o = overrides.pop(name, {})
-        unknown = set(o) - {"value", "min", "max", "vary"}
-        if unknown:
-            raise InputError(f"params.{name}: unknown keys {sorted(unknown)}; expected value, min, max, vary")
-        lo, hi = float(o.get("min", lo)), float(o.get("max", hi))
-        v = float(o.get("value", min(max(v, lo), hi)))
-        out[name] = Parameter(name, v, lo, hi, bool(o.get("vary", True)))
+        w = f"{where}.{name}"
+        if not isinstance(o, dict):
+            raise InputError(f"{w} = {o!r}: expected a table with value, min, max, vary")
+        check_keys(o, {"value", "min", "max", "vary"}, w)
+        lo, hi = number(o, "min", w, lo), number(o, "max", w, hi)
+        vary = boolean(o, "vary", w, True)
+        v = number(o, "value", w, min(max(v, lo), hi))
+        if lo > hi or (vary and lo == hi):
+            raise InputError(f"{w}: min = {lo:g} and max = {hi:g}; expected min < max for a varied parameter "
+                             "(or vary = false)")
+        if not lo <= v <= hi:
+            raise InputError(f"{w}.value = {v:g}: outside [min, max] = [{lo:g}, {hi:g}]")
+        out[name] = Parameter(name, v, lo, hi, vary)
     if overrides:
         raise InputError(f"params: {sorted(overrides)} are not parameters of this model; "
                          f"expected {list(spec.param_names)}")

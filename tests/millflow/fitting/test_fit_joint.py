@@ -111,5 +111,5 @@ cell = 1.0
     with pytest.raises(InputError, match="bad.csv: row 2, column F: 'x' is not a number"):
         load_config(tmp_path / "bad.toml")
     (tmp_path / "neg.toml").write_text(toml.replace("tracer = 2.0", "tracer = -1.0"))
-    with pytest.raises(InputError, match="\\[weights\\] tracer = -1.0"):
+    with pytest.raises(InputError, match=r"\[weights\]\.tracer = -1\.0: expected >= 0"):
         load_config(tmp_path / "neg.toml")
