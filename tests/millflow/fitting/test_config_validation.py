@@ -9,7 +9,8 @@ from tests.millflow.fitting.test_fit_cli import _write_batch_case
 
 
 @pytest.mark.parametrize("old, new, match", [
-    ("[params.beta]\nmin = 2.2", "[params.beta]\nmin = 2.2\nvary = \"no\"", r"\[params\]\.beta\.vary = 'no': expected true or false"),
+    ("[params.beta]\nmin = 2.2", "[params.beta]\nmin = 2.2\nvary = \"no\"",
+     r"\[params\]\.beta\.vary = 'no': expected true or false"),
     ("ratio = 1.189207115002721", "ratio = 1.189207115002721\nsharpness = 2", r"\[grid\]: unknown key sharpness"),
     ("ratio = 1.189207115002721", "ratio = \"fine\"", r"\[grid\]\.ratio = 'fine': expected a number"),
     ("ratio = 1.189207115002721", "ratio = 1.0", r"\[grid\]\.ratio = 1\.0: expected > 1"),
@@ -17,9 +18,11 @@ from tests.millflow.fitting.test_fit_cli import _write_batch_case
     ("starts = 3", "starts = 2.7", r"\[optimizer\]\.starts = 2\.7: expected a whole number"),
     ("popsize = 6", "popsize = 0", r"\[optimizer\]\.popsize = 0: expected a whole number >= 1"),
     ("maxiter = 40", "maxiter = -1", r"\[optimizer\]\.maxiter = -1: expected a whole number >= 1"),
-    ("maxiter = 40", "maxiter = 40\nseed = \"abc\"", r"\[optimizer\]\.seed = 'abc': expected a whole number"),
+    ("maxiter = 40", "maxiter = 40\nseed = \"abc\"",
+     r"\[optimizer\]\.seed = 'abc': expected a whole number"),
     ("[params.beta]\nmin = 2.2", "[params.beta]\nmin = 3.0\nmax = 3.0", r"min = 3 and max = 3; expected min < max"),
-    ("[params.gamma]\nmax = 2.0", "[params.gamma]\nmax = [2.0, 3.0]", r"gamma\.max = \[2\.0, 3\.0\]: expected a number"),
+    ("[params.gamma]\nmax = 2.0", "[params.gamma]\nmax = [2.0, 3.0]",
+     r"gamma\.max = \[2\.0, 3\.0\]: expected a number"),
     ("dir = \"out\"", "dir = \"out\"\nplot = false", r"\[output\]: unknown key plot"),
     ("[data]", "tracer = \"t.csv\"\n[data]", r"unknown tables \['tracer'\]"),
 ])
