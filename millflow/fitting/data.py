@@ -91,6 +91,9 @@ class PSDData:
         return PSDData(t, p, self.source)
 
 
+#: Rounding allowed above 1 in a sample's sum of retained fractions (six-digit tables).
+RETAINED_TOL = 1e-6
+
 def _unit_column(df: pd.DataFrame, stem: str, units: dict, source: str, required: bool):
     pat = re.compile(rf"^{stem}_({'|'.join(units)})$")
     hits = [c for c in df.columns if pat.match(str(c))]
@@ -158,7 +161,12 @@ def psd_data_from_frames(psd: pd.DataFrame, process: pd.DataFrame | None = None,
         if grp.size_m.duplicated().any():
             raise InputError(f"{source}: {key}: a sieve size appears twice in one sample")
         if vcol == "retained":
-            # retained on sieve i = mass between size i and the next coarser size
+            # retained on sieve i = mass between size i and the next coarser size; a sample's
+            # fractions sum to at most 1 (the pan holds the rest): beyond rounding, refused
+            total = float(grp.value.sum())
+            if total > 1 + RETAINED_TOL:
+                raise InputError(f"{source}: sample {key}: retained fractions sum to {total:.6g}; expected at "
+                                 f"most 1 (within {RETAINED_TOL:g}): fractions, not percent, of one sample")
             grp = grp.assign(passing=np.clip(1.0 - np.cumsum(grp.value.to_numpy()), 0.0, 1.0))
         else:
             grp = grp.assign(passing=grp.value)

@@ -427,7 +427,11 @@ class ForwardModel:
         size, P = size[keep], P[keep]
         if size[0] > self.grid.x[0] * (1 + 1e-9):
             raise InputError(f"feed of {cond!r}: top size {size[0]:.4g} m is above the grid top {self.grid.x[0]:.4g} m")
-        return from_sieves(size, P, self.grid, oversize="lump" if P[0] < 1 else "error")
+        if P[0] < 1 - 1e-9:  # mass above the top sieve has no size: never lumped into class 1 silently
+            raise InputError(f"feed of {cond!r}: the top sieve ({size[0] * 1e3:.4g} mm) passes only "
+                             f"{100 * P[0]:.4g} %, so {100 * (1 - P[0]):.3g} % of the feed has no measured size; "
+                             "add a feed row at a size that passes 100 % (and a [grid] top_mm at least that size)")
+        return from_sieves(size, P, self.grid)
 
     def _process_matrix(self):
         spec, proc = self.spec, self.data.process

@@ -43,3 +43,28 @@ def test_a_fixed_parameter_may_have_equal_bounds(tmp_path):
     cfg.write_text(cfg.read_text().replace("[params.beta]\nmin = 2.2",
                                            "[params.beta]\nvalue = 3.0\nmin = 3.0\nmax = 3.0\nvary = false"))
     assert load_config(cfg).params["beta"].vary is False
+
+
+def test_retained_fractions_above_one_are_refused_naming_the_sample():
+    import pandas as pd
+
+    from millflow.fitting.data import psd_data_from_frames
+    rows = pd.DataFrame({"condition": "c1", "location": "product", "time_min": 1.0,
+                         "size_mm": [4.0, 2.0, 1.0], "retained": [0.5, 0.56, 0.5]})  # sums to 1.56
+    with pytest.raises(InputError, match=r"sample \('c1', 'product', 60\.0\): retained fractions sum to 1\.56"):
+        psd_data_from_frames(rows, None)
+
+
+def test_a_feed_whose_top_sieve_retains_mass_is_an_error_with_the_fix():
+    import numpy as np
+    import pandas as pd
+
+    from millflow.fitting.data import psd_data_from_frames
+    from millflow.fitting.models import ForwardModel, ModelSpec
+    feed = pd.DataFrame({"condition": "*", "location": "feed", "time_min": 0.0, "size_mm": [4.0, 2.0],
+                         "passing": [0.9, 0.0]})  # 10 % above the top sieve: no measured size
+    prod = pd.DataFrame({"condition": "c1", "location": "mill", "time_min": 1.0, "size_mm": [4.0, 2.0, 1.0],
+                         "passing": [1.0, 0.5, 0.1]})
+    data = psd_data_from_frames(pd.concat([feed, prod]), None)
+    with pytest.raises(InputError, match=r"top sieve \(4 mm\) passes only 90 %.*add a feed row"):
+        ForwardModel(ModelSpec(mode="batch"), data).predict(np.zeros(0))
