@@ -55,6 +55,10 @@ def stream_properties(sol) -> dict:
             p80, p50 = _percentile(fs.grid, frac, 80), _percentile(fs.grid, frac, 50)
             passing = (cum_passing_at(fs.grid, frac, np.array(fs.passing_sizes)) if fs.passing_sizes
                        else np.zeros(0))
+            # below the finest edge the grid cannot tell how the sink's mass is spread:
+            # not the value at x_N, but unknown ("-" in the table, null in JSON), as P80
+            below = np.asarray(fs.passing_sizes, dtype=float) < fs.grid.x[-1] * (1 - 1e-12)
+            passing = np.where(below, np.nan, passing) if passing.size else passing
         else:
             frac = cum = np.full(n, np.nan)
             p80 = p50 = float("nan")

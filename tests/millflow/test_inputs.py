@@ -58,3 +58,16 @@ def test_lists_and_absurd_sizes_are_named(tmp_path, capsys, old, new, match):
     err = capsys.readouterr().err.strip()
     assert err.count("\n") == 0 and err.startswith("millflow run: error: ") and str(p) in err
     assert not (tmp_path / "o").exists()
+
+
+def test_passing_below_the_finest_edge_is_unknown_not_the_edge_value(tmp_path, capsys):
+    """Issue 10 §5: "% passing 5 um" with the finest edge at ~10 um showed the value at the edge."""
+    text = CLOSED.read_text(encoding="utf-8")
+    assert "passing_um = [75, 150]" in text
+    p = tmp_path / "c.toml"
+    p.write_text(text.replace("passing_um = [75, 150]", "passing_um = [5, 75, 150]"), encoding="utf-8")
+    assert main(["run", str(p), "--json", "--no-plots", "--out", str(tmp_path / "o")]) == 0
+    import json
+    s = json.loads(capsys.readouterr().out)
+    assert s["streams"]["overflow"]["passing_pct"]["5"] is None
+    assert 0 < s["streams"]["overflow"]["passing_pct"]["75"] < 100
