@@ -73,7 +73,7 @@ def to_json(result, name: str, time_unit: str, plot) -> dict:
     return {"model": name, "repr": d["model"], "time_unit": time_unit, "params": d["params"],
             "scale": d["scale"], "ssr": d["ssr"], "ser": d["ser"], "r2": d["r2"],
             "aic": d["aic"], "bic": d["bic"], "n_data": d["n_data"], "notes": d["notes"],
-            "plot": None if plot is None else str(plot)}
+            "lack_of_fit": d["lack_of_fit"], "plot": None if plot is None else str(plot)}
 
 
 def text(path, result, name: str, time_unit: str) -> str:
@@ -153,6 +153,9 @@ def main(argv=None) -> int:
         js = to_json(result, args.model, curve.time_unit, plot)
         if args.json:
             print(json.dumps(js), flush=True)
+            if js["lack_of_fit"]["flag"]:
+                print(f"python -m rtd fit: warning: lack of fit ({'; '.join(js['lack_of_fit']['reasons'])})",
+                      file=sys.stderr)
         elif not args.quiet:
             print(text(path, result, args.model, curve.time_unit), flush=True)
         if out is not None:

@@ -88,6 +88,38 @@ class FitResult:
         half = stats.t.ppf(0.5 + level / 2, self.n_data - self.n_params) * self.se[i]
         return float(self.values[i] - half), float(self.values[i] + half)
 
+    @property
+    def lack_of_fit(self) -> dict:
+        """Residual diagnostics and whether the model fails to describe the curve.
+
+        Wald-Wolfowitz runs test on the residual signs (few runs: residuals in long
+        same-sign stretches, a shape the model misses) and the lag-1 autocorrelation.
+        ``flag`` is True when R^2 < 0.9 or the runs test rejects randomness at p < 1e-3:
+        the standard errors then describe the wrong model and understate the error.
+        """
+        r = np.asarray(self.residuals, float)
+        signs = r[r != 0] > 0
+        n1, n2 = int(signs.sum()), int((~signs).sum())
+        runs = 1 + int(np.count_nonzero(signs[1:] != signs[:-1])) if signs.size else 0
+        n = n1 + n2
+        if n1 and n2 and n > 2:
+            mu = 1 + 2.0 * n1 * n2 / n
+            var = 2.0 * n1 * n2 * (2.0 * n1 * n2 - n) / (n * n * (n - 1))
+            z = (runs - mu) / math.sqrt(var) if var > 0 else 0.0
+            p = math.erfc(abs(z) / math.sqrt(2))
+        else:
+            mu, z, p = float("nan"), float("nan"), float("nan")
+        rc = r - r.mean()
+        den = float(rc @ rc)
+        lag1 = float(rc[1:] @ rc[:-1]) / den if den > 0 else float("nan")
+        reasons = []
+        if math.isfinite(self.r2) and self.r2 < 0.9:
+            reasons.append(f"R^2 {self.r2:.3g} < 0.9")
+        if math.isfinite(p) and p < 1e-3 and runs < mu:
+            reasons.append(f"runs test: {runs} runs of residual signs where {mu:.1f} are expected (p {p:.1e})")
+        return {"flag": bool(reasons), "reasons": reasons, "runs": runs, "expected_runs": mu, "runs_z": z,
+                "runs_p": p, "lag1_autocorrelation": lag1}
+
     def to_dict(self) -> dict:
         """{"model", "params": {name: {"value", "se"}}, "ssr", "ser", "r2", "aic", "bic", ...}."""
         def num(x):
@@ -100,6 +132,7 @@ class FitResult:
             "aic": num(self.aic), "bic": num(self.bic),
             "n_data": self.n_data, "n_params": self.n_params, "kind": self.kind,
             "notes": list(self.notes),
+            "lack_of_fit": {k: (num(v) if isinstance(v, float) else v) for k, v in self.lack_of_fit.items()},
         }
 
     def summary(self) -> str:
@@ -114,6 +147,10 @@ class FitResult:
         lines.append(f"  SSR {self.ssr:.4g}  SER {self.ser:.4g}  R^2 {self.r2:.6f}  "
                      f"AIC {self.aic:.2f}  BIC {self.bic:.2f}")
         lines += [f"  note: {n}" for n in self.notes]
+        lof = self.lack_of_fit
+        if lof["flag"]:
+            lines.append(f"  warning: lack of fit ({'; '.join(lof['reasons'])}): the model does not describe "
+                         "this curve and its standard errors are not to be trusted")
         return "\n".join(lines)
 
 

@@ -52,6 +52,10 @@ def run(args) -> int:
     js = rtd_cli.to_json(result, args.model, curve.time_unit, plot)
     if args.json:
         print(json.dumps(js), flush=True)
+        if js["lack_of_fit"]["flag"]:  # also said where a person reads it
+            import sys
+            print(f"millflow fit-rtd: warning: lack of fit ({'; '.join(js['lack_of_fit']['reasons'])})",
+                  file=sys.stderr)
     elif not args.quiet:
         print(rtd_cli.text(path, result, args.model, curve.time_unit), flush=True)
     if out is not None:

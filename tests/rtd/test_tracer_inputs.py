@@ -53,3 +53,16 @@ def test_other_encodings_are_named(tmp_path, raw, match):
 def test_curves_no_model_can_fit_are_refused(tmp_path, c, t, match):
     with pytest.raises(rtd.TracerError, match=match):
         rtd.read_tracer_csv(_csv(tmp_path / "t.csv", c, t))
+
+
+def test_a_curve_no_model_fits_is_flagged(tmp_path):
+    """Issue 10 §5: a bimodal curve fitted by one tanks-in-series model (R^2 ~0.6) was a
+    normal result; now the fit carries a lack-of-fit flag with its reasons."""
+    t = np.linspace(0.0, 80.0, 81)
+    c = rtd.TanksInSeries(10.0, 4).pdf(t) + 0.8 * rtd.TanksInSeries(45.0, 12).pdf(t)
+    res = rtd.fit("tis", t, c)
+    lof = res.lack_of_fit
+    assert lof["flag"] and any("runs test" in r for r in lof["reasons"])
+    assert res.to_dict()["lack_of_fit"]["flag"] is True and "lack of fit" in res.summary()
+    good = rtd.fit("tis", rtd.read_tracer_csv(_csv(tmp_path / "c.csv", C)))
+    assert not good.lack_of_fit["flag"]
