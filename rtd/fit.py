@@ -94,7 +94,8 @@ class FitResult:
 
         Wald-Wolfowitz runs test on the residual signs (few runs: residuals in long
         same-sign stretches, a shape the model misses) and the lag-1 autocorrelation.
-        ``flag`` is True when R^2 < 0.9 or the runs test rejects randomness at p < 1e-3:
+        ``flag`` is True when R^2 < 0.9 or the runs test rejects randomness at p < 1e-3
+        (with residuals above rounding, SER > 1e-9 of the peak):
         the standard errors then describe the wrong model and understate the error.
         """
         r = np.asarray(self.residuals, float)
@@ -115,7 +116,10 @@ class FitResult:
         reasons = []
         if math.isfinite(self.r2) and self.r2 < 0.9:
             reasons.append(f"R^2 {self.r2:.3g} < 0.9")
-        if math.isfinite(p) and p < 1e-3 and runs < mu:
+        # the runs test means something only above rounding: exact data leave residuals
+        # of a few ulp whose signs follow the arithmetic, not the model
+        above_rounding = self.ser > 1e-9 * float(np.max(np.abs(self.data)))
+        if math.isfinite(p) and p < 1e-3 and runs < mu and above_rounding:
             reasons.append(f"runs test: {runs} runs of residual signs where {mu:.1f} are expected (p {p:.1e})")
         return {"flag": bool(reasons), "reasons": reasons, "runs": runs, "expected_runs": mu, "runs_z": z,
                 "runs_p": p, "lag1_autocorrelation": lag1}
