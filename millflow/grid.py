@@ -14,6 +14,7 @@ the refined grid reduces exactly to the original edges (:func:`millflow.psd.regr
 from __future__ import annotations
 
 import math
+import os
 from dataclasses import dataclass
 
 import numpy as np
@@ -135,6 +136,7 @@ class SizeGrid:
 
     def __post_init__(self):
         arr = validate_edges(self.upper_m, name="upper_m")
+        check_classes(arr.size)
         arr.setflags(write=False)
         object.__setattr__(self, "upper_m", arr)
 
@@ -156,6 +158,7 @@ class SizeGrid:
         _check_positive(top_m, "top_m")
         if int(n) != n or n < 1:
             raise GridError(f"n = {n!r}: the number of classes must be an integer >= 1")
+        check_classes(int(n))
         return cls(float(top_m) * float(ratio) ** -np.arange(int(n), dtype=float))
 
     @classmethod
@@ -183,6 +186,7 @@ class SizeGrid:
         if bottom_m >= top_m:
             raise GridError(f"bottom_m = {bottom_m!r} m must be below top_m = {top_m!r} m")
         steps = math.log(top_m / bottom_m) / math.log(ratio)
+        check_classes(math.ceil(steps) + 1, f"top {top_m:g} m, bottom {bottom_m:g} m, ratio {ratio!r}")
         n_steps = round(steps) if abs(steps - round(steps)) < 1e-9 else math.ceil(steps)
         grid = cls.geometric(top_m, ratio, n_steps + 1)
         if abs(steps - n_steps) < 1e-9:
@@ -205,6 +209,7 @@ class SizeGrid:
         x = self.upper_m
         if k == 1 or x.size == 1:
             return self
+        check_classes((x.size - 1) * k + 1, f"refine({k})")
         frac = np.arange(k, dtype=float) / k
         # geometric subdivision: x_i * (x_{i+1}/x_i)^(m/k), m = 0..k-1
         pieces = x[:-1, None] * (x[1:, None] / x[:-1, None]) ** frac[None, :]
@@ -267,6 +272,28 @@ class SizeGrid:
         r = self.ratio
         rs = "" if r is None else f", ratio={r:.6g}"
         return f"SizeGrid(n={self.n}, top={self.upper_m[0]:.6g} m, sink below {self.upper_m[-1]:.6g} m{rs})"
+
+
+def memory_budget_bytes() -> float:
+    """Largest array a solve may allocate: ``MILLFLOW_MEMORY_BUDGET_GB`` GiB (default 4)."""
+    raw = os.environ.get("MILLFLOW_MEMORY_BUDGET_GB", "4")
+    try:
+        gib = float(raw)
+    except ValueError:
+        raise GridError(f"MILLFLOW_MEMORY_BUDGET_GB = {raw!r}: expected a number of GiB") from None
+    return gib * 2.0**30
+
+
+def check_classes(n: int, how: str = "") -> None:
+    """Refuse, before anything is allocated, a grid whose N x N breakage matrix (every
+    solve forms one) exceeds the memory budget; the message gives the size it would need."""
+    need = 8.0 * float(n) * float(n)
+    budget = memory_budget_bytes()
+    if need > budget:
+        where = f" ({how})" if how else ""
+        raise GridError(f"a grid of {n:.4g} classes{where} needs {need / 2**30:.3g} GiB for one N x N breakage "
+                        f"matrix, above the memory budget of {budget / 2**30:.3g} GiB (MILLFLOW_MEMORY_BUDGET_GB); "
+                        "use a coarser ratio or fewer classes")
 
 
 def _check_ratio(ratio) -> None:

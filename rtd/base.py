@@ -21,6 +21,26 @@ class ParameterError(RTDError):
     """A model parameter is outside its valid range (the message names it)."""
 
 
+def memory_budget_bytes() -> float:
+    """Largest array an rtd computation may allocate: ``RTD_MEMORY_BUDGET_GB`` GiB (default 4)."""
+    import os
+
+    raw = os.environ.get("RTD_MEMORY_BUDGET_GB", "4")
+    try:
+        gib = float(raw)
+    except ValueError:
+        raise ParameterError(f"RTD_MEMORY_BUDGET_GB = {raw!r}: expected a number of GiB") from None
+    return gib * 2.0**30
+
+
+def check_memory(nbytes: float, what: str) -> None:
+    """Refuse, before allocating, an array larger than the memory budget, saying its size."""
+    budget = memory_budget_bytes()
+    if nbytes > budget:
+        raise ParameterError(f"{what} would need {nbytes / 2**30:.3g} GiB, above the memory budget of "
+                             f"{budget / 2**30:.3g} GiB (RTD_MEMORY_BUDGET_GB); use fewer cells or times")
+
+
 def check_positive(model: str, name: str, value) -> float:
     """Return ``value`` as float, or raise ParameterError if it is not finite and > 0."""
     value = float(value)

@@ -23,7 +23,7 @@ from typing import ClassVar
 import numpy as np
 from scipy import optimize
 
-from rtd.base import ParameterError, RTDModel, as_s, as_time, check_fraction, check_positive
+from rtd.base import ParameterError, RTDModel, as_s, as_time, check_fraction, check_memory, check_positive
 
 
 def _frozen(a) -> np.ndarray:
@@ -174,6 +174,8 @@ class CompartmentNetwork:
         if self._modes is not None:
             lam, vec, coef = self._modes
             return ((np.exp(np.outer(t, lam)) * coef[None, :]) @ vec.T).real
+        check_memory(8.0 * t.size * self.n * self.n,
+                     f"{type(self).__name__} with {self.n} cells at {t.size} times (expm at every time)")
         return expm_batch(self.system_matrix(), t) @ self.inlet
 
     def laplace(self, s):
@@ -217,6 +219,7 @@ class CompartmentNetwork:
         tau = check_positive("CompartmentNetwork.tanks_in_series", "tau", tau)
         if int(n) != n or n < 1:
             raise ParameterError(f"tanks_in_series: n = {n!r}; expected an integer >= 1")
+        check_memory(8.0 * n * n, f"tanks_in_series with {int(n)} cells (an {int(n)} x {int(n)} flow matrix)")
         return cls.cells_in_series(np.full(int(n), tau / n), forward=1.0, backward=0.0)
 
     @classmethod
@@ -229,6 +232,7 @@ class CompartmentNetwork:
         """
         v = np.asarray(volumes, dtype=float)
         n = v.size
+        check_memory(8.0 * n * n, f"cells_in_series with {n} cells (an {n} x {n} flow matrix)")
         q = forward - backward
         f = np.zeros((n, n))
         idx = np.arange(n - 1)

@@ -121,3 +121,21 @@ def test_as_sizes_and_labels():
         as_sizes([1.0, 2.0])
     assert class_label(6, np.full(8, 1.2e-4)) == "class 7 (x = 0.00012 m)"
     assert g.label(0) == "class 1 (x = 0.001 m)"
+
+
+def test_grids_beyond_the_memory_budget_are_refused_before_allocation(monkeypatch):
+    """Issue 10 §2: n = 100000 asked for 74.5 GiB and ratio 1.0000001 for 31.7 PiB; now a
+    GridError says what it would need (nothing of that size is allocated)."""
+    import pytest
+
+    from millflow.errors import GridError
+    with pytest.raises(GridError, match=r"1e\+05 classes needs 74\.5 GiB .* budget of 4 GiB"):
+        SizeGrid.geometric(1e-3, 1.01, 100000)
+    with pytest.raises(GridError, match=r"ratio 1\.0000001\) needs .* GiB"):
+        SizeGrid.between(1e-2, 1e-5, 1.0000001)
+    with pytest.raises(GridError, match=r"refine\(100000\)"):
+        SizeGrid.geometric(1e-3, 2.0, 10).refine(100000)
+    monkeypatch.setenv("MILLFLOW_MEMORY_BUDGET_GB", "1e-6")  # about 1 kB: 11 classes pass, 12 do not
+    assert SizeGrid.geometric(1e-3, 2.0, 11).n == 11
+    with pytest.raises(GridError, match="MILLFLOW_MEMORY_BUDGET_GB"):
+        SizeGrid.geometric(1e-3, 2.0, 12)

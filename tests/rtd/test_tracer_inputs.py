@@ -66,3 +66,11 @@ def test_a_curve_no_model_fits_is_flagged(tmp_path):
     assert res.to_dict()["lack_of_fit"]["flag"] is True and "lack of fit" in res.summary()
     good = rtd.fit("tis", rtd.read_tracer_csv(_csv(tmp_path / "c.csv", C)))
     assert not good.lack_of_fit["flag"]
+
+
+def test_rtd_arrays_beyond_the_memory_budget_are_refused():
+    """RecirculatingCells(1, 1000, 1).pdf at 20001 times asked for 149 GiB."""
+    with pytest.raises(rtd.ParameterError, match=r"1000 cells at 20001 times .* 149 GiB"):
+        rtd.RecirculatingCells(1.0, 1000, 1.0).pdf(np.linspace(0.0, 5.0, 20001))
+    with pytest.raises(rtd.ParameterError, match="RTD_MEMORY_BUDGET_GB"):
+        rtd.TanksInSeries(600.0, 1e9).network()
