@@ -100,6 +100,21 @@ def _spec(table: dict, where: str, rel=None, grid_of=None) -> tuple[str, ModelSp
     unknown = set(table) - _MODEL_KEYS
     if unknown:
         raise InputError(f"{where}: unknown keys {sorted(unknown)}; expected some of {sorted(_MODEL_KEYS)}")
+    for k in ("mode", "rate", "breakage", "screen_column", "ball_column", "tau_column", "objective", "transport",
+              "b_matrix_csv", "b_kind", "t10_table_csv", "label", "classification"):
+        if k in table:
+            string(table, k, where)
+    for k in ("rate_process", "transport_fit"):
+        if k in table and not (isinstance(table[k], list) and all(isinstance(x, str) for x in table[k])):
+            raise InputError(f"{where}.{k} = {table[k]!r}: expected a list of names, e.g. [\"speed\"]")
+    if "n_tanks" in table:
+        integer(table, "n_tanks", where, lo=1)
+    if "where" in table and not isinstance(table["where"], (str, list)):
+        raise InputError(f"{where}.where = {table['where']!r}: expected a string or a list of cell numbers")
+    if "x0_mm" in table:
+        number(table, "x0_mm", where, lo=0.0, lo_open=True)
+    if "t10" in table:
+        number(table, "t10", where, lo=0.0, hi=1.0)
     kw = {k: table[k] for k in ("mode", "rate", "breakage", "screen_column", "ball_column", "tau_column", "objective",
                                 "n_tanks", "transport", "where")
           if k in table}
@@ -143,7 +158,9 @@ def _spec(table: dict, where: str, rel=None, grid_of=None) -> tuple[str, ModelSp
         kw["x0_m"] = float(table["x0_mm"]) * 1e-3
     try:
         spec = ModelSpec(**kw)
-    except TypeError as exc:
+    except (TypeError, ValueError) as exc:
+        if isinstance(exc, InputError):
+            raise
         raise InputError(f"{where}: {exc}") from exc
     return str(table.get("label", spec.label())), spec
 
