@@ -12,6 +12,7 @@ import contextlib
 import importlib
 import os
 import pkgutil
+import re
 import signal
 import sys
 import threading
@@ -36,7 +37,30 @@ def build_parser() -> argparse.ArgumentParser:
         module = importlib.import_module(f"millflow.commands.{info.name}")
         if hasattr(module, "add_parser"):
             module.add_parser(sub)
+    for name, p in sub.choices.items():  # help text is plain text: no reStructuredText roles
+        p.description = _plain(p.description)
+        p.epilog = p.epilog or f"example: {EXAMPLES.get(name, f'millflow {name} --help')}"
+        p.formatter_class = argparse.RawDescriptionHelpFormatter
     return parser
+
+
+#: One example line per command (shown under --help).
+EXAMPLES = {
+    "run": "millflow run flowsheets/closed_circuit_ball_mill.toml --out results",
+    "fit": "millflow fit examples/knife_mill/knife_mill.toml --json",
+    "fit-rtd": "millflow fit-rtd docs/examples/tracer_tis.csv --model tis --out tis-fit",
+    "scaleup": "millflow scaleup lab_fit.json --to examples/scaleup/plant.toml --target-p80-um 150",
+    "falsify": "millflow falsify docs/examples/falsify/tanks.toml --out study",
+    "bench": "millflow bench core --quick",
+}
+
+
+def _plain(text: str | None) -> str | None:
+    """Docstring text without reStructuredText markup (``x``, :func:`x`, :mod:`~a.b`)."""
+    if not text:
+        return text
+    text = re.sub(r":[a-z]+:`~?([^`]+)`", r"\1", text)
+    return text.replace("``", "")
 
 
 class Terminated(BaseException):

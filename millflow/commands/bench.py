@@ -58,6 +58,7 @@ def add_parser(subparsers) -> None:
     )
     p.add_argument("suite", help="suite name, e.g. core")
     p.add_argument("--json", action="store_true", help="print the rows as a JSON array instead of a table")
+    p.add_argument("--quiet", action="store_true", help="no notes on stderr (the table or JSON still prints)")
     p.add_argument("--quick", action="store_true", help="fewer sizes and repeats (a few seconds)")
     p.add_argument("--make-references", action="store_true",
                    help="(re)make the suite's cached high-precision references first (slow)")
@@ -107,8 +108,9 @@ def run_command(args) -> int:
         if code is not None:
             return code
         threads = "default"
-        print("millflow bench: BLAS threads not limited (set OPENBLAS_NUM_THREADS=1 OMP_NUM_THREADS=1 "
-              "MKL_NUM_THREADS=1 before starting Python); timings may differ", file=sys.stderr)
+        if not getattr(args, "quiet", False):
+            print("millflow bench: BLAS threads not limited (set OPENBLAS_NUM_THREADS=1 OMP_NUM_THREADS=1 "
+                  "MKL_NUM_THREADS=1 before starting Python); timings may differ", file=sys.stderr)
     if args.make_references:
         maker = getattr(suite, "make_references", None)
         if maker is None:

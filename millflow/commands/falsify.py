@@ -19,7 +19,8 @@ def add_parser(subparsers) -> None:
     p.add_argument("config", help="TOML configuration (see docs/model-error.md)")
     p.add_argument("--json", action="store_true", help="print one JSON object instead of the text summary")
     p.add_argument("--out", default=None, help="output folder (default falsify-results/ beside the config)")
-    p.add_argument("--overwrite", action="store_true", help="replace a non-empty output folder")
+    p.add_argument("--overwrite", action="store_true",
+                   help="replace an output folder that holds files millflow did not write")
     p.add_argument("--no-plots", action="store_true", help="do not write plots")
     p.add_argument("--quiet", action="store_true", help="no progress messages")
     p.set_defaults(func=run)

@@ -135,3 +135,13 @@ def test_version_and_help_examples(capsys):
     with pytest.raises(SystemExit):
         main(["--help"])
     assert "example: millflow run" in capsys.readouterr().out
+
+
+@pytest.mark.parametrize("command", ["run", "fit", "fit-rtd", "scaleup", "falsify", "bench"])
+def test_every_command_help_is_plain_text_with_an_example(capsys, command):
+    with pytest.raises(SystemExit):
+        main([command, "--help"])
+    out = capsys.readouterr().out
+    assert "example: millflow " in out and "``" not in out and ":func:" not in out
+    if command != "bench":  # bench writes no files
+        assert "--out" in out and "--json" in out and "--quiet" in out
