@@ -85,14 +85,20 @@ class FitResult:
         for name, par in self.params.items():
             if name in self.stats["params"]:
                 s = self.stats["params"][name]
-                out["params"][name] = {k: _jsonable(s[k]) for k in
-                                       ("value", "se", "t", "p_value", "ci95", "significant", "reasons")}
+                out["params"][name] = {k: _jsonable(s.get(k)) for k in
+                                       ("value", "se", "t", "p_value", "ci95", "significant", "reasons",
+                                        "se_eq9", "se_cluster", "covariance", "at_bound", "flags")}
             else:
                 out["fixed"][name] = par.value
         out.update({
             "ssr": self.ssr, "ser": _jsonable(self.ser), "n_data": self.n_data, "n_params": self.n_params,
             "starts": self.starts, "spread": _jsonable(self.spread),
             "condition_number": _jsonable(self.stats["condition_number"]),
+            "covariance_kind": self.stats.get("covariance_kind", "eq. 9"),
+            "se_ratio_max": _jsonable(self.stats.get("se_ratio_max", math.nan)),
+            "se_ratio_flag": bool(self.stats.get("se_ratio_flag", False)),
+            "residual_structure": {k: _jsonable(v) for k, v in self.stats.get("residuals", {}).items()
+                                   if k != "per_sample"},
             "correlated_pairs": [list(p) for p in self.stats["correlated_pairs"]],
             "correlation": {"names": list(self.stats["params"]),
                             "matrix": _jsonable(np.round(self.stats["correlation"], 4).tolist())},
@@ -118,11 +124,23 @@ class FitResult:
         for name, s in self.stats["params"].items():
             lo, hi = s["ci95"]
             flag = "; ".join(s["reasons"]) if s["reasons"] else "ok"
-            lines.append(f"{name:<16}{s['value']:>12.5g}{s['se']:>11.3g}{s['p_value']:>10.2g}   "
+            flag = "; ".join(s.get("flags", s["reasons"])) or "ok"
+            pv = "-" if s["p_value"] is None else f"{s['p_value']:.2g}"
+            lines.append(f"{name:<16}{s['value']:>12.5g}{s['se']:>11.3g}{pv:>10}   "
                          f"[{lo:.4g}, {hi:.4g}]  {flag}")
         for name, par in self.params.items():
             if name not in self.stats["params"]:
                 lines.append(f"{name:<16}{par.value:>12.5g}   (fixed)")
+        lines.append(f"SEP and intervals: {self.stats.get('covariance_kind', 'eq. 9')}"
+                     + (f" ({self.stats['clusters']} samples)" if self.stats.get("clusters") else "")
+                     + "; p omitted for ln_X parameters (X > 0 by construction: no meaningful null)")
+        if self.stats.get("se_ratio_flag"):
+            lines.append(f"flag: cluster-robust and eq. 9 SEs differ by up to {self.stats['se_ratio_max']:.2g}x: "
+                         "residuals are correlated within samples; eq. 9 alone would overstate the precision")
+        rs = self.stats.get("residuals")
+        if rs:
+            lines.append(f"residuals: mean lag-1 autocorrelation within samples {rs['mean_lag1']:.2f}; runs test "
+                         f"rejects randomness (p < 0.05) in {100 * rs['runs_reject_fraction']:.0f} % of samples")
         for a, b, c in self.stats["correlated_pairs"]:
             lines.append(f"correlation {a} / {b} = {c:+.3f} (> 0.95: not separately identifiable)")
         if self.grid_check:
@@ -284,7 +302,8 @@ def fit(model: ForwardModel, params: dict | None = None, *, global_search: bool 
     spread = _spread(sols, zb, sb, lo, hi)
     theta = prob.expand(zb)[0]
     J = prob.jac(zb)
-    st = parameter_statistics(prob.names, zb, J, sb, model.n_data, lo, hi)
+    st = parameter_statistics(prob.names, zb, J, sb, model.n_data, lo, hi, residuals=prob.resid(zb),
+                              clusters=model.sample_ids())
     fitted = {n: Parameter(n, float(v), params[n].min, params[n].max, params[n].vary)
               for n, v in zip(model.param_names, theta)}
     gc = _grid_check(model, params, theta, zb, sb, st) if grid_check else {}

@@ -527,6 +527,19 @@ class ForwardModel:
         self.weights = np.concatenate(ws)
         self.times = np.array(sorted({t for _, _, t in groups}))
 
+    def sample_ids(self) -> np.ndarray:
+        """For each measured value (in the order of ``y``), the sample it belongs to: one sieve
+        curve (condition, location, time) or one tracer curve. Residuals are correlated
+        within a sample, not between samples (the clusters of the robust covariance)."""
+        ids = np.repeat(np.arange(len(self.groups)), np.diff(self.group_slices))
+        blocks = [ids]
+        for k, (_, times) in enumerate(getattr(self, "_tracer", [])):
+            blocks.append(np.full(len(times), len(self.groups) + k))
+        out = np.concatenate(blocks)
+        if out.size != self.n_data:  # every value belongs to one sample
+            raise AssertionError(f"sample ids {out.size} != n_data {self.n_data}")
+        return out
+
     def _check_mill_location(self, loc, cond):
         spec = self.spec
         if loc in ("product", "holdup"):

@@ -10,14 +10,19 @@ __all__ = ["write_report", "parameter_table"]
 
 
 def parameter_table(result) -> str:
-    """The parameter table as CSV text (name, value, se, t, p_value, ci95_low, ci95_high, flags)."""
-    lines = ["name,value,se,t,p_value,ci95_low,ci95_high,significant,flags"]
+    """The parameter table as CSV text (name, value, se, se_eq9, se_cluster, t, p_value,
+    ci95_low, ci95_high, significant, flags); t and p are empty for ln_X parameters."""
+    def g(v, fmt):
+        return "" if v is None else format(v, fmt)
+    lines = ["name,value,se,se_eq9,se_cluster,t,p_value,ci95_low,ci95_high,significant,flags"]
     for name, s in result.stats["params"].items():
-        lines.append(f"{name},{s['value']:.8g},{s['se']:.4g},{s['t']:.4g},{s['p_value']:.4g},"
-                     f"{s['ci95'][0]:.6g},{s['ci95'][1]:.6g},{s['significant']},\"{'; '.join(s['reasons'])}\"")
+        lines.append(f"{name},{s['value']:.8g},{s['se']:.4g},{g(s.get('se_eq9'), '.4g')},"
+                     f"{g(s.get('se_cluster'), '.4g')},{g(s['t'], '.4g')},{g(s['p_value'], '.4g')},"
+                     f"{s['ci95'][0]:.6g},{s['ci95'][1]:.6g},{s['significant']},"
+                     f"\"{'; '.join(s.get('flags', s['reasons']))}\"")
     for name, par in result.params.items():
         if name not in result.stats["params"]:
-            lines.append(f"{name},{par.value:.8g},,,,,,,fixed")
+            lines.append(f"{name},{par.value:.8g},,,,,,,,,fixed")
     return "\n".join(lines) + "\n"
 
 

@@ -21,7 +21,8 @@ import math
 import numpy as np
 from scipy import stats
 
-__all__ = ["jacobian", "parameter_statistics", "information_criteria", "f_test", "CORR_LIMIT"]
+__all__ = ["jacobian", "parameter_statistics", "cluster_robust_covariance", "residual_structure",
+           "information_criteria", "f_test", "CORR_LIMIT", "SE_RATIO_FLAG"]
 
 CORR_LIMIT = 0.95
 _EPS3 = np.finfo(float).eps ** (1.0 / 3.0)
@@ -61,7 +62,61 @@ def jacobian(resid_pop, theta, lower, upper):
     return J
 
 
-def parameter_statistics(names, theta, J, ssr, n_data, lower=None, upper=None):
+#: A fit is flagged when the cluster-robust and eq. 9 standard errors differ by more than this factor.
+SE_RATIO_FLAG = 1.5
+
+
+def cluster_robust_covariance(J, r, clusters, n_params: int):
+    """Sample-clustered sandwich covariance (CR1) of least-squares estimates.
+
+    C = c (J^T J)^-1 [sum_g (J_g^T r_g)(J_g^T r_g)^T] (J^T J)^-1, c = G/(G-1) (n-1)/(n-p),
+    G clusters (samples: the residuals of one sieve curve are correlated with each other,
+    not with other samples). Valid whatever the within-sample correlation; needs G well
+    above 1. Returns (C, G). Liang and Zeger (1986); Cameron and Miller (2015).
+    """
+    J = np.asarray(J, float)
+    r = np.asarray(r, float)
+    ids = np.asarray(clusters)
+    uniq = np.unique(ids)
+    G, n = uniq.size, r.size
+    bread = np.linalg.pinv(J.T @ J)
+    scores = np.array([J[ids == g].T @ r[ids == g] for g in uniq])
+    meat = scores.T @ scores
+    c = (G / (G - 1.0)) * ((n - 1.0) / (n - n_params)) if G > 1 and n > n_params else math.nan
+    return c * bread @ meat @ bread, G
+
+
+def residual_structure(r, clusters) -> dict:
+    """Per sample: lag-1 autocorrelation of the residuals and a Wald-Wolfowitz runs test of
+    their signs (few runs: same-sign stretches the model misses). Summary: the mean lag-1
+    autocorrelation and the fraction of samples whose runs test rejects at p < 0.05."""
+    r = np.asarray(r, float)
+    ids = np.asarray(clusters)
+    per = []
+    for g in np.unique(ids):
+        e = r[ids == g]
+        ec = e - e.mean()
+        den = float(ec @ ec)
+        lag1 = float(ec[1:] @ ec[:-1]) / den if den > 0 and e.size > 2 else math.nan
+        s = e[e != 0] > 0
+        n1, n2 = int(s.sum()), int((~s).sum())
+        runs = 1 + int(np.count_nonzero(s[1:] != s[:-1])) if s.size else 0
+        n = n1 + n2
+        if n1 and n2 and n > 2:
+            mu = 1 + 2.0 * n1 * n2 / n
+            var = 2.0 * n1 * n2 * (2.0 * n1 * n2 - n) / (n * n * (n - 1))
+            p = float(stats.norm.cdf((runs - mu) / math.sqrt(var))) if var > 0 else math.nan  # one-sided: few runs
+        else:
+            p = math.nan
+        per.append({"sample": int(g), "n": int(e.size), "lag1": lag1, "runs": runs, "runs_p": p})
+    lag = [d["lag1"] for d in per if math.isfinite(d["lag1"])]
+    tested = [d for d in per if math.isfinite(d["runs_p"])]
+    return {"mean_lag1": float(np.mean(lag)) if lag else math.nan,
+            "runs_reject_fraction": (sum(d["runs_p"] < 0.05 for d in tested) / len(tested)) if tested else math.nan,
+            "per_sample": per}
+
+
+def parameter_statistics(names, theta, J, ssr, n_data, lower=None, upper=None, residuals=None, clusters=None):
     """Eq. 9 statistics of the varying parameters.
 
     Returns a dict with ``params`` (name -> value, se, t, p_value, ci95, significant,
@@ -94,13 +149,34 @@ def parameter_statistics(names, theta, J, ssr, n_data, lower=None, upper=None):
         se = np.full(p, math.inf)
     with np.errstate(divide="ignore", invalid="ignore"):
         corr = C / np.outer(se, se)
-    tq = float(stats.t.ppf(0.975, dof)) if dof > 0 else math.nan
+    C9, se9 = C, se
+    # Eq. 9 assumes independent residuals; neighbouring sieves of one cumulative curve are
+    # not. The default covariance keeps eq. 9's correlations and raises each SE to the
+    # sample-clustered sandwich SE where that is larger: D C9 D, D = max(1, se_cl/se_9).
+    robust, G, ratio = None, 0, np.ones(p)
+    if residuals is not None and clusters is not None and not singular and dof > 0:
+        C_cl, G = cluster_robust_covariance(J, residuals, clusters, p)
+        if G >= 3 and np.all(np.isfinite(C_cl)):
+            se_cl = np.sqrt(np.clip(np.diag(C_cl), 0.0, None))
+            with np.errstate(divide="ignore", invalid="ignore"):
+                ratio = np.where(se9 > 0, se_cl / se9, 1.0)
+            D = np.maximum(1.0, ratio)
+            C = C9 * np.outer(D, D)
+            se = se9 * D
+            robust = {"se": se_cl, "ratio": ratio, "clusters": G}
+    kind = ("eq. 9 with each SE raised to the sample-clustered sandwich (CR1) SE where larger"
+            if robust is not None else "eq. 9")
+    # intervals and p: t with the residual dof, or G - 1 where the cluster-robust SE was used
+    dof_t = min(dof, G - 1) if robust is not None and np.any(ratio > 1) else dof
+    tq = float(stats.t.ppf(0.975, dof_t)) if dof_t > 0 else math.nan
     params, pairs = {}, []
     for k, name in enumerate(names):
         v, s = float(theta[k]), float(se[k])
         is_log = name.startswith("ln_")
-        tval = (1.0 / s if s > 0 else math.inf) if is_log else (v / s if s > 0 else math.inf)
-        pval = float(2 * stats.t.sf(abs(tval), dof)) if dof > 0 else math.nan
+        # ln_X: X = exp(ln_X) > 0 by construction, so no null hypothesis is meaningful
+        # (ln X = 0 would test X = 1 in whatever units): t and p are omitted (None)
+        tval = None if is_log else (v / s if s > 0 else math.inf)
+        pval = None if is_log else (float(2 * stats.t.sf(abs(tval), dof_t)) if dof_t > 0 else math.nan)
         ci = [v - tq * s, v + tq * s]
         reasons = []
         if is_log:
@@ -115,15 +191,26 @@ def parameter_statistics(names, theta, J, ssr, n_data, lower=None, upper=None):
                         and (np.isclose(v, lower[k], atol=1e-8) or np.isclose(v, upper[k], atol=1e-8)))
         if at_bound:
             reasons.append("at a bound (statistics not valid there)")
-        params[name] = {"value": v, "se": s, "t": float(tval), "p_value": pval, "ci95": ci,
-                        "significant": not reasons, "reasons": reasons, "at_bound": at_bound}
+        flags = list(reasons)
+        if robust is not None and not (1 / SE_RATIO_FLAG <= ratio[k] <= SE_RATIO_FLAG):
+            flags.append(f"cluster-robust SE {ratio[k]:.2g} x eq. 9 (residuals correlated within samples)")
+        params[name] = {"value": v, "se": s, "t": None if tval is None else float(tval), "p_value": pval,
+                        "ci95": ci, "significant": not reasons, "reasons": reasons, "at_bound": at_bound,
+                        "se_eq9": float(se9[k]), "se_cluster": None if robust is None else float(robust["se"][k]),
+                        "covariance": kind, "flags": flags}
     for a in range(p):
         for b in range(a + 1, p):
             if np.isfinite(corr[a, b]) and abs(corr[a, b]) > CORR_LIMIT:
                 pairs.append((names[a], names[b], float(corr[a, b])))
-    return {"params": params, "covariance": C, "correlation": corr, "condition_number": cond_scaled,
-            "condition_number_raw": cond_raw, "ser": math.sqrt(ser2) if dof > 0 else math.nan, "dof": dof,
-            "correlated_pairs": pairs, "singular": singular}
+    out = {"params": params, "covariance": C, "covariance_eq9": C9, "covariance_kind": kind,
+           "correlation": corr, "condition_number": cond_scaled,
+           "condition_number_raw": cond_raw, "ser": math.sqrt(ser2) if dof > 0 else math.nan, "dof": dof,
+           "dof_intervals": dof_t, "correlated_pairs": pairs, "singular": singular,
+           "clusters": G, "se_ratio_max": float(np.max(ratio)) if robust is not None else math.nan,
+           "se_ratio_flag": bool(robust is not None and np.any((ratio > SE_RATIO_FLAG) | (ratio < 1 / SE_RATIO_FLAG)))}
+    if residuals is not None and clusters is not None:
+        out["residuals"] = residual_structure(residuals, clusters)
+    return out
 
 
 def information_criteria(ssr: float, n: int, p: int) -> dict:
