@@ -87,7 +87,8 @@ class FitResult:
                 s = self.stats["params"][name]
                 out["params"][name] = {k: _jsonable(s.get(k)) for k in
                                        ("value", "se", "t", "p_value", "ci95", "significant", "reasons",
-                                        "se_eq9", "se_cluster", "covariance", "at_bound", "flags")}
+                                        "se_eq9", "se_cluster", "covariance", "at_bound", "flags",
+                                        "start_range", "grid_dependent")}
             else:
                 out["fixed"][name] = par.value
         out.update({
@@ -307,6 +308,7 @@ def fit(model: ForwardModel, params: dict | None = None, *, global_search: bool 
     fitted = {n: Parameter(n, float(v), params[n].min, params[n].max, params[n].vary)
               for n, v in zip(model.param_names, theta)}
     gc = _grid_check(model, params, theta, zb, sb, st) if grid_check else {}
+    _flag_parameters(st, gc, sols, prob.names, model.n_data)
     names = prob.names
     solutions = [(float(s), {n: float(v) for n, v in zip(names, z)}) for s, z in sols]
     say(f"done: SSR {sb:.6g}, spread {spread:.3g}, {time.perf_counter() - t0:.1f} s")
@@ -327,10 +329,47 @@ def _grid_check(model, params, theta, zb, sb, st) -> dict:
     z2, s2 = _local(prob, zb)
     se = np.array([st["params"][n]["se"] for n in prob.names])
     with np.errstate(divide="ignore", invalid="ignore"):
-        shift = float(np.nanmax(np.abs(z2 - zb) / se)) if np.all(se > 0) else math.nan
+        shifts = np.abs(z2 - zb) / se
+    shift = float(np.nanmax(shifts)) if np.all(se > 0) else math.nan
     return {"n": model.n, "n_refined": fine.n, "ssr": sb, "ssr_refined": s_same,
             "relative_change": abs(s_same - sb) / max(sb, 1e-300), "ssr_refit": s2,
-            "relative_change_refit": abs(s2 - sb) / max(sb, 1e-300), "max_param_shift_in_se": shift}
+            "relative_change_refit": abs(s2 - sb) / max(sb, 1e-300), "max_param_shift_in_se": shift,
+            "param_shift_in_se": {n: float(v) for n, v in zip(prob.names, shifts)}}
+
+
+#: A parameter that moves more than this many SE when the grid is refined is "grid-dependent".
+GRID_SHIFT_FLAG_SE = 1.0
+
+
+def _flag_parameters(st: dict, gc: dict, sols, names, n_data: int) -> None:
+    """Make the grid check and the multi-start search act on each parameter's flags.
+
+    - grid-dependent: the re-fit on the refined grid moves it by more than
+      GRID_SHIFT_FLAG_SE standard errors (the discretisation error is not negligible);
+    - not unique over starts: starts whose SSR lies inside the joint 95 % confidence
+      region of the best, SSR <= SSR_best (1 + p/(n - p) F_{p, n-p, 0.95}) (they fit
+      equally well within the noise), span more than 2 SE of the parameter. Its range
+      over those starts is reported as ``start_range``.
+    """
+    from scipy import stats as _stats
+
+    for n, shift in gc.get("param_shift_in_se", {}).items():
+        if math.isfinite(shift) and shift > GRID_SHIFT_FLAG_SE:
+            st["params"][n]["flags"].append(f"grid-dependent (moves {shift:.2g} SE when the grid is refined)")
+            st["params"][n]["grid_dependent"] = True
+    p = len(names)
+    if not sols or n_data <= p:
+        return
+    best = sols[0][0]
+    limit = best * (1 + p / (n_data - p) * float(_stats.f.ppf(0.95, p, n_data - p)))
+    within = np.array([z for s, z in sols if s <= limit])
+    for k, n in enumerate(names):
+        lo, hi = float(within[:, k].min()), float(within[:, k].max())
+        s = st["params"][n]
+        s["start_range"] = [lo, hi]
+        s["starts_within_noise"] = int(len(within))
+        if math.isfinite(s["se"]) and hi - lo > 2 * s["se"]:
+            s["flags"].append(f"not unique over starts (equally good fits range {lo:.4g} to {hi:.4g})")
 
 
 def _spread(sols, zb, sb, lo, hi) -> float:
