@@ -16,7 +16,7 @@ def test_grid_dependent_and_start_range_are_reported(tmp_path):
     flagged = {n for n, s in res.stats["params"].items() if any("grid-dependent" in f for f in s["flags"])}
     assert flagged == {n for n, v in shifts.items() if v > 1.0} and flagged
     d = res.to_dict()["params"]
-    for n, s in d.items():
+    for s in d.values():
         lo, hi = s["start_range"]
         assert lo <= s["value"] <= hi or np.isclose(lo, s["value"]) or np.isclose(hi, s["value"])
         assert ("grid_dependent" in s) and ("flags" in s) and ("covariance" in s)
