@@ -95,10 +95,10 @@ def main(argv: list[str] | None = None) -> int:
             warnings.showwarning = _one_line_warning
             return int(args.func(args) or 0)
     except (SolverError, OutputError) as err:
-        print(f"{name}: error: {err}", file=sys.stderr)
+        print(f"{name}: error: {one_line(err)}", file=sys.stderr)
         return 1
     except MillflowError as err:
-        print(f"{name}: error: {err}", file=sys.stderr)
+        print(f"{name}: error: {one_line(err)}", file=sys.stderr)
         return 2
     except KeyboardInterrupt:
         print(f"{name}: interrupted; no partial results were written", file=sys.stderr)
@@ -113,12 +113,23 @@ def main(argv: list[str] | None = None) -> int:
     except Exception as err:  # a bug: one line, not a traceback (MILLFLOW_DEBUG=1 shows it)
         if os.environ.get("MILLFLOW_DEBUG"):
             raise
-        print(f"{name}: internal error: {type(err).__name__}: {err} "
+        print(f"{name}: internal error: {type(err).__name__}: {one_line(err)} "
               "(please report it; MILLFLOW_DEBUG=1 shows the traceback)", file=sys.stderr)
         return 1
     finally:
         if previous is not None:
             signal.signal(signal.SIGTERM, previous)
+
+
+def one_line(err) -> str:
+    """An error message as one line a person reads: numpy reprs as plain numbers
+    (np.float64(0.5) -> 0.5), a doubled sign (--1e+07) single, a prefix repeated by
+    nested wrappers ("a.toml: a.toml: ...") once, whitespace collapsed."""
+    msg = " ".join(str(err).split())
+    msg = re.sub(r"np\.(?:float|int|uint|bool_)\w*\(([^()]*)\)", r"\1", msg)
+    msg = re.sub(r"(?<![\w-])--(?=\d)", "-", msg)
+    msg = re.sub(r"^((?:[^:]+: ))\1+", r"\1", msg)
+    return msg
 
 
 def _main_thread() -> bool:

@@ -145,3 +145,10 @@ def test_every_command_help_is_plain_text_with_an_example(capsys, command):
     assert "example: millflow " in out and "``" not in out and ":func:" not in out
     if command != "bench":  # bench writes no files
         assert "--out" in out and "--json" in out and "--quiet" in out
+
+
+def test_error_lines_read_as_plain_text():
+    """Issue 10 §5: no numpy reprs, no doubled prefixes, no '--1e+07' in messages."""
+    from millflow.cli import one_line
+    msg = one_line("f.toml: f.toml: units.x.d = np.float64(0.0): expected > --1e+07 (give --out)\n more")
+    assert msg == "f.toml: units.x.d = 0.0: expected > -1e+07 (give --out) more"
