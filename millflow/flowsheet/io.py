@@ -179,6 +179,8 @@ def _feed_psd(t: _Table, grid: SizeGrid) -> np.ndarray:
         try:
             return from_sieves(size, passing, grid)
         except GridError as exc:
+            if size[0] <= grid.x[0] * (1 + 1e-12):  # the grid does cover it: say what is wrong instead
+                raise GridError(f"{t.where}: {exc}") from exc
             raise GridError(f"{t.where}: the size grid does not cover the feed (grid.top = {grid.x[0] * 1e6:.6g} um, "
                             f"coarsest sieve {size[0] * 1e6:.6g} um): {exc}") from exc
     if form in ("rosin_rammler", "ggs"):
