@@ -14,7 +14,8 @@ import numpy as np
 import xarray as xr
 
 from millflow.mill.accuracy import check_accuracy
-from millflow.mill.steady import _check_feed, _scene, _solve, steady_mill, transfer_matrix
+from millflow.mill.scene import _check_feed, _scene
+from millflow.mill.steady import _solve, steady_mill, transfer_matrix
 from millflow.mill.transient import transient_mill
 
 __all__ = ["Mill"]

@@ -37,170 +37,20 @@ from __future__ import annotations
 
 import dataclasses
 import time
-from dataclasses import dataclass
 
 import numpy as np
 import xarray as xr
 
-import rtd
-from millflow import checks
 from millflow.errors import InputError, SolverError
 from millflow.mill.accuracy import check_accuracy
+from millflow.mill.scene import (METHODS, WHERE, _check_feed, _part_scene, _Scene, _scene, _tau,
+                                 choose_method)
 from millflow.mill.axial import solve_axial
-from millflow.mill.cells import network_of, solve_cells
+from millflow.mill.cells import solve_cells
 from millflow.mill.segregated import plug_flow, segregated, segregated_quadrature
 from millflow.mill.well_mixed import solve_well_mixed
 
 __all__ = ["METHODS", "steady_mill", "transfer_matrix", "choose_method", "WHERE"]
-
-#: Steady-state methods by name (see the module docstring).
-METHODS = ("well_mixed", "cells", "plug_flow", "segregated", "axial_fv", "composed", "quadrature")
-#: Where classification acts: at the discharge (exit flows), at every cell outlet
-#: (every flow of a cell network), along the axis (axial velocity of class i = d_i* u).
-WHERE = ("discharge", "cells", "axis")
-
-
-# ----------------------------------------------------------------------- checking
-def _kind(transport) -> str:
-    if isinstance(transport, rtd.PerfectMixing):
-        return "perfect_mixing"
-    if isinstance(transport, rtd.PlugFlow):
-        return "plug"
-    if isinstance(transport, rtd.AxialDispersion):
-        return "axial" if transport.bc == "closed" else "rtd"
-    if isinstance(transport, rtd.Series):
-        return "series"
-    if isinstance(transport, rtd.Parallel):
-        return "parallel"
-    if network_of(transport) is not None:
-        return "network"
-    if hasattr(transport, "laplace") and hasattr(transport, "mean"):
-        return "rtd"
-    raise InputError(
-        f"transport is {transport!r}; expected an rtd model (rtd.PerfectMixing, rtd.PlugFlow, "
-        "rtd.TanksInSeries, rtd.RecirculatingCells, rtd.AxialDispersion, rtd.Series, ...)")
-
-
-_WHERE_OK = {
-    "perfect_mixing": ("discharge", "cells"),
-    "network": ("discharge", "cells"),
-    "plug": ("axis",),
-    "axial": ("axis",),
-    "rtd": (),
-    "series": (),
-    "parallel": (),
-}
-_WHERE_DEFAULT = {"perfect_mixing": "discharge", "network": "discharge", "plug": "axis", "axial": "axis"}
-
-
-def _check_feed(feed, n: int) -> np.ndarray:
-    feed = np.asarray(feed, dtype=float)
-    if feed.ndim == 2 and feed.shape[0] == n:
-        if not np.all(np.isfinite(feed)) or np.any(feed < 0):
-            raise InputError("feed: expected finite flows >= 0 in every column")
-        return feed
-    return checks.class_vector(feed, n, "feed", "feed flow")
-
-
-@dataclass(frozen=True)
-class _Scene:
-    """A validated mill definition: what the solvers need and nothing more."""
-
-    S: np.ndarray
-    b: np.ndarray
-    transport: object
-    kind: str
-    d: np.ndarray | None
-    where: str | None
-    dispersion: np.ndarray | None
-    method: str
-    network: object = None
-    forced: bool = False
-
-
-def _scene(S, b, transport, d=None, where=None, dispersion=None, method=None) -> _Scene:
-    S, b = checks.kernel(S, b)
-    n = S.size
-    kind = _kind(transport)
-    if d is not None:
-        d = checks.class_vector(d, n, "d", "normalised discharge rate d_i*", positive=True)
-    if dispersion is not None:
-        if kind != "axial":
-            raise InputError(f"dispersion is given but transport {transport!r} has no axial "
-                             "dispersion; expected rtd.AxialDispersion(bc='closed')")
-        dispersion = checks.class_vector(dispersion, n, "dispersion", "relative dispersion", positive=True)
-    if d is not None:
-        allowed = _WHERE_OK[kind]
-        if not allowed:
-            raise InputError(
-                f"transport {transport!r} cannot carry classification d (it has no cells or axis "
-                "to place it on); expected rtd.PerfectMixing, rtd.TanksInSeries (integer n), "
-                "rtd.RecirculatingCells, a CompartmentNetwork, rtd.PlugFlow or "
-                "rtd.AxialDispersion(bc='closed'), or d=None")
-        where = _WHERE_DEFAULT[kind] if where is None else where
-        if kind == "network" and not isinstance(where, str):
-            where = _cell_list(where, network_of(transport).n)
-        elif where not in allowed:
-            raise InputError(f"where = {where!r} is not possible for {type(transport).__name__}; "
-                             f"expected one of {', '.join(map(repr, allowed))}")
-    elif where is not None and isinstance(where, str) and where not in WHERE:
-        raise InputError(f"where = {where!r}; expected one of {', '.join(map(repr, WHERE))}")
-    chosen = choose_method(kind, d is not None or dispersion is not None)
-    if method is None:
-        method = chosen
-    elif method not in METHODS:
-        raise InputError(f"method = {method!r} is unknown; expected one of {', '.join(METHODS)}")
-    elif method != chosen and not _method_applies(method, kind, d, dispersion):
-        raise InputError(f"method = {method!r} does not apply to {transport!r}"
-                         f"{' with classification' if d is not None else ''}; the exact method is {chosen!r}")
-    net = network_of(transport) if method == "cells" else None
-    return _Scene(S, b, transport, kind, d, where, dispersion, method, net, method != chosen)
-
-
-def _cell_list(where, n: int) -> tuple:
-    try:
-        cells = tuple(int(k) for k in where)
-    except (TypeError, ValueError):
-        raise InputError(f"where = {where!r}; expected 'discharge', 'cells' or 1-based cell numbers") from None
-    bad = [k for k in cells if not 1 <= k <= n]
-    if bad or not cells:
-        raise InputError(f"where = {where!r}: cell {bad[0] if bad else '(none)'} is not in 1..{n}; "
-                         "expected 1-based cell numbers of the network")
-    return cells
-
-
-def choose_method(kind: str, classified: bool) -> str:
-    """The cheapest exact method for a transport kind (see the module docstring)."""
-    if kind == "perfect_mixing":
-        return "well_mixed"
-    if kind == "network":
-        return "cells"
-    if kind == "plug":
-        return "plug_flow"
-    if kind == "axial":
-        return "axial_fv" if classified else "segregated"
-    if kind in ("series", "parallel"):
-        return "composed"
-    return "segregated"
-
-
-def _method_applies(method, kind, d, dispersion) -> bool:
-    if method in ("segregated", "quadrature"):
-        return d is None and dispersion is None and kind != "plug"
-    if method == "cells":
-        return kind in ("perfect_mixing", "network")
-    if method == "axial_fv":
-        return kind == "axial"
-    return False
-
-
-def _part_scene(sc: _Scene, part) -> _Scene:
-    """Scene of one part of a Series or Parallel (breakage already validated)."""
-    kind = _kind(part)
-    method = choose_method(kind, False)
-    net = network_of(part) if method == "cells" else None
-    return _Scene(sc.S, sc.b, part, kind, None, None, None, method, net, False)
-
 
 def _solve_composed(sc: _Scene, feed, *, tol: float, holdup: bool, cache: dict | None = None):
     """Series: each part grinds the previous part's product (first-order breakage:
@@ -226,79 +76,107 @@ def _solve_composed(sc: _Scene, feed, *, tol: float, holdup: bool, cache: dict |
     return product, (hold if holdup else None), error, methods
 
 
-def _tau(transport) -> float:
-    tau = float(transport.mean)
-    if not np.isfinite(tau) or tau <= 0:
-        raise InputError(f"transport mean residence time is {tau!r}; expected tau > 0 [s]")
-    return tau
+def _well_mixed(sc, feed, out, *, tol, holdup, cache):
+    tau = _tau(sc.transport)
+    p = solve_well_mixed(sc.S, sc.b, feed, tau, sc.d)
+    dd = 1.0 if sc.d is None else (sc.d if np.ndim(feed) == 1 else sc.d[:, None])
+    out.update(product=p, holdup=tau * p / dd, error=_triangular_error(p))
+    out["cell_holdup"] = (tau * p / dd)[np.newaxis]
+    return sc
 
 
-# ------------------------------------------------------------------------ solving
+def _cells(sc, feed, out, *, tol, holdup, cache):
+    sol = solve_cells(sc.S, sc.b, feed, sc.network, sc.d, sc.where)
+    out.update(product=sol.product, holdup=sol.holdup.sum(axis=0), error=_triangular_error(sol.product))
+    out["cell_holdup"] = sol.holdup
+    out["extras"].update(solver=sol.method, kernel=sol.kernel)
+    return sc
+
+
+def _keep_blocks(out, cache, key):
+    """The spectral decomposition a solve returned, kept in a Mill's cache."""
+    blocks = out["extras"].pop("blocks", None)
+    if blocks is not None and cache is not None:
+        cache[key] = blocks
+
+
+def _plug_flow(sc, feed, out, *, tol, holdup, cache):
+    d = sc.d
+    rates = sc.S if d is None else sc.S / d
+    blocks = None if cache is None else cache.get("plug")
+    p, h, err, info = plug_flow(rates, sc.b, feed, _tau(sc.transport), holdup=holdup, blocks=blocks)
+    if d is not None and h is not None:
+        h = h / (d if np.ndim(feed) == 1 else d[:, None])
+    out.update(product=p, holdup=h, error=err)
+    out["extras"].update(info)
+    _keep_blocks(out, cache, "plug")
+    return sc
+
+
+def _segregated(sc, feed, out, *, tol, holdup, cache):
+    blocks = None if cache is None else cache.get("segregated")
+    try:
+        p, h, err, info = segregated(sc.S, sc.b, feed, sc.transport, holdup=holdup, blocks=blocks)
+    except SolverError as exc:
+        if sc.forced or sc.kind != "axial":
+            raise
+        p, err, info = None, np.inf, {"fallback_reason": str(exc)}
+    scale = float(np.abs(feed).sum(axis=0).max()) if np.size(feed) else 0.0
+    too_large = err > max(tol, 1e-10) * max(scale, 1.0)
+    if not sc.forced and sc.kind != "axial" and too_large:
+        info["advice"] = ("the eigenbasis cancels for these rates; method='quadrature' integrates "
+                          "E(t) exp(K t) f over t instead (slower, exact to its tolerance)")
+    out["extras"].update(info)
+    _keep_blocks(out, cache, "segregated")
+    if sc.kind == "axial" and not sc.forced and too_large:
+        # rates so close over many classes that the eigenbasis cancels: the finite
+        # volumes never divide by rate differences
+        out["extras"]["fallback"] = f"segregated error estimate {err:.1e} > tol; axial_fv"
+        return dataclasses.replace(sc, method="axial_fv")
+    out.update(product=p, holdup=h, error=err)
+    return sc
+
+
+def _quadrature(sc, feed, out, *, tol, holdup, cache):
+    p, h, err, info = segregated_quadrature(sc.S, sc.b, feed, sc.transport, holdup=holdup, tol=min(tol, 1e-10))
+    out.update(product=p, holdup=h, error=err)
+    out["extras"].update(info)
+    return sc
+
+
+def _composed(sc, feed, out, *, tol, holdup, cache):
+    p, h, err, methods = _solve_composed(sc, feed, tol=tol, holdup=holdup, cache=cache)
+    out.update(product=p, holdup=h, error=err)
+    out["extras"]["parts"] = ", ".join(methods)
+    return sc
+
+
+def _axial_fv(sc, feed, out, *, tol, holdup, cache):
+    T = sc.transport
+    sol = solve_axial(sc.S, sc.b, feed, T.tau, T.pe, v=sc.d, w=sc.dispersion, tol=tol)
+    out.update(product=sol.product, holdup=sol.holdup, error=sol.error_estimate)
+    out["axial"] = sol
+    out["extras"].update(order=sol.order, control_volumes=int(sol.z.size - 1))
+    return sc
+
+
+#: Method name -> solver(scene, feed, out, *, tol, holdup, cache) -> scene. A solver fills
+#: ``out`` and returns its scene, or a scene with another method to fall back to.
+SOLVERS = {"well_mixed": _well_mixed, "cells": _cells, "plug_flow": _plug_flow, "segregated": _segregated,
+           "quadrature": _quadrature, "composed": _composed, "axial_fv": _axial_fv}
+
+
 def _solve(sc: _Scene, feed, *, tol: float, holdup: bool = True, cache: dict | None = None):
-    """Dispatch to the method. Returns dict with product, holdup, error, extras.
+    """Dispatch to the method (:data:`SOLVERS`). Returns dict with product, holdup,
+    error, extras, method.
 
     ``cache`` (a Mill's) keeps the spectral decomposition of the breakage matrix
     between calls of the plug-flow and segregated paths."""
-    key = "plug" if sc.method == "plug_flow" else "segregated"  # the two choose gaps differently
-    blocks = None if cache is None else cache.get(key)
-    S, b, d, T = sc.S, sc.b, sc.d, sc.transport
     out = {"extras": {}}
-    if sc.method == "well_mixed":
-        tau = _tau(T)
-        p = solve_well_mixed(S, b, feed, tau, d)
-        dd = 1.0 if d is None else (d if np.ndim(feed) == 1 else d[:, None])
-        out.update(product=p, holdup=tau * p / dd, error=_triangular_error(p))
-        out["cell_holdup"] = (tau * p / dd)[np.newaxis]
-    elif sc.method == "cells":
-        sol = solve_cells(S, b, feed, sc.network, d, sc.where)
-        out.update(product=sol.product, holdup=sol.holdup.sum(axis=0), error=_triangular_error(sol.product))
-        out["cell_holdup"] = sol.holdup
-        out["extras"]["solver"] = sol.method
-        out["extras"]["kernel"] = sol.kernel
-    elif sc.method == "plug_flow":
-        rates = S if d is None else S / d
-        p, h, err, info = plug_flow(rates, b, feed, _tau(T), holdup=holdup, blocks=blocks)
-        if d is not None and h is not None:
-            h = h / (d if np.ndim(feed) == 1 else d[:, None])
-        out.update(product=p, holdup=h, error=err)
-        out["extras"].update(info)
-    elif sc.method == "segregated":
-        try:
-            p, h, err, info = segregated(S, b, feed, T, holdup=holdup, blocks=blocks)
-        except SolverError as exc:
-            if sc.forced or sc.kind != "axial":
-                raise
-            p, err, info = None, np.inf, {"fallback_reason": str(exc)}
-        scale = float(np.abs(feed).sum(axis=0).max()) if np.size(feed) else 0.0
-        if not sc.forced and sc.kind != "axial" and err > max(tol, 1e-10) * max(scale, 1.0):
-            info["advice"] = ("the eigenbasis cancels for these rates; method='quadrature' integrates "
-                              "E(t) exp(K t) f over t instead (slower, exact to its tolerance)")
-        if sc.kind == "axial" and not sc.forced and err > max(tol, 1e-10) * max(scale, 1.0):
-            # rates so close over many classes that the eigenbasis cancels: the
-            # finite volumes never divide by rate differences
-            info.pop("blocks", None)
-            sc = dataclasses.replace(sc, method="axial_fv")
-            out["extras"]["fallback"] = f"segregated error estimate {err:.1e} > tol; axial_fv"
-        else:
-            out.update(product=p, holdup=h, error=err)
-        out["extras"].update(info)
-    if "blocks" in out["extras"]:
-        blocks = out["extras"].pop("blocks")
-        if cache is not None:
-            cache[key] = blocks
-    if sc.method == "quadrature":
-        p, h, err, info = segregated_quadrature(S, b, feed, T, holdup=holdup, tol=min(tol, 1e-10))
-        out.update(product=p, holdup=h, error=err)
-        out["extras"].update(info)
-    if sc.method == "composed":
-        p, h, err, methods = _solve_composed(sc, feed, tol=tol, holdup=holdup, cache=cache)
-        out.update(product=p, holdup=h, error=err)
-        out["extras"]["parts"] = ", ".join(methods)
-    if sc.method == "axial_fv":
-        sol = solve_axial(S, b, feed, T.tau, T.pe, v=d, w=sc.dispersion, tol=tol)
-        out.update(product=sol.product, holdup=sol.holdup, error=sol.error_estimate)
-        out["axial"] = sol
-        out["extras"].update(order=sol.order, control_volumes=int(sol.z.size - 1))
+    nxt = SOLVERS[sc.method](sc, feed, out, tol=tol, holdup=holdup, cache=cache)
+    while nxt.method != sc.method:  # a fallback (segregated -> axial_fv)
+        sc = nxt
+        nxt = SOLVERS[sc.method](sc, feed, out, tol=tol, holdup=holdup, cache=cache)
     out["method"] = sc.method
     return out
 

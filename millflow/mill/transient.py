@@ -30,7 +30,8 @@ from scipy.integrate import solve_ivp
 from millflow.batch import batch_grind
 from millflow.errors import InputError, SolverError
 from millflow.linalg import breakage_matrix
-from millflow.mill.steady import _check_feed, _scene, _size_coords, _tau
+from millflow.mill.scene import _check_feed, _scene, _tau
+from millflow.mill.steady import _size_coords
 from millflow.mill.axial import _bernoulli, solve_axial_grid
 from millflow.mill.cells import cell_operators, solve_cells
 from millflow.mill.segregated import plug_flow
