@@ -85,13 +85,16 @@ MODES = ("batch", "plug_flow", "well_mixed", "mill")
 #: cumulative-passing data resolve ~1e-4 at best, ten times coarser.
 FORWARD_TOL = 1e-5
 
-TRANSPORTS = {
-    "perfect_mixing": ("PerfectMixing", (), ()),
-    "tanks_in_series": ("TanksInSeries", ("n",), ()),
-    "recirculating_cells": ("RecirculatingCells", ("n",), ("r", "dead", "bypass")),
-    "axial_dispersion": ("AxialDispersion", ("pe",), ("bc",)),
-    "plug_flow": ("PlugFlow", (), ()),
-}
+def _transports() -> dict:
+    """name -> (rtd class name, required, optional): a view of rtd's one table
+    (:mod:`rtd.names`); a fixed keyword such as the axial vessel's ``bc`` may be overridden."""
+    from rtd import names
+
+    return {name: (e.cls.__name__, e.required, e.optional + tuple(k for k, _ in e.fixed))
+            for name, e in names.TRANSPORTS.items()}
+
+
+TRANSPORTS = _transports()
 _CELL_TRANSPORTS = ("perfect_mixing", "tanks_in_series", "recirculating_cells")
 #: Transport parameters that mode "mill" can fit: name -> (fit parameter, transports).
 TRANSPORT_FIT = {"tau": ("ln_tau", tuple(TRANSPORTS)), "pe": ("ln_pe", ("axial_dispersion",)),
@@ -225,8 +228,12 @@ class ModelSpec:
                 raise InputError(f"model.transport, transport_params and where need mode = 'mill' "
                                  f"(mode is {self.mode!r})")
             return
-        if self.transport not in TRANSPORTS:
-            raise InputError(f"model.transport = {self.transport!r}: mode 'mill' needs one of {list(TRANSPORTS)}")
+        from rtd import names as rtd_names
+        try:  # canonical name from rtd's table; its aliases (tis, cells, ad-closed, ...) accepted
+            object.__setattr__(self, "transport", rtd_names.canonical_name(self.transport))
+        except ValueError:
+            raise InputError(f"model.transport = {self.transport!r}: mode 'mill' needs one of {list(TRANSPORTS)} "
+                             f"(or an alias: {', '.join(rtd_names.ALIASES)})") from None
         _, required, optional = TRANSPORTS[self.transport]
         names = dict(tp)
         unknown = sorted(set(names) - set(required) - set(optional))
@@ -250,9 +257,10 @@ class ModelSpec:
         """The rtd transport model of mode "mill" with mean residence time ``tau`` [s]
         (``fitted``: values of fitted transport parameters, e.g. pe=8.0, r=1.0)."""
         import rtd
-        cls = getattr(rtd, TRANSPORTS[self.transport][0])
+        from rtd import names as rtd_names
+        entry = rtd_names.TRANSPORTS[self.transport]
         try:
-            return cls(float(tau), **{**dict(self.transport_params), **fitted})
+            return entry.cls(float(tau), **{**dict(entry.fixed), **dict(self.transport_params), **fitted})
         except (rtd.RTDError, TypeError, ValueError) as exc:
             raise InputError(f"model.transport = {self.transport!r} with transport_params "
                              f"{dict(self.transport_params)}: {exc}") from exc

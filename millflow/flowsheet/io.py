@@ -23,6 +23,7 @@ from millflow.flowsheet.graph import Flowsheet, Stream
 from millflow.flowsheet.units import (TRANSPORTS, UNIT_TYPES, Classifier, Feed, MillUnit, Mixer,
                                       Product, Splitter)
 from millflow.grid import SizeGrid
+from rtd import names as rtd_names
 from millflow.inputs import read_text
 from millflow.psd import from_distribution, from_sieves, gates_gaudin_schuhmann, rosin_rammler
 
@@ -316,15 +317,21 @@ def _mill(name: str, t: _Table, materials: dict) -> MillUnit:
     tr = t.sub("transport", None)
     model, tparams = "perfect_mixing", {}
     if tr is not None:
-        model = tr.plain("model", kind=str)
-        if model not in TRANSPORTS:
-            raise InputError(f"{tr.where}.model = {model!r}: unknown transport model; valid: "
-                             f"{', '.join(sorted(TRANSPORTS))}")
-        for k in list(inspect.signature(TRANSPORTS[model]).parameters)[1:]:
+        raw = tr.plain("model", kind=str)
+        try:  # the one table of transport names (rtd.names): canonical names and aliases
+            model = rtd_names.canonical_name(raw)
+        except ValueError:
+            raise InputError(f"{tr.where}.model = {raw!r}: unknown transport model; valid: "
+                             f"{', '.join(sorted(TRANSPORTS))} (aliases: {', '.join(rtd_names.ALIASES)})") from None
+        entry = rtd_names.TRANSPORTS[model]
+        for k in entry.required:
             tparams[k] = tr.plain(k, kind=float)
             if tparams[k] <= 0:
                 raise InputError(f"{tr.where}.{k} = {tparams[k]!r}: expected > 0")
-        tr.finish(", ".join(["model"] + list(tparams)))
+        for k in entry.optional:
+            if k in tr.data:
+                tparams[k] = tr.plain(k, kind=float)
+        tr.finish(", ".join(["model", *entry.required, *entry.optional]))
     design = None
     from millflow.scaleup.flowsheet import ScaledRate, design_from_table, is_design
     if is_design(t.data):  # a mill by dimensions and operation: hold-up, power (and rate) computed

@@ -32,18 +32,14 @@ __all__ = [
 
 
 def _transport_registry() -> dict:
-    import rtd
+    from rtd import names
 
-    return {
-        "perfect_mixing": lambda tau: rtd.PerfectMixing(tau),
-        "tanks_in_series": lambda tau, n: rtd.TanksInSeries(tau, n),
-        "plug_flow": lambda tau: rtd.PlugFlow(tau),
-        "axial_dispersion": lambda tau, pe: rtd.AxialDispersion(tau, pe),
-    }
+    return {name: entry.build for name, entry in names.TRANSPORTS.items()}
 
 
-#: Transport (residence time distribution) models by the name used in flowsheet files;
-#: each builds an ``rtd`` model from tau [s] and its own parameters.
+#: Transport (residence time distribution) models by their canonical name in rtd's one
+#: table (:mod:`rtd.names`; flowsheet files also accept its aliases); each builds an
+#: ``rtd`` model from tau [s] and its own parameters.
 TRANSPORTS = _transport_registry()
 
 

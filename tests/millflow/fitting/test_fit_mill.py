@@ -94,9 +94,12 @@ def test_mill_mode_axial_samples_match_steady_mill():
 
 
 def test_mill_mode_names_are_validated():
-    with pytest.raises(InputError, match="'perfect_mixing', 'tanks_in_series', 'recirculating_cells', "
-                                         "'axial_dispersion', 'plug_flow'"):
-        ModelSpec(mode="mill", transport="cstr")
+    # one table of transport names (rtd.names): aliases are accepted and made canonical
+    assert ModelSpec(mode="mill", transport="cstr").transport == "perfect_mixing"
+    assert ModelSpec(mode="mill", transport="tis", transport_params={"n": 3}).transport == "tanks_in_series"
+    with pytest.raises(InputError, match="'perfect_mixing', 'plug_flow', 'tanks_in_series', 'recirculating_cells', "
+                                         "'axial_dispersion'"):
+        ModelSpec(mode="mill", transport="tanks")
     with pytest.raises(InputError, match="unknown \\['pe'\\]; missing \\['n'\\]"):
         ModelSpec(mode="mill", transport="recirculating_cells", transport_params={"pe": 3})
     with pytest.raises(InputError, match="n = 0"):
