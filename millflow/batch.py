@@ -245,6 +245,12 @@ def plug_flow_profile(S, b, feed, tau: float, positions) -> np.ndarray:
     return batch_grind(S, b, feed, tau * positions)
 
 
+def _kernel_status() -> str:
+    from millflow.compiled import status
+
+    return status()
+
+
 def grind(grid, rates, breakage, feed, times_s, method: str = "exact"):
     """Batch grind on a size grid with breakage models; an xarray Dataset.
 
@@ -297,6 +303,7 @@ def grind(grid, rates, breakage, feed, times_s, method: str = "exact"):
             "error_estimate": res.error_estimate,
             "mass_balance_error": res.mass_balance_error,
             "runtime_s": res.runtime_s,
+            "kernel": _kernel_status(),  # which kernel ran: compiled C or numpy
             "equation": "dM_i/dt = -S_i M_i + sum_{j<i} b_ij S_j M_j (eq. 4)",
         },
     )

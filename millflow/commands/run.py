@@ -62,7 +62,7 @@ def format_summary(s: dict, out_dir: str | None, written: list[str] | None = Non
     how = s["solver"]["structure"]
     if tear:
         how += f" ({tear['method']}, {tear['iterations']} iterations, last change {tear['residual_history'][-1]:.1e})"
-    lines.append(f"solved in {1e3 * s['runtime_s']:.1f} ms: {how}")
+    lines.append(f"solved in {1e3 * s['runtime_s']:.1f} ms: {how}; kernel {s.get('kernel', '?')}")
     if out_dir:
         names = written if written is not None else ["results.nc", "streams.csv", "units.csv", "psd.csv",
                                                       "summary.json", "psd.png", "classifiers.png", "flowsheet.png"]

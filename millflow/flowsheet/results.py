@@ -163,6 +163,7 @@ def to_dataset(sol, props=None):
         "mass_balance_error": mb["overall"],
         "circulating_load": json.dumps(circulating_loads(sol)),
         "tear": json.dumps(sol.solver["tear"]) if sol.solver["tear"] else "none (all units linear)",
+        "kernel": _kernel_status(),
         "conventions": "class 1 coarsest, class N the sink; size = upper class edge (Austin)",
     })
     return ds
@@ -179,6 +180,13 @@ def _clean(v):
     if isinstance(v, np.integer):
         return int(v)
     return v
+
+
+def _kernel_status() -> str:
+    """Which kernel ran each compiled piece (compiled C or numpy), as every result says."""
+    from millflow.compiled import status
+
+    return status()
 
 
 def summary(sol, props=None) -> dict:
@@ -211,6 +219,7 @@ def summary(sol, props=None) -> dict:
         "specific_energy_kWh_per_t": _specific_energy(sol),
         "units": units,
         "solver": {k: v for k, v in sol.solver.items()},
+        "kernel": _kernel_status(),
         "runtime_s": sol.runtime_s,
     })
 

@@ -181,3 +181,17 @@ def test_bad_input_gives_clear_error(S, b, feed, t, match):
 def test_unknown_method_lists_valid_ones():
     with pytest.raises(InputError, match="BDF"):
         batch_solve([1.0, 0.0], [[0, 0], [1, 0]], [1.0, 0.0], 1.0, method="euler")
+
+
+def test_grind_and_flowsheet_results_say_which_kernel_ran():
+    """Issue 16: every result says which kernel ran (compiled C or numpy)."""
+    import millflow as mf
+    from millflow.compiled import status
+    from millflow.flowsheet import load, solve, summary, to_dataset
+    from tests import paths
+    g = mf.SizeGrid.geometric(top_m=2e-3, ratio=2 ** 0.25, n=20)
+    ds = mf.grind(g, mf.PowerLawRate(A=0.02, alpha=1.0, x0=1e-3), mf.NormalizedBreakage(0.5, 0.8, 3.0),
+                  np.r_[1.0, np.zeros(19)], [60.0])
+    assert ds.attrs["kernel"] == status() and "eigenbasis=" in status()
+    sol = solve(load(paths.FLOWSHEETS / "open_circuit_ball_mill.toml"))
+    assert summary(sol)["kernel"] == status() and to_dataset(sol).attrs["kernel"] == status()
