@@ -59,6 +59,8 @@ def add_parser(subparsers) -> None:
     p.add_argument("suite", help="suite name, e.g. core")
     p.add_argument("--json", action="store_true", help="print the rows as a JSON array instead of a table")
     p.add_argument("--quiet", action="store_true", help="no notes on stderr (the table or JSON still prints)")
+    p.add_argument("--plot", default=None, metavar="FILE.png",
+                   help="also draw error against run time for every method on one log-log axis")
     p.add_argument("--quick", action="store_true", help="fewer sizes and repeats (a few seconds)")
     p.add_argument("--make-references", action="store_true",
                    help="(re)make the suite's cached high-precision references first (slow)")
@@ -116,12 +118,16 @@ def run_command(args) -> int:
         if maker is None:
             raise InputError(f"benchmark suite {args.suite!r} has no references to make")
         maker()
+    if args.plot and os.path.exists(args.plot):  # checked before the run, not after it
+        raise InputError(f"--plot {args.plot}: exists; give a new file name (or remove it)")
     rows = suite.run(quick=args.quick)
     kernels = kernel_status()
     for row in rows:
         row.setdefault("suite", args.suite)
         row["blas_threads"] = threads
         row["kernels"] = kernels
+    if args.plot:
+        plot_work_precision(rows, args.plot, f"millflow bench {args.suite}" + (" --quick" if args.quick else ""))
     if args.json:
         print(json.dumps(_jsonable(rows), indent=1, allow_nan=False))
     else:
@@ -130,3 +136,60 @@ def run_command(args) -> int:
               + f"; kernels: {kernels}")
         print(fmt(rows))
     return 0
+
+
+#: Errors below this are drawn at it (an exact 0 has no place on a log axis).
+ERROR_FLOOR = 1e-17
+
+
+def plot_work_precision(rows: list[dict], path, title: str) -> int:
+    """Error (max abs error against the reference) against run time [s] for every row that
+    has both, one marker series per method, on one log-log axis; written to ``path``
+    (PNG, whole or not at all: drawn into a temporary file beside it, then renamed).
+    Returns the number of points drawn; a suite without error columns is refused."""
+    import os
+    import tempfile
+
+    from matplotlib.backends.backend_agg import FigureCanvasAgg
+    from matplotlib.figure import Figure
+
+    pts = {}
+    for r in rows:
+        err, t = r.get("max_abs_error"), r.get("runtime_s")
+        if isinstance(err, (int, float)) and isinstance(t, (int, float)) and math.isfinite(err) \
+                and math.isfinite(t) and t > 0:
+            pts.setdefault(str(r.get("method", "?")), []).append((t, max(float(err), ERROR_FLOOR)))
+    if not pts:
+        raise InputError(f"--plot {path}: this suite reports no errors to draw (no max_abs_error with runtime_s)")
+    fig = Figure(figsize=(7.5, 5.0))
+    FigureCanvasAgg(fig)
+    ax = fig.add_subplot()
+    markers = "osD^v<>pPhX*"
+    for k, (method, xy) in enumerate(sorted(pts.items())):
+        t, e = zip(*sorted(xy))
+        ax.loglog(t, e, markers[k % len(markers)], ms=5, alpha=0.8, label=method)
+    ax.set_xlabel("run time [s]")
+    ax.set_ylabel(f"max abs error (floor {ERROR_FLOOR:g})")
+    ax.set_title(f"work-precision: {title}", fontsize=9)
+    ax.grid(True, which="major", alpha=0.3)
+    ax.legend(fontsize=6, ncol=2)
+    fig.tight_layout()
+    path = os.fspath(path)
+    folder = os.path.dirname(os.path.abspath(path))
+    if not os.path.isdir(folder):
+        raise InputError(f"--plot {path}: the folder {folder} does not exist")
+    if os.path.exists(path):  # never over a file the user has: name a new one
+        raise InputError(f"--plot {path}: exists; give a new file name (or remove it)")
+    fd, tmp = tempfile.mkstemp(prefix=".plot-", suffix=".png", dir=folder)
+    os.close(fd)
+    try:
+        fig.savefig(tmp, dpi=110)
+        mask = os.umask(0)
+        os.umask(mask)
+        os.chmod(tmp, 0o666 & ~mask)  # as an ordinary new file (mkstemp makes it private)
+        os.replace(tmp, path)
+    except BaseException:
+        if os.path.exists(tmp):
+            os.unlink(tmp)
+        raise
+    return sum(len(v) for v in pts.values())
