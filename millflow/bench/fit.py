@@ -78,7 +78,8 @@ def run(quick: bool = False, knife: bool = True) -> list[dict]:
 
     model, params, truth = make_batch_problem(seed=1)
     start, cpu = time.perf_counter(), time.process_time()
-    res = fit(model, params, starts=20, popsize=10, maxiter=100 if quick else 200, seed=0, grid_check=False)
+    res = fit(model, params, starts=20, popsize=10, maxiter=100 if quick else 200, seed=0, grid_check=False,
+              quiet=True)
     runtime, cpu = time.perf_counter() - start, time.process_time() - cpu
     err = max(abs(res.params[n].value - truth[n]) for n in truth)
     return [{"case": "global_5p_batch_8x30_grid60", "method": "DE(vectorised)+20 LSQ starts", "runtime_s": runtime,

@@ -48,7 +48,7 @@ def synthetic_lab_fit(theta: dict, grid, noise: float, rng, label: str = "synthe
         k += 12
     model = ForwardModel(spec, psd_data_from_frames(pd.concat(rows), strict=False), grid)
     params = default_parameters(spec, {n: {"value": float(v)} for n, v in theta.items()})
-    res = fit(model, params, global_search=False, starts=1, grid_check=False)
+    res = fit(model, params, global_search=False, starts=1, grid_check=False, quiet=True)
     return fit_from_dict(res.to_dict(), label), model
 
 

@@ -163,7 +163,7 @@ def _fit_one(task):
            "drift": (np.nan, np.nan, np.nan), "error": ""}
     try:
         model = ForwardModel(spec, data, design.grid)
-        res = fit(model, params, seed=int(seed[-1]), grid_check=False, **fit_opts)
+        res = fit(model, params, seed=int(seed[-1]), grid_check=False, quiet=True, **fit_opts)
         for k, n in enumerate(names):
             st = res.stats["params"][n]
             out["est"][k], out["se"][k] = st["value"], st["se"]
@@ -192,7 +192,7 @@ def _drift(model, params, fit_opts, seed, split):
             keep = (t.location == "feed") | t.time_s.isin(part)
             sub = PSDData(t[keep].reset_index(drop=True), model.data.process, model.data.source)
         m = ForwardModel(model.spec, sub, model.grid)
-        r = fit(m, params, seed=int(seed[-1]), grid_check=False, **fit_opts)
+        r = fit(m, params, seed=int(seed[-1]), grid_check=False, quiet=True, **fit_opts)
         st = r.stats["params"]["ln_A0"]
         est.append((st["value"], st["se"]))
     (a, sa), (b, sb) = est

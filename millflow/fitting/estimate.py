@@ -33,6 +33,7 @@ from scipy.stats import qmc
 
 from millflow.errors import InputError, MillflowError
 from millflow.fitting.models import ForwardModel, Parameter, default_parameters
+from millflow.fitting.progress import reporter
 from millflow.fitting.statistics import information_criteria, jacobian, parameter_statistics
 
 __all__ = ["FitResult", "fit", "compare_models", "SAME_SSR_RTOL"]
@@ -251,7 +252,7 @@ def _local(prob: _Problem, z0, tight: bool = False):
 
 def fit(model: ForwardModel, params: dict | None = None, *, global_search: bool = True, starts: int = 20,
         popsize: int = 15, maxiter: int = 200, seed: int = 0, de_tol: float = 1e-3, grid_check: bool = True,
-        progress=None) -> FitResult:
+        progress=None, quiet: bool = False) -> FitResult:
     """Fit a :class:`ForwardModel`; see the module docstring for the steps.
 
     Parameters
@@ -266,9 +267,11 @@ def fit(model: ForwardModel, params: dict | None = None, *, global_search: bool 
         from the given values.
     popsize, maxiter, seed, de_tol : differential-evolution settings.
     grid_check : re-evaluate the SSR on ``model.grid.refine(2)``.
-    progress : callable taking a message string, or None.
+    progress, quiet : a callable taking each stage's message; by default (None) the stages
+        go to stderr once the fit has taken more than 2 s (:mod:`millflow.fitting.progress`);
+        ``quiet=True`` silences them.
     """
-    say = progress or (lambda msg: None)
+    say = reporter(progress, quiet, "fit")
     t0 = time.perf_counter()
     params = params or default_parameters(model.spec)
     prob = check_problem(model, params)
@@ -294,7 +297,7 @@ def fit(model: ForwardModel, params: dict | None = None, *, global_search: bool 
     for k, z0 in enumerate(candidates):
         z, s = _local(prob, z0)
         sols.append((s, z))
-        if progress and (k % 5 == 4 or k == len(candidates) - 1):
+        if k % 5 == 4 or k == len(candidates) - 1:
             say(f"  local starts {k + 1}/{len(candidates)}: best SSR {min(x[0] for x in sols):.6g}")
     sols.sort(key=lambda t: t[0])
     zb, sb = _local(prob, sols[0][1], tight=True)
@@ -401,6 +404,7 @@ def compare_models(models: dict, params: dict | None = None, **fit_kwargs) -> di
     ys = {label: m.y.tobytes() for label, m in models.items()}
     if len(set(ys.values())) > 1:
         raise InputError("compare_models: the candidate models must be fitted to the same data values")
+    fit_kwargs.setdefault("quiet", True)  # one fit per candidate: their stages are not news
     fits = {label: fit(m, (params or {}).get(label), **fit_kwargs) for label, m in models.items()}
     rows = []
     for label, r in fits.items():

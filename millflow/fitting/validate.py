@@ -11,6 +11,7 @@ import numpy as np
 
 from millflow.errors import InputError
 from millflow.fitting.estimate import fit
+from millflow.fitting.progress import reporter
 from millflow.fitting.models import ForwardModel
 
 __all__ = ["leave_out", "nested_leave_out", "condition_rmse", "CRITERIA"]
@@ -25,7 +26,8 @@ def condition_rmse(model: ForwardModel, theta) -> dict:
     return {c: float(np.sqrt(np.mean(r[model.condition_of_value == c] ** 2))) for c in model.conditions}
 
 
-def leave_out(model: ForwardModel, params: dict | None, held_out="each", *, progress=None, **fit_kwargs) -> dict:
+def leave_out(model: ForwardModel, params: dict | None, held_out="each", *, progress=None, quiet: bool = False,
+              **fit_kwargs) -> dict:
     """Fit without some conditions and predict them.
 
     Parameters
@@ -42,13 +44,13 @@ def leave_out(model: ForwardModel, params: dict | None, held_out="each", *, prog
     dict with ``folds`` (list of {held_out, rmse: {condition: value}, params}),
     ``rmse`` (condition -> prediction RMSE) and ``mean_rmse``.
     """
+    say = reporter(progress, quiet, "leave_out")
     conds = model.conditions
     folds, rmse = [], {}
     groups = _groups(conds, held_out)
     for k, (group, train) in enumerate(groups):
-        if progress:
-            progress(f"fold {k + 1}/{len(groups)}: predicting {', '.join(group)}")
-        res = fit(model.for_conditions(train), params, grid_check=False, **fit_kwargs)
+        say(f"fold {k + 1}/{len(groups)}: predicting {', '.join(group)}")
+        res = fit(model.for_conditions(train), params, grid_check=False, quiet=True, **fit_kwargs)
         pred = condition_rmse(model.for_conditions(group), res.theta)
         rmse.update(pred)
         folds.append({"held_out": group, "rmse": pred, "params": {n: p.value for n, p in res.params.items()},
@@ -77,7 +79,7 @@ def _groups(conds, held_out) -> list[tuple[list, list]]:
 
 
 def nested_leave_out(candidates: dict, params: dict | None = None, held_out="each", *, criterion: str = "bic",
-                     progress=None, **fit_kwargs) -> dict:
+                     progress=None, quiet: bool = False, **fit_kwargs) -> dict:
     """Nested validation: the model structure is chosen inside each outer fold.
 
     A leave-out score of a structure that was itself chosen by comparing candidates on
@@ -113,15 +115,16 @@ def nested_leave_out(candidates: dict, params: dict | None = None, held_out="eac
         if m.conditions != first.conditions or m.y.shape != first.y.shape or not np.array_equal(m.y, first.y):
             raise InputError(f"candidate {label!r} is fitted to other data than {labels[0]!r}: "
                              "nested validation compares structures on the same data")
+    say = reporter(progress, quiet, "nested_leave_out")
     params = params or {}
     folds, rmse = [], {}
     chosen = dict.fromkeys(labels, 0)
     groups = _groups(first.conditions, held_out)
     for k, (group, train) in enumerate(groups):
-        if progress:
-            progress(f"outer fold {k + 1}/{len(groups)}: choosing among {len(labels)} structures without "
-                     f"{', '.join(group)}")
-        fits = {label: fit(candidates[label].for_conditions(train), params.get(label), grid_check=False, **fit_kwargs)
+        say(f"outer fold {k + 1}/{len(groups)}: choosing among {len(labels)} structures without "
+            f"{', '.join(group)}")
+        fits = {label: fit(candidates[label].for_conditions(train), params.get(label), grid_check=False, quiet=True,
+                           **fit_kwargs)
                 for label in labels}
         scores = {label: float(r.criteria[criterion]) for label, r in fits.items()}
         best = min(labels, key=lambda label: scores[label])  # ties: the first listed
