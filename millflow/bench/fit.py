@@ -111,7 +111,7 @@ def run_knife_loo(data_dir: str) -> dict:
     cfg = load_config(os.path.join(here, "examples", "knife_mill", "knife_mill.toml"), data_dir=data_dir)
     model = cfg.model()
     start, cpu = time.perf_counter(), time.process_time()
-    loo = leave_out(model, cfg.params, "each", **dict(cfg.optimizer))
+    loo = leave_out(model, cfg.params, "each", quiet=True, **dict(cfg.optimizer))
     runtime, cpu = time.perf_counter() - start, time.process_time() - cpu
     return {"case": "knife_mill_loo_12fold", "method": "12 x (DE+8 LSQ starts), 151-class eq. 3", "runtime_s": runtime,
             "cpu_s": cpu, "max_abs_error": float("nan"), "loo_mean_rmse": float(loo["mean_rmse"]),
