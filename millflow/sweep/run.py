@@ -1,0 +1,166 @@
+"""Solving a sweep's cases: serially, on a LocalCluster, or on a Dask scheduler."""
+from __future__ import annotations
+
+import copy
+import math
+import os
+import time
+
+import numpy as np
+import xarray as xr
+
+from millflow.errors import InputError, MillflowError
+from millflow.sweep.cases import Axis, grid_cases, latin_hypercube_cases, set_key
+
+__all__ = ["solve_case", "run_sweep", "SCHEDULERS"]
+
+#: "local": a dask.distributed LocalCluster on this machine; "serial": this process; any
+#: other value is the address of a running Dask scheduler (e.g. tcp://10.0.0.5:8786).
+SCHEDULERS = ("local", "serial")
+
+
+def _products(data: dict) -> list[str]:
+    """Streams that end in a product unit, in file order."""
+    units = data.get("units", {})
+    return [n for n, s in data.get("streams", {}).items()
+            if isinstance(s, dict) and units.get(s.get("to"), {}).get("type") == "product"]
+
+
+def solve_case(data: dict, case: dict, source: str = "<sweep>") -> dict:
+    """One case: the flowsheet dict with the case's values set, solved. Returns
+    ``{"p80_um": {stream: v}, "p50_um": {...}, "circulating_load": {unit: v},
+    "specific_energy_kWh_per_t", "mass_balance_error", "runtime_s", "reason"}``; a case
+    that cannot be built or solved returns NaNs and its one-line reason."""
+    from millflow.flowsheet import from_dict, solve, summary
+
+    t0 = time.perf_counter()
+    d = copy.deepcopy(data)
+    try:
+        for key, value in case.items():
+            set_key(d, key, value)
+        s = summary(solve(from_dict(d, source=source)))
+    except MillflowError as exc:
+        return {"reason": " ".join(str(exc).split()), "runtime_s": time.perf_counter() - t0}
+    return {"p80_um": {n: s["streams"][n]["p80_um"] for n in s["streams"]},
+            "p50_um": {n: s["streams"][n]["p50_um"] for n in s["streams"]},
+            "circulating_load": dict(s["circulating_load"]),
+            "specific_energy_kWh_per_t": s["specific_energy_kWh_per_t"],
+            "mass_balance_error": s["mass_balance_error"], "runtime_s": time.perf_counter() - t0, "reason": ""}
+
+
+def _solve_chunk(data: dict, cases: list[dict], source: str) -> list[dict]:
+    return [solve_case(data, c, source) for c in cases]
+
+
+def _num(v) -> float:
+    return float("nan") if v is None or not isinstance(v, (int, float)) or not math.isfinite(v) else float(v)
+
+
+def run_sweep(path, vary: list[Axis], *, samples: int | None = None, seed: int = 0, scheduler: str = "local",
+              workers: int | None = None, chunk: int | None = None, progress: bool = True) -> xr.Dataset:
+    """Solve the flowsheet file ``path`` for every case of ``vary`` (a grid, or
+    ``samples`` Latin-hypercube cases); see the package docstring for the Dataset."""
+    from millflow.flowsheet import from_dict
+    from millflow.inputs import read_toml
+
+    if not vary:
+        raise InputError("sweep: give at least one --vary KEY=START:STOP:N")
+    keys = [a.key for a in vary]
+    if len(set(keys)) != len(keys):
+        raise InputError(f"sweep: a key is varied twice ({', '.join(keys)})")
+    data = read_toml(path, "flowsheet file")
+    source = str(path)
+    from_dict(copy.deepcopy(data), source=source)  # the base flowsheet must be valid
+    for key in keys:  # and every varied key must exist and be a number
+        set_key(copy.deepcopy(data), key, 0.0)
+    cases = grid_cases(vary) if samples is None else latin_hypercube_cases(vary, samples, seed)
+    results = _execute(data, cases, source, scheduler, workers, chunk, progress)
+    products = _products(data)
+    loads = sorted({u for r in results for u in r.get("circulating_load", {})})
+    n = len(cases)
+    p80 = np.array([[_num(r.get("p80_um", {}).get(s)) for s in products] for r in results]).reshape(n, len(products))
+    p50 = np.array([[_num(r.get("p50_um", {}).get(s)) for s in products] for r in results]).reshape(n, len(products))
+    cl = np.array([[_num(r.get("circulating_load", {}).get(u)) for u in loads] for r in results]).reshape(n, len(loads))
+    scalar = {k: np.array([_num(r.get(k)) for r in results])
+              for k in ("specific_energy_kWh_per_t", "mass_balance_error", "runtime_s")}
+    reason = np.array([r.get("reason", "") for r in results], dtype=object)
+    ds = xr.Dataset(
+        {"p80_um": (("case", "product"), p80, {"units": "um", "long_name": "P80 of the product stream"}),
+         "p50_um": (("case", "product"), p50, {"units": "um", "long_name": "P50 of the product stream"}),
+         "circulating_load": (("case", "classifier"), cl, {"units": "1", "long_name": "recycle / new feed"}),
+         "specific_energy_kWh_per_t": ("case", scalar["specific_energy_kWh_per_t"], {"units": "kWh/t"}),
+         "mass_balance_error": ("case", scalar["mass_balance_error"], {"units": "1"}),
+         "runtime_s": ("case", scalar["runtime_s"], {"units": "s"}),
+         "reason": ("case", reason.astype(str), {"long_name": "why a case failed ('' if solved)"})},
+        coords={"case": np.arange(n), "product": products, "classifier": loads,
+                **{k: ("case", np.array([c[k] for c in cases]), {"long_name": f"varied: {k}"}) for k in keys}})
+    ds.attrs.update(source_file=source, design="grid" if samples is None else f"latin hypercube, seed {seed}",
+                    n_cases=n, n_failed=int(np.sum(reason != "")), scheduler=scheduler,
+                    varied=", ".join(f"{a.key}={a.start:g}:{a.stop:g}:{a.n}" for a in vary))
+    if samples is None and len(keys) == 1:  # a grid: one dimension per varied key
+        ds = ds.swap_dims(case=keys[0]).drop_vars("case")
+    elif samples is None:
+        ds = ds.set_index(case=keys).unstack("case")
+    return ds
+
+
+def _execute(data, cases, source, scheduler, workers, chunk, progress) -> list[dict]:
+    """Results in case order. Chunks of cases are the tasks (per-case overhead small)."""
+    n_workers = workers or os.cpu_count() or 1
+    size = chunk or max(1, math.ceil(len(cases) / (4 * n_workers)))
+    chunks = [cases[i:i + size] for i in range(0, len(cases), size)]
+    if scheduler == "serial":
+        out = []
+        bar = _bar(len(cases), progress)
+        for c in chunks:
+            out += _solve_chunk(data, c, source)
+            bar.update(len(c))
+        bar.close()
+        return out
+    try:
+        from dask.distributed import Client, LocalCluster, as_completed
+    except ImportError:
+        raise InputError("sweep on Dask needs dask[distributed]: python -m pip install 'dask[distributed]' "
+                         "(or --scheduler serial)") from None
+    cluster = None
+    if scheduler == "local":
+        cluster = LocalCluster(n_workers=n_workers, threads_per_worker=1, processes=True, dashboard_address=None)
+        client = Client(cluster)
+    else:
+        try:
+            client = Client(scheduler, timeout="10s")
+        except OSError as exc:
+            raise InputError(f"--scheduler {scheduler}: cannot connect ({exc})") from None
+    try:
+        futures = client.map(_solve_chunk, [data] * len(chunks), chunks, [source] * len(chunks),
+                             retries=2, pure=False)  # a lost worker's chunk is run again
+        index = {f.key: k for k, f in enumerate(futures)}
+        parts = [None] * len(chunks)
+        bar = _bar(len(cases), progress)
+        for fut in as_completed(futures):
+            k = index[fut.key]
+            parts[k] = fut.result()
+            bar.update(len(chunks[k]))
+        bar.close()
+    finally:
+        client.close()
+        if cluster is not None:
+            cluster.close()
+    return [r for p in parts for r in p]
+
+
+def _bar(total: int, progress: bool):
+    """A tqdm bar on stderr (off with progress=False, or when tqdm is absent)."""
+    class _Null:
+        def update(self, n):
+            pass
+
+        def close(self):
+            pass
+    if not progress:
+        return _Null()
+    try:
+        from tqdm import tqdm
+    except ImportError:
+        return _Null()
+    return tqdm(total=total, unit="case", desc="sweep", mininterval=1.0)
