@@ -60,3 +60,17 @@ def test_cli_writes_dataset_csv_and_plot(tmp_path, capsys):
     assert main(["sweep", str(CLOSED), "--vary", VARY[0], "--scheduler", "serial", "--quiet", "--out", str(out)]) == 0
     assert {"sweep.nc", "sweep.csv", "sweep.png", "summary.json", ".millflow-manifest.json"} <= \
         {p.name for p in out.iterdir()}
+
+
+def test_compare_two_flowsheets(tmp_path, capsys):
+    """Issue 14 §3: one table and one plot of the streams both flowsheets share."""
+    import json
+    a, b = paths.FLOWSHEETS / "open_circuit_ball_mill.toml", CLOSED
+    assert main(["compare", str(a), str(b), "--json", "--out", str(tmp_path / "c")]) == 0
+    res = json.loads(capsys.readouterr().out)
+    assert [r["stream"] for r in res["streams"]] == ["mill_feed", "mill_discharge"]
+    r = res["streams"][0]
+    assert r["d_p80_um"] == pytest.approx(r["p80_um_b"] - r["p80_um_a"])
+    assert {"compare.csv", "compare.json", "compare.png"} <= {p.name for p in (tmp_path / "c").iterdir()}
+    assert main(["compare", str(a), str(paths.FLOWSHEETS / "hammer_mill_screen.toml"), "--quiet",
+                 "--out", str(tmp_path / "d")]) in (0, 2)  # no shared stream: exit 2 with a line

@@ -1,0 +1,98 @@
+"""``millflow compare A.toml B.toml [--out DIR] [--json] [--no-plots]``: two flowsheets
+side by side.
+
+Solves both and prints one table of the streams they share (by name): t/h, P80 and P50
+in A and in B, and the differences; the circulating loads and specific energies of
+both. Writes ``compare.csv``, ``compare.json`` and ``compare.png`` (cumulative passing
+of every shared stream, A solid, B dashed) into ``--out`` (default ``<A>-vs-<B>/``).
+"""
+from __future__ import annotations
+
+import json
+import math
+from pathlib import Path
+
+
+def add_parser(subparsers) -> None:
+    p = subparsers.add_parser("compare", help="solve two flowsheets and compare the streams they share",
+                              description=__doc__.split("\n\n")[0],
+                              epilog="example: millflow compare flowsheets/open_circuit_ball_mill.toml "
+                                     "flowsheets/closed_circuit_ball_mill.toml")
+    p.add_argument("a", help="first flowsheet file (TOML)")
+    p.add_argument("b", help="second flowsheet file (TOML)")
+    p.add_argument("--out", default=None, help="output folder (default: <A stem>-vs-<B stem>)")
+    p.add_argument("--json", action="store_true", help="print one JSON object instead of the table")
+    p.add_argument("--no-plots", action="store_true", help="do not write compare.png")
+    p.add_argument("--quiet", action="store_true", help="print nothing but errors (and --json output)")
+    p.add_argument("--overwrite", action="store_true",
+                   help="replace an output folder that holds files millflow did not write")
+    p.set_defaults(func=run)
+
+
+def _d(a, b):
+    return None if a is None or b is None or not (math.isfinite(a) and math.isfinite(b)) else b - a
+
+
+def run(args) -> int:
+    from millflow.commands.output import check_target, staged_folder
+    from millflow.errors import InputError
+    from millflow.flowsheet import load, solve, summary
+
+    pa, pb = Path(args.a), Path(args.b)
+    out = Path(args.out) if args.out else Path.cwd() / f"{pa.stem}-vs-{pb.stem}"
+    check_target(out, overwrite=args.overwrite, input_path=pa)
+    sa, sb = summary(solve(load(pa))), summary(solve(load(pb)))
+    shared = [n for n in sa["streams"] if n in sb["streams"]]
+    if not shared:
+        raise InputError(f"{pa} and {pb} share no stream name; compare needs streams of the same name")
+    rows = []
+    for n in shared:
+        a, b = sa["streams"][n], sb["streams"][n]
+        rows.append({"stream": n, "tph_a": a["solids_tph"], "tph_b": b["solids_tph"],
+                     "p80_um_a": a["p80_um"], "p80_um_b": b["p80_um"], "d_p80_um": _d(a["p80_um"], b["p80_um"]),
+                     "p50_um_a": a["p50_um"], "p50_um_b": b["p50_um"], "d_p50_um": _d(a["p50_um"], b["p50_um"])})
+    result = {"a": str(pa), "b": str(pb), "streams": rows,
+              "circulating_load": {"a": sa["circulating_load"], "b": sb["circulating_load"]},
+              "specific_energy_kWh_per_t": {"a": sa["specific_energy_kWh_per_t"],
+                                            "b": sb["specific_energy_kWh_per_t"]}}
+    with staged_folder(out, overwrite=args.overwrite, input_path=pa, command="compare") as tmp:
+        import pandas as pd
+
+        pd.DataFrame(rows).to_csv(tmp / "compare.csv", index=False, float_format="%.6g")
+        (tmp / "compare.json").write_text(json.dumps(result, indent=1) + "\n", encoding="utf-8")
+        if not args.no_plots:
+            _plot(sa, sb, shared, pa.stem, pb.stem, tmp / "compare.png")
+    if args.json:
+        print(json.dumps(result))
+    elif not args.quiet:
+        def f(v, fmt="{:.4g}"):
+            return "-" if v is None or not math.isfinite(v) else fmt.format(v)
+        head = f"{'stream':<20}{'t/h A':>9}{'t/h B':>9}{'P80 A':>9}{'P80 B':>9}{'dP80':>9}{'P50 A':>9}{'P50 B':>9}"
+        print(f"A = {pa}\nB = {pb}\n{head}\n{'-' * len(head)}")
+        for r in rows:
+            print(f"{r['stream']:<20}{f(r['tph_a'], '{:.1f}'):>9}{f(r['tph_b'], '{:.1f}'):>9}"
+                  f"{f(r['p80_um_a'], '{:.0f}'):>9}{f(r['p80_um_b'], '{:.0f}'):>9}{f(r['d_p80_um'], '{:+.0f}'):>9}"
+                  f"{f(r['p50_um_a'], '{:.0f}'):>9}{f(r['p50_um_b'], '{:.0f}'):>9}")
+        print(f"circulating load: A {sa['circulating_load']}, B {sb['circulating_load']}")
+        print(f"specific energy [kWh/t]: A {f(sa['specific_energy_kWh_per_t'] or math.nan)}, "
+              f"B {f(sb['specific_energy_kWh_per_t'] or math.nan)}")
+        print(f"written to {out}/")
+    return 0
+
+
+def _plot(sa, sb, shared, la, lb, path) -> None:
+    from matplotlib.backends.backend_agg import FigureCanvasAgg
+    from matplotlib.figure import Figure
+
+    fig = Figure(figsize=(7, 4.5))
+    FigureCanvasAgg(fig)
+    ax = fig.add_subplot()
+    for k, n in enumerate(shared):
+        for s, style, lab in ((sa, "-", la), (sb, "--", lb)):
+            st = s["streams"][n]
+            ax.semilogx(st["size_um"], st["cum_passing"], style, color=f"C{k % 10}", lw=1.2, label=f"{n} ({lab})")
+    ax.set_xlabel("size [um]")
+    ax.set_ylabel("cumulative passing [-]")
+    ax.legend(fontsize=6, ncol=2)
+    fig.tight_layout()
+    fig.savefig(path, dpi=110)
