@@ -107,11 +107,9 @@ def _write(res, s, out: Path, plots: bool):
     pd.DataFrame(cols).to_csv(files[1], index=False)
     files[2].write_text(json.dumps(s, indent=1, default=float))
     if plots:
-        import matplotlib
-        matplotlib.use("Agg")
-        import matplotlib.pyplot as plt
+        from millflow.plotting import figure
 
-        fig, ax = plt.subplots(figsize=(6, 4))
+        fig, ax = figure(figsize=(6, 4))  # a Figure of its own: no pyplot state, no backend switched
         x = ds.x.values * 1e6
         ax.semilogx(x, ds.feed_passing, "k:", lw=1, label="fresh feed")
         ax.semilogx(x, ds.passing, "C0-", lw=1.5, label=f"plant product, P80 {s['p80_um']:.0f} um")
@@ -126,6 +124,5 @@ def _write(res, s, out: Path, plots: bool):
         fig.tight_layout()
         p = out / "scaleup.png"
         fig.savefig(p, dpi=110)
-        plt.close(fig)
         files.append(p)
     return files

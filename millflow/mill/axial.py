@@ -111,7 +111,7 @@ def _bernoulli(x: np.ndarray) -> np.ndarray:
     return out
 
 
-def solve_axial_grid(S, b, feed, tau: float, pe: float, m_cells: int, v=None, w=None):
+def solve_axial_grid(S, b, feed, tau: float, pe: float, m_cells: int, d=None, w=None):
     """Concentrations c (M + 1, N[, m]) and product on one grid of ``m_cells`` volumes.
 
     Parameters as :func:`solve_axial`. Returns (z, c, product). The product is taken
@@ -123,7 +123,7 @@ def solve_axial_grid(S, b, feed, tau: float, pe: float, m_cells: int, v=None, w=
     n_cls = S.size
     feed = np.asarray(feed, dtype=float)
     cols = feed.shape[1:]
-    v = np.ones(n_cls) if v is None else np.asarray(v, dtype=float)
+    v = np.ones(n_cls) if d is None else np.asarray(d, dtype=float)  # relative axial velocity v_i = d_i*
     w = np.ones(n_cls) if w is None else np.asarray(w, dtype=float)
     M = int(m_cells)
     h = 1.0 / M
@@ -187,7 +187,7 @@ def solve_axial_grid(S, b, feed, tau: float, pe: float, m_cells: int, v=None, w=
     return z, np.moveaxis(c, 1, 0), product
 
 
-def solve_axial(S, b, feed, tau: float, pe: float, v=None, w=None, *, tol: float = 1e-8,
+def solve_axial(S, b, feed, tau: float, pe: float, d=None, w=None, *, tol: float = 1e-8,
                 m_start: int = 16, m_max: int = 16384, m_cells: int | None = None) -> AxialSolution:
     """Steady axial-dispersion mill with optional size-dependent velocity and dispersion.
 
@@ -206,30 +206,31 @@ def solve_axial(S, b, feed, tau: float, pe: float, v=None, w=None, *, tol: float
     S : (N,) rates [1/s]; b : (N, N) fractional breakage distribution.
     feed : (N,) or (N, m) feed flows.
     tau : L/u [s]; pe : Peclet number u L / D [-].
-    v, w : (N,) relative axial velocity and dispersion of each class (default 1).
+    d, w : (N,) classification d_i* (the relative axial velocity of class i) and relative
+        dispersion of each class (default 1).
     tol : target of the error estimate (max abs error of the product).
     m_start, m_max : first and largest number of control volumes.
     m_cells : solve on this one grid only (no refinement, error estimate nan).
     """
     n_cls = np.asarray(S).size
-    v_arr = np.ones(n_cls) if v is None else np.asarray(v, float)
+    v_arr = np.ones(n_cls) if d is None else np.asarray(d, float)
     w_arr = np.ones(n_cls) if w is None else np.asarray(w, float)
     if pe * float(np.min(v_arr / w_arr)) < PE_MIXED:
         return _perfectly_mixed_limit(S, b, feed, tau, pe, v_arr, w_arr)
     if m_cells is not None:
-        z, c, p = solve_axial_grid(S, b, feed, tau, pe, m_cells, v, w)
+        z, c, p = solve_axial_grid(S, b, feed, tau, pe, m_cells, d, w)
         return AxialSolution(p, z, tau * c, _holdup(z, tau * c), float("nan"), float("nan"), [])
     ratio = v_arr / w_arr
     cell_pe = float(ratio.max()) * pe  # divided by M: cell Peclet number of the grid
     M = int(m_start)
-    grids = [solve_axial_grid(S, b, feed, tau, pe, M * k, v, w) for k in (1, 2)]
+    grids = [solve_axial_grid(S, b, feed, tau, pe, M * k, d, w) for k in (1, 2)]
     history = [(M, float("nan")), (2 * M, float(np.abs(grids[1][2] - grids[0][2]).max()))]
     r_prev = None
     order_prev = float("nan")
     M *= 2
     while True:
         M *= 2
-        grids = [grids[-2], grids[-1], solve_axial_grid(S, b, feed, tau, pe, M, v, w)]
+        grids = [grids[-2], grids[-1], solve_axial_grid(S, b, feed, tau, pe, M, d, w)]
         p1, p2, p3 = (g[2] for g in grids)
         d1, d2 = float(np.abs(p2 - p1).max()), float(np.abs(p3 - p2).max())
         history.append((M, d2))

@@ -153,7 +153,7 @@ def _composed(sc, feed, out, *, tol, holdup, cache):
 
 def _axial_fv(sc, feed, out, *, tol, holdup, cache):
     T = sc.transport
-    sol = solve_axial(sc.S, sc.b, feed, T.tau, T.pe, v=sc.d, w=sc.dispersion, tol=tol)
+    sol = solve_axial(sc.S, sc.b, feed, T.tau, T.pe, d=sc.d, w=sc.dispersion, tol=tol)
     out.update(product=sol.product, holdup=sol.holdup, error=sol.error_estimate)
     out["axial"] = sol
     out["extras"].update(order=sol.order, control_volumes=int(sol.z.size - 1))
