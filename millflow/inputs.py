@@ -19,10 +19,12 @@ import math
 import tomllib
 from pathlib import Path
 
+import numpy as np
+
 from millflow.errors import InputError
 
 __all__ = ["read_text", "read_toml", "read_json", "read_csv", "number", "integer", "boolean", "string",
-           "table_of", "check_keys"]
+           "table_of", "check_keys", "UNITS", "quantity", "unit_keys", "suffixes"]
 
 
 def read_text(path, what: str = "file") -> str:
@@ -165,3 +167,70 @@ def check_keys(table: dict, allowed, where: str) -> None:
     if unknown:
         raise InputError(f"{where}: unknown key{'s' if len(unknown) > 1 else ''} {', '.join(unknown)}; "
                          f"expected some of {', '.join(sorted(allowed))}")
+
+
+# --------------------------------------------------------- unit-suffixed keys
+#: Unit suffixes of keys per dimension, with the factor to SI: a key is written
+#: ``<name>_<unit>`` (``tau_min``, ``top_mm``, ``feed_tph``) and read in SI.
+UNITS = {
+    "length": {"um": 1e-6, "mm": 1e-3, "m": 1.0},
+    "time": {"s": 1.0, "min": 60.0, "h": 3600.0},
+    "mass_flow": {"tph": 1000.0 / 3600.0, "kg_s": 1.0},
+    "mass": {"t": 1000.0, "kg": 1.0},
+    "power": {"W": 1.0, "kW": 1e3, "MW": 1e6},
+    "rate": {"per_s": 1.0, "per_min": 1.0 / 60.0, "per_h": 1.0 / 3600.0},
+    "fraction": {"pct": 0.01, "frac": 1.0},
+}
+
+
+def suffixes(dim: str) -> str:
+    return ", ".join(f"_{s}" for s in UNITS[dim])
+
+
+def unit_keys(base: str, dim: str) -> set:
+    """Every spelling of ``base`` with a unit of ``dim`` (for check_keys)."""
+    return {f"{base}_{u}" for u in UNITS[dim]}
+
+
+def quantity(table: dict, base: str, dim: str, where: str, default=..., *, positive: bool = True,
+             allow_zero: bool = False, array: bool = False, used: set | None = None):
+    """The value of ``base_<unit>`` in SI (one reader for flowsheet, fit and plant files).
+
+    Refused, each with one line naming the key: the bare ``base`` (units of measure
+    missing), two spellings at once, an unknown unit, a non-number (a list only where
+    ``array``), a negative (or zero) value where ``positive``. ``used`` collects the key
+    read (for tables that refuse unread keys).
+    """
+    at = f"{where}.{base}" if where else base
+    found = [k for k in table if k.startswith(base + "_") and k[len(base) + 1:] in UNITS[dim]]
+    if base in table:
+        raise InputError(f"{at}: units of measure missing; write {base}_<unit> with one of {suffixes(dim)} "
+                         f"(e.g. {base}_{next(iter(UNITS[dim]))})")
+    if len(found) > 1:
+        raise InputError(f"{where or 'top level'}: {', '.join(found)} give {base!r} twice; keep one")
+    if not found:
+        wrong = [k for k in table if k.startswith(base + "_")]
+        if wrong:
+            raise InputError(f"{where + '.' if where else ''}{wrong[0]}: unknown unit {wrong[0][len(base) + 1:]!r} "
+                             f"for {base} ({dim}); expected one of {suffixes(dim)}")
+        if default is ...:
+            raise InputError(f"{where or 'top level'}: missing parameter {base}_<unit> ({dim}: {suffixes(dim)})")
+        return default
+    key = found[0]
+    if used is not None:
+        used.add(key)
+    v = table[key]
+    ok_scalar = isinstance(v, (int, float)) and not isinstance(v, bool)
+    ok_list = array and isinstance(v, list) and all(isinstance(e, (int, float)) and not isinstance(e, bool)
+                                                    for e in v)
+    if not (ok_scalar or ok_list):
+        raise InputError(f"{where + '.' if where else ''}{key} = {_show(v)}: expected a number"
+                         + (" or a list of numbers" if array else ""))
+    arr = np.asarray(v, dtype=float)
+    if not np.all(np.isfinite(arr)):
+        raise InputError(f"{where + '.' if where else ''}{key} = {_show(v)}: expected finite numbers")
+    if positive and (np.any(arr < 0) or (not allow_zero and np.any(arr == 0))):
+        raise InputError(f"{where + '.' if where else ''}{key} = {_show(v)}: expected a value "
+                         f"{'>= 0' if allow_zero else '> 0'}")
+    out = arr * UNITS[dim][key[len(base) + 1:]]
+    return float(out) if out.ndim == 0 else out

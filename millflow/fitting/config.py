@@ -28,7 +28,8 @@ import numpy as np
 
 from millflow.breakage import b_from_B, validate_b
 from millflow.errors import InputError
-from millflow.inputs import boolean, check_keys, integer, number, read_csv, read_text, string, table_of
+from millflow.inputs import (boolean, check_keys, integer, number, quantity, read_csv, read_text, string,
+                             table_of, unit_keys)
 from millflow.fitting.data import PSDData, read_psd_table, read_sprite_folder
 from millflow.fitting.models import ModelSpec, auto_grid, default_parameters
 from millflow.grid import SizeGrid
@@ -38,7 +39,7 @@ __all__ = ["FitConfig", "load_config", "read_b_matrix"]
 _TABLES = {"data", "grid", "model", "params", "optimizer", "validation", "output", "candidates", "weights"}
 _MODEL_KEYS = {"mode", "rate", "breakage", "classification", "rate_process", "param_process", "screen_column",
                "ball_column", "tau_column", "n_tanks", "transport", "transport_params", "where", "b_matrix_csv",
-               "b_kind", "t10_table_csv", "t10", "x0_mm", "objective", "label", "transport_fit"}
+               "b_kind", "t10_table_csv", "t10", "objective", "label", "transport_fit"} | unit_keys("x0", "length")
 _OPT_KEYS = {"global", "starts", "popsize", "maxiter", "seed"}
 
 
@@ -111,8 +112,7 @@ def _spec(table: dict, where: str, rel=None, grid_of=None) -> tuple[str, ModelSp
         integer(table, "n_tanks", where, lo=1)
     if "where" in table and not isinstance(table["where"], (str, list)):
         raise InputError(f"{where}.where = {table['where']!r}: expected a string or a list of cell numbers")
-    if "x0_mm" in table:
-        number(table, "x0_mm", where, lo=0.0, lo_open=True)
+    x0 = quantity(table, "x0", "length", where, None)  # x0_um, x0_mm or x0_m
     if "t10" in table:
         number(table, "t10", where, lo=0.0, hi=1.0)
     kw = {k: table[k] for k in ("mode", "rate", "breakage", "screen_column", "ball_column", "tau_column", "objective",
@@ -154,8 +154,8 @@ def _spec(table: dict, where: str, rel=None, grid_of=None) -> tuple[str, ModelSp
         if not all(isinstance(x, list) and len(x) == 2 for x in pp):
             raise InputError(f"{where}: param_process must be a list of [parameter, process column] pairs")
         kw["param_process"] = tuple(tuple(x) for x in pp)
-    if "x0_mm" in table:
-        kw["x0_m"] = float(table["x0_mm"]) * 1e-3
+    if x0 is not None:
+        kw["x0_m"] = x0
     try:
         spec = ModelSpec(**kw)
     except (TypeError, ValueError) as exc:
@@ -194,15 +194,15 @@ def load_config(path, data_dir: str | None = None) -> FitConfig:
         raise InputError(f"{path}: [data] needs 'psd' (and 'process') or 'sprite_folder'")
     g = table_of(cfg, "grid", where)
     gw = f"{path} [grid]"
-    check_keys(g, {"ratio", "top_mm", "bottom_mm"}, gw)
+    check_keys(g, {"ratio"} | unit_keys("top", "length") | unit_keys("bottom", "length"), gw)
     grid = None
     if g:
         ratio = number(g, "ratio", gw, 2 ** 0.25, lo=1.0, lo_open=True)
         sizes = data.table.size_m[data.table.size_m > 0]
-        top = number(g, "top_mm", gw, None, lo=0.0, lo_open=True)
-        bottom = number(g, "bottom_mm", gw, None, lo=0.0, lo_open=True)
-        top = top * 1e-3 if top is not None else float(sizes.max()) * 1.0001
-        bottom = bottom * 1e-3 if bottom is not None else float(sizes.min()) / 2
+        top = quantity(g, "top", "length", gw, None)        # top_um, top_mm or top_m
+        bottom = quantity(g, "bottom", "length", gw, None)
+        top = top if top is not None else float(sizes.max()) * 1.0001
+        bottom = bottom if bottom is not None else float(sizes.min()) / 2
         if not bottom < top:
             raise InputError(f"{gw}: bottom {bottom * 1e3:g} mm is not below top {top * 1e3:g} mm")
         try:

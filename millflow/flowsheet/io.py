@@ -24,26 +24,18 @@ from millflow.flowsheet.units import (TRANSPORTS, UNIT_TYPES, Classifier, Feed, 
                                       Product, Splitter)
 from millflow.grid import SizeGrid
 from rtd import names as rtd_names
-from millflow.inputs import read_text
+from millflow.inputs import UNITS, quantity, read_text, suffixes
 from millflow.psd import from_distribution, from_sieves, gates_gaudin_schuhmann, rosin_rammler
 
 __all__ = ["load", "loads", "from_dict", "DIMENSIONS"]
 
-#: Accepted unit suffixes per dimension, with the factor to SI.
-DIMENSIONS = {
-    "length": {"um": 1e-6, "mm": 1e-3, "m": 1.0},
-    "time": {"s": 1.0, "min": 60.0, "h": 3600.0},
-    "mass_flow": {"tph": 1000.0 / 3600.0, "kg_s": 1.0},
-    "mass": {"t": 1000.0, "kg": 1.0},
-    "power": {"W": 1.0, "kW": 1e3, "MW": 1e6},
-    "rate": {"per_s": 1.0, "per_min": 1.0 / 60.0, "per_h": 1.0 / 3600.0},
-    "fraction": {"pct": 0.01, "frac": 1.0},
-}
-_SI = {"length": "m", "time": "s", "mass_flow": "kg/s", "mass": "kg", "power": "W", "rate": "1/s", "fraction": "-"}
+#: Accepted unit suffixes per dimension, with the factor to SI (the one table:
+#: :data:`millflow.inputs.UNITS`, shared with fit configs and plant files).
+DIMENSIONS = UNITS
 
 
 def _suffixes(dim: str) -> str:
-    return ", ".join(f"_{s}" for s in DIMENSIONS[dim])
+    return suffixes(dim)
 
 
 class _Table:
@@ -74,32 +66,10 @@ class _Table:
         return v
 
     def quantity(self, base: str, dim: str, default=..., *, positive=True, allow_zero=False, array=False):
-        """Value of ``base_<suffix>`` in SI; error if written without a unit or missing.
-        A list of numbers only where ``array`` (sieve sizes, grid edges): elsewhere one number."""
-        found = [k for k in self.data if k.startswith(base + "_") and k[len(base) + 1:] in DIMENSIONS[dim]]
-        if base in self.data:
-            raise InputError(f"{self._at(base)}: units of measure missing; write {base}_<unit> with one of "
-                             f"{_suffixes(dim)} (e.g. {base}_{next(iter(DIMENSIONS[dim]))})")
-        if len(found) > 1:
-            raise InputError(f"{self.where or 'top level'}: {', '.join(found)} give {base!r} twice; keep one")
-        if not found:
-            wrong = [k for k in self.data if k.startswith(base + "_")]
-            if wrong:
-                raise InputError(f"{self._at(wrong[0])}: unknown unit {wrong[0][len(base) + 1:]!r} for {base} "
-                                 f"({dim}); expected one of {_suffixes(dim)}")
-            if default is ...:
-                raise InputError(f"{self.where or 'top level'}: missing parameter {base}_<unit> "
-                                 f"({dim}: {_suffixes(dim)})")
-            return default
-        key = found[0]
-        self.used.add(key)
-        v = _number(self.data[key], self._at(key), array_ok=array)
-        arr = np.asarray(v, dtype=float)
-        if positive and (np.any(arr < 0) or (not allow_zero and np.any(arr == 0))):
-            raise InputError(f"{self._at(key)} = {self.data[key]!r}: expected a value "
-                             f"{'>= 0' if allow_zero else '> 0'}")
-        out = arr * DIMENSIONS[dim][key[len(base) + 1:]]
-        return float(out) if out.ndim == 0 else out
+        """Value of ``base_<suffix>`` in SI (:func:`millflow.inputs.quantity`, the one reader
+        of unit-suffixed keys); error if written without a unit or missing."""
+        return quantity(self.data, base, dim, self.where, default, positive=positive, allow_zero=allow_zero,
+                        array=array, used=self.used)
 
     def sub(self, key, default=...):
         if key not in self.data:

@@ -68,3 +68,16 @@ def test_a_feed_whose_top_sieve_retains_mass_is_an_error_with_the_fix():
     data = psd_data_from_frames(pd.concat([feed, prod]), None)
     with pytest.raises(InputError, match=r"top sieve \(4 mm\) passes only 90 %.*add a feed row"):
         ForwardModel(ModelSpec(mode="batch"), data).predict(np.zeros(0))
+
+
+def test_fit_config_reads_unit_suffixed_keys_like_flowsheets(tmp_path):
+    """Issue 11 §2: one reader of unit-suffixed keys (millflow.inputs.quantity) for both."""
+    cfg, _ = _write_batch_case(tmp_path)
+    text = cfg.read_text()
+    cfg.write_text(text.replace("ratio = 1.189207115002721", "ratio = 1.189207115002721\ntop_um = 4000.0"))
+    a = load_config(cfg).grid
+    cfg.write_text(text.replace("ratio = 1.189207115002721", "ratio = 1.189207115002721\ntop_mm = 4.0"))
+    assert load_config(cfg).grid == a
+    cfg.write_text(text.replace("ratio = 1.189207115002721", "ratio = 1.189207115002721\ntop = 4.0"))
+    with pytest.raises(InputError, match=r"\[grid\]\.top: units of measure missing; write top_<unit>"):
+        load_config(cfg)
