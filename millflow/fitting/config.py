@@ -194,8 +194,8 @@ def load_config(path, data_dir: str | None = None) -> FitConfig:
         raise InputError(f"{path}: [data] needs 'psd' (and 'process') or 'sprite_folder'")
     g = table_of(cfg, "grid", where)
     gw = f"{path} [grid]"
-    for base in ("top", "bottom"):  # a bare or misspelt unit is named before unknown keys are
-        quantity(g, base, "length", gw, None)
+    for edge in ("top", "bottom"):  # a bare or misspelt unit is named before unknown keys are
+        quantity(g, edge, "length", gw, None)
     check_keys(g, {"ratio"} | unit_keys("top", "length") | unit_keys("bottom", "length"), gw)
     grid = None
     if g:
