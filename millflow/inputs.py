@@ -180,6 +180,9 @@ UNITS = {
     "power": {"W": 1.0, "kW": 1e3, "MW": 1e6},
     "rate": {"per_s": 1.0, "per_min": 1.0 / 60.0, "per_h": 1.0 / 3600.0},
     "fraction": {"pct": 0.01, "frac": 1.0},
+    "density": {"kg_m3": 1.0, "t_m3": 1000.0},
+    "volume": {"m3": 1.0, "L": 1e-3},
+    "pressure": {"Pa": 1.0, "kPa": 1e3, "bar": 1e5},
 }
 
 

@@ -36,11 +36,15 @@ def format_summary(s: dict, out_dir: str | None, written: list[str] | None = Non
     """The terminal summary as text."""
     streams = s["streams"]
     sizes = list(next(iter(streams.values()))["passing_pct"]) if streams else []
-    head = ["stream", "from -> to", "t/h", "P80 um", "P50 um"] + [f"%-{x}um" for x in sizes]
+    wet = any("water_tph" in st for st in streams.values())
+    head = ["stream", "from -> to", "t/h"] + (["water t/h", "% solids"] if wet else []) + ["P80 um", "P50 um"] \
+        + [f"%-{x}um" for x in sizes]
     rows = []
     for name, st in streams.items():
-        rows.append([name, f"{st['from']} -> {st['to']}", _f(st["solids_tph"], "{:.1f}"), _f(st["p80_um"], "{:.0f}"),
-                     _f(st["p50_um"], "{:.0f}")] + [_f(st["passing_pct"][x], "{:.1f}") for x in sizes])
+        slurry = [_f(st.get("water_tph"), "{:.1f}"), _f(st.get("solids_pct"), "{:.1f}")] if wet else []
+        rows.append([name, f"{st['from']} -> {st['to']}", _f(st["solids_tph"], "{:.1f}")] + slurry
+                    + [_f(st["p80_um"], "{:.0f}"), _f(st["p50_um"], "{:.0f}")]
+                    + [_f(st["passing_pct"][x], "{:.1f}") for x in sizes])
     width = [max(len(str(r[k])) for r in [head] + rows) for k in range(len(head))]
     lines = [s["title"] or s["source_file"], ""]
     for r in [head] + rows:
@@ -58,6 +62,10 @@ def format_summary(s: dict, out_dir: str | None, written: list[str] | None = Non
         lines.append(f"circuit specific energy: {s['specific_energy_kWh_per_t']:.3g} kWh/t of product")
     worst = max(s["unit_mass_balance_error"].values())
     lines.append(f"mass balance error: overall {_f(s['mass_balance_error'], '{:.1e}')}, worst unit {worst:.1e}")
+    if wet:
+        w_worst = max((r.get("water_balance_error", 0.0) or 0.0) for r in s["units"].values())
+        lines.append(f"water balance error: overall {_f(s.get('water_balance_error'), '{:.1e}')}, "
+                     f"worst unit {w_worst:.1e}")
     tear = s["solver"].get("tear")
     how = s["solver"]["structure"]
     if tear:

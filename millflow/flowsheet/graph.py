@@ -42,6 +42,8 @@ class Flowsheet:
     streams : dict name -> Stream (order kept: it is the order of results)
     title : str
     passing_sizes : tuple of sizes [m] at which % passing is reported
+    slurry : :class:`~millflow.flowsheet.water.Slurry` or None (densities of solids and water)
+    water_added : dict unit -> water added to its feed [kg/s]
     """
 
     grid: SizeGrid
@@ -51,6 +53,8 @@ class Flowsheet:
     passing_sizes: tuple = ()
     source_file: str = ""
     meta: dict = field(default_factory=dict)
+    slurry: object = None
+    water_added: dict = field(default_factory=dict)
 
     def __post_init__(self):
         self._check()

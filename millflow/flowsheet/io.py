@@ -20,6 +20,7 @@ from millflow.breakage import AustinRate, NonNormalizedBreakage, NormalizedBreak
 from millflow.classifiers import CURVES
 from millflow.errors import GridError, InputError, MillflowError
 from millflow.flowsheet.graph import Flowsheet, Stream
+from millflow.flowsheet.water import Slurry
 from millflow.flowsheet.units import (TRANSPORTS, UNIT_TYPES, Classifier, Feed, MillUnit, Mixer,
                                       Product, Splitter)
 from millflow.grid import SizeGrid
@@ -270,7 +271,7 @@ def _kinetics(t: _Table) -> dict:
     return out
 
 
-def _mill(name: str, t: _Table, materials: dict) -> MillUnit:
+def _mill(name: str, t: _Table, materials: dict, slurry=None) -> MillUnit:
     """A mill table: breakage from its material (or its own), transport, tau or hold-up."""
     mat_name = t.plain("material", None, kind=str)
     mat = {}
@@ -311,11 +312,27 @@ def _mill(name: str, t: _Table, materials: dict) -> MillUnit:
             rate = ScaledRate(rate, design["rate_factor"])
     tau = t.quantity("tau", "time", None)
     holdup = t.quantity("holdup", "mass", None)
-    if design is not None and tau is None and holdup is None:
+    slurry_volume = t.quantity("slurry_volume", "volume", None)
+    filling = t.plain("slurry_filling", None, kind=float)
+    if filling is not None:
+        if design is None:
+            raise InputError(f"units.{name}.slurry_filling: needs the mill's dimensions (diameter_m, length_m, ...); "
+                             "or give slurry_volume_m3")
+        if not 0.0 < filling < 1.0:
+            raise InputError(f"units.{name}.slurry_filling = {filling!r}: expected the fraction of the mill volume "
+                             "held as slurry, in (0, 1)")
+        if slurry_volume is not None:
+            raise InputError(f"units.{name}: give one of slurry_filling or slurry_volume_m3")
+        slurry_volume = filling * design["design"].volume_m3
+    if slurry_volume is not None and slurry is None:
+        raise InputError(f"units.{name}: a mill given by its slurry hold-up needs the solids density; add "
+                         "[slurry] solids_density_t_m3 = ...")
+    if design is not None and tau is None and holdup is None and slurry_volume is None:
         holdup = design["holdup_kg"]
-    if tau is None and holdup is None:
-        raise InputError(f"units.{name}: missing parameter tau_<unit> (time: {_suffixes('time')}) "
-                         f"or holdup_<unit> (mass: {_suffixes('mass')})")
+    if tau is None and holdup is None and slurry_volume is None:
+        raise InputError(f"units.{name}: missing parameter tau_<unit> (time: {_suffixes('time')}), "
+                         f"holdup_<unit> (mass: {_suffixes('mass')}) or slurry_volume_<unit> "
+                         f"(volume: {_suffixes('volume')})")
     # (power_model of a mill by dimensions is not a power with an unknown unit)
     given = design is None or any(k.startswith("power_") and k != "power_model" for k in t.data)
     power = t.quantity("power", "power", None, allow_zero=True) if given else None
@@ -327,15 +344,47 @@ def _mill(name: str, t: _Table, materials: dict) -> MillUnit:
         curve = ct.plain("curve", kind=str)
         cls = {"curve": curve, **_curve_params(ct, curve)}
     kin = _kinetics(t.sub("kinetics")) if "kinetics" in t.data else None
-    t.finish("type, material, rate, breakage, transport, tau_min, holdup_t, power_kW, classification, kinetics, "
-             "or by dimensions: diameter_m, length_m, ball_filling, critical_speed_fraction, ball_size_mm, ... "
+    t.finish("type, material, rate, breakage, transport, tau_min, holdup_t, slurry_volume_m3, power_kW, "
+             "classification, kinetics, add_water_tph, or by dimensions: diameter_m, length_m, ball_filling, critical_speed_fraction, ball_size_mm, ... "
              "(docs/scaleup.md)")
-    unit = _wrap(f"units.{name}", MillUnit, name, rate, brk, model, tparams, tau, holdup, cls, power, kin)
+    unit = _wrap(f"units.{name}", MillUnit, name, rate, brk, model, tparams, tau, holdup, cls, power, kin,
+                 slurry_volume, slurry)
     _wrap(f"units.{name}", TRANSPORTS[model], tau or 1.0, **tparams)
     return unit
 
 
-def _unit(name: str, t: _Table, grid: SizeGrid, materials: dict):
+def _feed_water(t: _Table, solids: float) -> float:
+    """Water of a feed [kg/s]: water_<mass flow> or solids_content_<fraction> (% solids by mass)."""
+    water = t.quantity("water", "mass_flow", None, allow_zero=True)
+    content = t.quantity("solids_content", "fraction", None)
+    if water is not None and content is not None:
+        raise InputError(f"{t.where}: give one of water_tph or solids_content_pct, not both")
+    if content is not None:
+        if not content <= 1.0:
+            raise InputError(f"{t.where}.solids_content: {content * 100:.6g} % solids; expected a value in (0, 100] %")
+        return solids * (1.0 - content) / content
+    return 0.0 if water is None else water
+
+
+def _classifier_water(t: _Table) -> dict | None:
+    """Where a classifier's feed water goes: water_to_coarse (R_f) or coarse_solids_content_pct."""
+    split = t.plain("water_to_coarse", None, kind=float)
+    content = t.quantity("coarse_solids_content", "fraction", None)
+    if split is not None and content is not None:
+        raise InputError(f"{t.where}: give one of water_to_coarse or coarse_solids_content_pct, not both")
+    if split is not None:
+        if not 0.0 <= split < 1.0:
+            raise InputError(f"{t.where}.water_to_coarse = {split!r}: expected a fraction in [0, 1)")
+        return {"to_coarse": split}
+    if content is not None:
+        if not content < 1.0:
+            raise InputError(f"{t.where}.coarse_solids_content: {content * 100:.6g} % solids; expected a value in "
+                             "(0, 100) %")
+        return {"coarse_solids_content": content}
+    return None
+
+
+def _unit(name: str, t: _Table, grid: SizeGrid, materials: dict, slurry=None):
     utype = t.plain("type", kind=str)
     if utype not in UNIT_TYPES:
         raise InputError(f"units.{name}.type = {utype!r}: unknown unit type; valid: {', '.join(sorted(UNIT_TYPES))}")
@@ -343,20 +392,24 @@ def _unit(name: str, t: _Table, grid: SizeGrid, materials: dict):
         solids = t.quantity("solids", "mass_flow")
         psd = _feed_psd(t.sub("psd"), grid)
         t.plain("material", None)
-        t.finish("type, solids_tph, psd, material")
-        return Feed(name, solids, psd)
+        water = _feed_water(t, solids)
+        t.finish("type, solids_tph, psd, material, water_tph or solids_content_pct")
+        return Feed(name, solids, psd, water)
     if utype == "mill":
-        return _mill(name, t, materials)
+        return _mill(name, t, materials, slurry)
     if utype in ("hydrocyclone", "screen", "air_separator", "dynamic_classifier"):
         kind = "air_separator" if utype == "dynamic_classifier" else utype
         default = {"hydrocyclone": None, "screen": "screen", "air_separator": "tromp"}[kind]
         curve = t.plain("curve", default, kind=str)
         if curve is None:
             raise InputError(f"units.{name}: missing parameter 'curve' (whiten or plitt for a hydrocyclone)")
-        return Classifier(name, kind, curve, _curve_params(t, curve, skip=("type",)))
+        water = _classifier_water(t)
+        return Classifier(name, kind, curve, _curve_params(t, curve, skip=("type", "water_to_coarse",
+                                                                             "coarse_solids_content_pct",
+                                                                             "add_water_tph")), water)
     if utype in ("mixer", "tank"):
         holdup = t.quantity("holdup", "mass", None)
-        t.finish("type, holdup_t")
+        t.finish("type, holdup_t, add_water_tph")
         return Mixer(name, holdup)
     if utype == "splitter":
         ft = t.sub("fractions")
@@ -364,7 +417,7 @@ def _unit(name: str, t: _Table, grid: SizeGrid, materials: dict):
         for k, v in fr.items():
             if not 0 <= v <= 1:
                 raise InputError(f"units.{name}.fractions.{k} = {v!r}: expected a fraction in [0, 1]")
-        t.finish("type, fractions")
+        t.finish("type, fractions, add_water_tph")
         return _wrap(f"units.{name}", Splitter, name, fr)
     t.finish("type")
     return Product(name)
@@ -380,6 +433,13 @@ def from_dict(data: dict, *, source: str = "<dict>") -> Flowsheet:
     if rep is not None:
         passing = tuple(np.atleast_1d(rep.quantity("passing", "length", (), array=True)))
         rep.finish("passing_um")
+    slurry = None
+    sl = top.sub("slurry", None)
+    if sl is not None:
+        rho_s = sl.quantity("solids_density", "density")
+        rho_w = sl.quantity("water_density", "density", 1000.0)
+        sl.finish("solids_density_t_m3, water_density_kg_m3")
+        slurry = _wrap("slurry", Slurry, rho_s, rho_w)
     materials = {}
     mt = top.sub("materials", None)
     if mt is not None:
@@ -387,10 +447,17 @@ def from_dict(data: dict, *, source: str = "<dict>") -> Flowsheet:
             m = mt.sub(mname)
             materials[mname] = {k: f(m.sub(k)) for k, f in (("rate", _rate), ("breakage", _breakage)) if k in m.data}
             m.finish("rate, breakage")
-    units = {}
+    units, water_added = {}, {}
     ut = top.sub("units")
     for uname in ut.data:
-        units[uname] = _unit(uname, ut.sub(uname), grid, materials)
+        u = ut.sub(uname)
+        added = u.quantity("add_water", "mass_flow", None, allow_zero=True)
+        units[uname] = _unit(uname, u, grid, materials, slurry)
+        if added is not None:
+            if units[uname].type in ("feed", "product"):
+                raise InputError(f"units.{uname}.add_water: a {units[uname].type} takes no water addition "
+                                 "(give a feed its water_tph)")
+            water_added[uname] = added
     streams = {}
     st = top.sub("streams")
     for sname in st.data:
@@ -406,9 +473,9 @@ def from_dict(data: dict, *, source: str = "<dict>") -> Flowsheet:
                                  f"{', '.join(ports) or 'none'}; write from = \"{uname}.<outlet>\"")
             port = ports[0]
         streams[sname] = Stream(sname, uname, port, dst)
-    top.finish("title, grid, report, materials, units, streams")
+    top.finish("title, grid, report, slurry, materials, units, streams")
     return Flowsheet(grid=grid, units=units, streams=streams, title=title, passing_sizes=passing,
-                     source_file=source)
+                     source_file=source, slurry=slurry, water_added=water_added)
 
 
 def loads(text: str, *, source: str = "<string>") -> Flowsheet:

@@ -23,6 +23,7 @@ from pathlib import Path
 import numpy as np
 
 from millflow.errors import GridError
+from millflow.flowsheet.water import slurry_properties
 from millflow.psd import _fix_sum, cum_passing, cum_passing_at, percentile_size
 
 __all__ = ["stream_properties", "circulating_loads", "mass_balance", "to_dataset", "summary",
@@ -65,7 +66,15 @@ def stream_properties(sol) -> dict:
             passing = np.full(len(fs.passing_sizes), np.nan)
         out[name] = {"solids_kg_s": total, "fraction": frac, "cum_passing": cum, "p80_m": p80, "p50_m": p50,
                      "passing": np.asarray(passing, dtype=float)}
+        if is_wet(sol):
+            water = sol.water_flow(name)
+            out[name].update(water_kg_s=water, **slurry_properties(total, water, fs.slurry))
     return out
+
+
+def is_wet(sol) -> bool:
+    """True when any stream carries water (a wet circuit): results then show the slurry."""
+    return sol.water is not None and bool(np.any(sol.water.flows > 0))
 
 
 def circulating_loads(sol) -> dict:
@@ -93,13 +102,18 @@ def circulating_loads(sol) -> dict:
 
 
 def mass_balance(sol) -> dict:
-    """Relative mass balance errors: ``overall`` (products vs feeds) and per unit."""
+    """Relative mass balance errors: ``overall`` (products vs feeds) and per unit, of the solids
+    and (``water``, ``water_units``) of the water."""
     fs = sol.flowsheet
     tot = {n: math.fsum(sol.flows[k]) for k, n in enumerate(fs.stream_names)}
     feed = math.fsum(u.solids for u in fs.units.values() if u.type == "feed")
     prod = math.fsum(tot[s] for n, u in fs.units.items() if u.type == "product" for s in fs.inlets(n))
-    return {"overall": abs(prod - feed) / feed if feed > 0 else 0.0,
-            "units": {n: r["mass_balance_error"] for n, r in sol.units.items()}}
+    out = {"overall": abs(prod - feed) / feed if feed > 0 else 0.0,
+           "units": {n: r["mass_balance_error"] for n, r in sol.units.items()}}
+    if sol.water is not None:
+        out["water"] = sol.water.overall_error
+        out["water_units"] = {n: r["water_balance_error"] for n, r in sol.water.units.items()}
+    return out
 
 
 def _specific_energy(sol) -> float | None:
@@ -136,6 +150,15 @@ def to_dataset(sol, props=None):
     ds["source"] = var("stream", [f"{fs.streams[n].source}.{fs.streams[n].port}" for n in names], "",
                        "unit and outlet the stream leaves")
     ds["target"] = var("stream", [fs.streams[n].target for n in names], "", "unit the stream enters")
+    if is_wet(sol):
+        ds["water"] = var("stream", [props[n]["water_kg_s"] for n in names], "kg/s", "water mass flow")
+        ds["solids_content"] = var("stream", [props[n]["solids_content"] for n in names], "1",
+                                   "solids mass fraction of the slurry")
+        if fs.slurry is not None:
+            ds["volume_flow"] = var("stream", [props[n]["volume_flow_m3_s"] for n in names], "m3/s",
+                                    "volumetric slurry flow")
+            ds["pulp_density"] = var("stream", [props[n]["pulp_density_kg_m3"] for n in names], "kg/m3",
+                                     "slurry (pulp) density")
     if fs.passing_sizes:
         ds = ds.assign_coords(named_size=("named_size", np.array(fs.passing_sizes),
                                           {"units": "m", "long_name": "size for % passing"}))
@@ -150,10 +173,23 @@ def to_dataset(sol, props=None):
     ds["unit_error_estimate"] = var("unit", [sol.units[u]["error_estimate"] for u in units], "1",
                                     "error estimate of the unit model")
     ds["unit_runtime"] = var("unit", [sol.units[u]["runtime_s"] for u in units], "s", "run time of the unit model")
+    for key, name, unit_of, long_name in (("tau_s", "unit_tau", "s", "mean residence time of the mill"),
+                                          ("holdup_kg", "unit_holdup", "kg", "solids hold-up of the mill"),
+                                          ("power_kW", "unit_power", "kW", "mill power draw"),
+                                          ("specific_energy_kWh_per_t", "unit_specific_energy", "kWh/t",
+                                           "mill specific energy")):
+        vals = [sol.units[u].get(key) for u in units]
+        if any(v is not None for v in vals):
+            ds[name] = var("unit", [np.nan if v is None else v for v in vals], unit_of, long_name)
+    if sol.water is not None and is_wet(sol):
+        ds["unit_water_in"] = var("unit", [sol.water.units[u]["water_in_kg_s"] for u in units], "kg/s",
+                                  "water entering the unit (with its addition)")
+        ds["unit_water_balance_error"] = var("unit", [sol.water.units[u]["water_balance_error"] for u in units],
+                                             "1", "relative water balance error |out - in| / in")
     cls = [u for u, unit in fs.units.items() if unit.type == "classifier"]
     if cls:
         ds = ds.assign_coords(classifier=("classifier", cls))
-        ds["efficiency"] = var(("classifier", "size"), [fs.units[u].efficiency(fs.grid) for u in cls], "1",
+        ds["efficiency"] = var(("classifier", "size"), [sol.unit_blocks[u][fs.units[u].ports[0]] for u in cls], "1",
                                "fraction of each size to the coarse stream (partition curve)")
     mb = mass_balance(sol)
     ds.attrs.update({
@@ -161,9 +197,11 @@ def to_dataset(sol, props=None):
         "method": sol.solver["method"], "structure": sol.solver["structure"],
         "relative_residual": sol.solver["relative_residual"], "runtime_s": sol.runtime_s,
         "mass_balance_error": mb["overall"],
+        "water_balance_error": mb.get("water", 0.0),
         "circulating_load": json.dumps(circulating_loads(sol)),
         "tear": json.dumps(sol.solver["tear"]) if sol.solver["tear"] else "none (all units linear)",
         "kernel": _kernel_status(),
+        **_provenance(fs),
         "conventions": "class 1 coarsest, class N the sink; size = upper class edge (Austin)",
     })
     return ds
@@ -180,6 +218,19 @@ def _clean(v):
     if isinstance(v, np.integer):
         return int(v)
     return v
+
+
+def _provenance(fs) -> dict:
+    """millflow version and the SHA-256 of the input file (when the flowsheet came from one)."""
+    import hashlib
+
+    from millflow import __version__
+
+    out = {"millflow_version": __version__}
+    src = Path(fs.source_file) if fs.source_file and not fs.source_file.startswith("<") else None
+    if src is not None and src.is_file():
+        out["input_sha256"] = hashlib.sha256(src.read_bytes()).hexdigest()
+    return out
 
 
 def _kernel_status() -> str:
@@ -204,11 +255,19 @@ def summary(sol, props=None) -> dict:
             "passing_pct": {f"{x * 1e6:g}": v * 100 for x, v in zip(fs.passing_sizes, p["passing"])},
             "size_um": fs.grid.x * 1e6, "cum_passing": p["cum_passing"],
         }
+        if "water_kg_s" in p:
+            streams[n].update(water_tph=p["water_kg_s"] * TPH, solids_pct=p["solids_content"] * 100)
+            if "volume_flow_m3_s" in p:
+                streams[n].update(volume_flow_m3_h=p["volume_flow_m3_s"] * 3600,
+                                  pulp_density_t_m3=p["pulp_density_kg_m3"] / 1000)
     mb = mass_balance(sol)
     units = {}
     for u, r in sol.units.items():
         units[u] = {k: v for k, v in r.items() if k not in ("solids_in_kg_s", "solids_out_kg_s")}
         units[u]["solids_in_tph"] = r["solids_in_kg_s"] * TPH
+        for k in ("water_in_kg_s", "water_added_kg_s", "water_out_kg_s"):
+            if k in units[u]:
+                units[u][k.replace("_kg_s", "_tph")] = units[u].pop(k) * TPH
     return _clean({
         "title": fs.title, "source_file": fs.source_file,
         "grid": {"n": fs.grid.n, "top_um": fs.grid.x[0] * 1e6, "sink_below_um": fs.grid.x[-1] * 1e6},
@@ -216,10 +275,12 @@ def summary(sol, props=None) -> dict:
         "circulating_load": circulating_loads(sol),
         "mass_balance_error": mb["overall"],
         "unit_mass_balance_error": mb["units"],
+        "water_balance_error": mb.get("water", 0.0),
         "specific_energy_kWh_per_t": _specific_energy(sol),
         "units": units,
         "solver": {k: v for k, v in sol.solver.items()},
         "kernel": _kernel_status(),
+        **_provenance(fs),
         "runtime_s": sol.runtime_s,
     })
 
@@ -233,8 +294,13 @@ def stream_table(sol, props=None):
     rows = []
     for n in fs.stream_names:
         p, s = props[n], fs.streams[n]
-        row = {"stream": n, "from": f"{s.source}.{s.port}", "to": s.target, "solids_tph": p["solids_kg_s"] * TPH,
-               "p80_um": p["p80_m"] * 1e6, "p50_um": p["p50_m"] * 1e6}
+        row = {"stream": n, "from": f"{s.source}.{s.port}", "to": s.target, "solids_tph": p["solids_kg_s"] * TPH}
+        if "water_kg_s" in p:
+            row.update(water_tph=p["water_kg_s"] * TPH, solids_pct=p["solids_content"] * 100)
+            if "volume_flow_m3_s" in p:
+                row.update(volume_flow_m3_h=p["volume_flow_m3_s"] * 3600,
+                           pulp_density_t_m3=p["pulp_density_kg_m3"] / 1000)
+        row.update(p80_um=p["p80_m"] * 1e6, p50_um=p["p50_m"] * 1e6)
         for x, v in zip(fs.passing_sizes, p["passing"]):
             row[f"passing_{x * 1e6:g}um_pct"] = v * 100
         rows.append(row)
@@ -249,7 +315,8 @@ def unit_table(sol):
     for u, r in sol.units.items():
         rows.append({"unit": u, "type": r["type"], "method": r["method"], "solids_in_tph": r["solids_in_kg_s"] * TPH,
                      "mass_balance_error": r["mass_balance_error"], "error_estimate": r["error_estimate"],
-                     "runtime_s": r["runtime_s"], "power_kW": r.get("power_kW"),
+                     "runtime_s": r["runtime_s"], "tau_min": r["tau_s"] / 60 if r.get("tau_s") else None,
+                     "holdup_t": r["holdup_kg"] / 1e3 if r.get("holdup_kg") else None, "power_kW": r.get("power_kW"),
                      "specific_energy_kWh_per_t": r.get("specific_energy_kWh_per_t")})
     return pd.DataFrame(rows).set_index("unit")
 
@@ -265,6 +332,11 @@ def psd_table(sol, props=None):
     return df
 
 
+#: CSV number format: 10 significant digits. The solve is exact to ~1e-13 relative, so
+#: digits past the 10th are rounding noise (100.00000000000003 is written 100).
+CSV_FLOAT_FORMAT = "%.10g"
+
+
 def save(sol, out_dir, *, plots: bool = True) -> dict:
     """Write results.nc, streams.csv, units.csv, psd.csv, summary.json (and PNG plots) to ``out_dir``.
 
@@ -278,11 +350,11 @@ def save(sol, out_dir, *, plots: bool = True) -> dict:
     files["netcdf"] = out / "results.nc"
     ds.to_netcdf(files["netcdf"], engine="scipy")
     files["streams_csv"] = out / "streams.csv"
-    stream_table(sol, props).to_csv(files["streams_csv"])
+    stream_table(sol, props).to_csv(files["streams_csv"], float_format=CSV_FLOAT_FORMAT)
     files["units_csv"] = out / "units.csv"
-    unit_table(sol).to_csv(files["units_csv"])
+    unit_table(sol).to_csv(files["units_csv"], float_format=CSV_FLOAT_FORMAT)
     files["psd_csv"] = out / "psd.csv"
-    psd_table(sol, props).to_csv(files["psd_csv"])
+    psd_table(sol, props).to_csv(files["psd_csv"], float_format=CSV_FLOAT_FORMAT)
     files["summary"] = out / "summary.json"
     files["summary"].write_text(json.dumps(summary(sol, props), indent=2), encoding="utf-8")
     if plots:

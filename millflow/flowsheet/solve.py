@@ -44,6 +44,7 @@ import scipy.sparse as sp
 import scipy.sparse.linalg as spla
 
 from millflow.errors import InputError, SolverError
+from millflow.flowsheet.water import solve_water
 
 __all__ = ["solve", "FlowsheetSolution", "TEAR_METHODS", "assemble"]
 
@@ -70,6 +71,11 @@ class FlowsheetSolution:
     solver: dict
     runtime_s: float
     unit_blocks: dict = field(default_factory=dict, repr=False)
+    water: object = field(default=None, repr=False)
+
+    def water_flow(self, stream: str) -> float:
+        """Water [kg/s] of a stream (0 in a dry circuit)."""
+        return float(self.water.flows[self.flowsheet.stream_names.index(stream)]) if self.water is not None else 0.0
 
     def flow(self, stream: str) -> np.ndarray:
         return self.flows[self.flowsheet.stream_names.index(stream)]
@@ -79,10 +85,13 @@ class FlowsheetSolution:
 MASS_TOL = 1e-9
 
 
-def _unit_blocks(fs, throughputs):
+def _unit_blocks(fs, state):
+    """Blocks of every unit; ``state`` maps a torn unit to its (solids, water) throughput [kg/s]."""
     blocks, infos = {}, {}
     for name, unit in fs.units.items():
-        blocks[name], infos[name] = unit.blocks(fs.grid, throughputs.get(name))
+        solids, water = state.get(name, (None, None))
+        blocks[name], infos[name] = unit.blocks(fs.grid, solids, water) if water is not None \
+            else unit.blocks(fs.grid, solids)
     return blocks, infos
 
 
@@ -204,11 +213,17 @@ def _linear_solve(fs, blocks, extra_sources=None):
 
 
 # --------------------------------------------------------------- tear methods
+def _relative_change(gx, x) -> float:
+    """max |g(x) - x| / |g(x)| (a variable that is and stays 0, such as the water of a dry mill, counts 0)."""
+    d = np.abs(gx - x)
+    return float(np.max(np.where(d == 0, 0.0, d / np.where(gx != 0, np.abs(gx), 1e-300))))
+
+
 def _substitution(g, x0, tol, maxiter):
     x, hist = x0, []
     for it in range(1, maxiter + 1):
         gx = g(x)
-        err = float(np.max(np.abs(gx - x) / np.abs(gx)))
+        err = _relative_change(gx, x)
         hist.append(err)
         x = gx
         if err < tol:
@@ -219,13 +234,13 @@ def _substitution(g, x0, tol, maxiter):
 def _wegstein(g, x0, tol, maxiter, qmin=-5.0, qmax=0.0):
     """Wegstein's accelerated substitution, componentwise, q bounded to [qmin, qmax]."""
     x_prev, g_prev = x0, g(x0)
-    hist = [float(np.max(np.abs(g_prev - x_prev) / np.abs(g_prev)))]
+    hist = [_relative_change(g_prev, x_prev)]
     if hist[-1] < tol:
         return g_prev, 1, hist, True
     x = g_prev
     for it in range(2, maxiter + 1):
         gx = g(x)
-        err = float(np.max(np.abs(gx - x) / np.abs(gx)))
+        err = _relative_change(gx, x)
         hist.append(err)
         if err < tol:
             return gx, it, hist, True
@@ -246,8 +261,8 @@ def _newton(g, x0, tol, maxiter):
 
     def f(x):
         gx = g(x)
-        hist.append(float(np.max(np.abs(gx - x) / np.abs(gx))))
-        return (gx - x) / np.abs(x0)
+        hist.append(_relative_change(gx, x))
+        return (gx - x) / np.where(x0 != 0, np.abs(x0), 1.0)
 
     sol = root(f, x0, method="hybr", options={"xtol": tol, "maxfev": maxiter})
     return sol.x, int(sol.nfev), hist, bool(sol.success and hist and hist[-1] < max(tol, 1e-12) * 100)
@@ -296,43 +311,59 @@ def solve(fs, *, method="wegstein", tol: float = 1e-13, maxiter: int = 200,
     if kin:
         return _solve_kinetic(fs, kin, method, tol, maxiter, t0, mass_tol)
     torn = [n for n, u in fs.units.items() if getattr(u, "nonlinear", False)]
+    wet = [n for n in torn if getattr(fs.units[n], "needs_water", False)]
     names = fs.stream_names
 
-    def throughputs_of(flows):
-        return np.array([sum(flows[names.index(s)].sum() for s in fs.inlets(u)) for u in torn])
+    def state_of(flows, infos):
+        """Torn variables: each torn unit's solids throughput, then the water of those that need it."""
+        F = [math.fsum(math.fsum(flows[names.index(s)]) for s in fs.inlets(u)) for u in torn]
+        if wet:
+            w = solve_water(fs, flows, infos)
+            F += [w.units[u]["water_in_kg_s"] for u in wet]
+        return np.array(F)
+
+    def unit_state(X):
+        state = {u: (X[k], None) for k, u in enumerate(torn)}
+        for k, u in enumerate(wet):
+            state[u] = (state[u][0], X[len(torn) + k])
+        return state
 
     tear_report = None
     if torn:
         fresh = sum(u.solids for u in fs.units.values() if u.type == "feed")
+        water0 = sum(getattr(u, "water", 0.0) for u in fs.units.values() if u.type == "feed")
+        water0 += sum((getattr(fs, "water_added", {}) or {}).values())
         state = {}
 
-        def g(F):
-            blocks, infos = _unit_blocks(fs, dict(zip(torn, F)))
+        def g(X):
+            blocks, infos = _unit_blocks(fs, unit_state(X))
             flows, info = _linear_solve(fs, blocks)
             state.update(blocks=blocks, infos=infos, flows=flows, info=info)
-            return throughputs_of(flows)
+            return state_of(flows, infos)
 
-        F0 = np.full(len(torn), float(fresh))
-        F, its, hist, ok = tear(g, F0, tol, maxiter)
+        X0 = np.array([float(fresh)] * len(torn) + [float(water0)] * len(wet))
+        X, its, hist, ok = tear(g, X0, tol, maxiter)
         if not ok:
             raise SolverError(f"tear iterations on the throughput of {', '.join(torn)} did not converge "
                               f"({method if isinstance(method, str) else 'custom'}, {its} iterations, "
                               f"last relative change {hist[-1] if hist else float('nan'):.3g})")
-        g(np.asarray(F))  # final consistent pass at the converged throughputs
+        g(np.asarray(X))  # final consistent pass at the converged throughputs
         blocks, infos, flows, lin = state["blocks"], state["infos"], state["flows"], state["info"]
         tear_report = {"method": method if isinstance(method, str) else getattr(method, "__name__", "custom"),
                        "torn_units": torn, "iterations": int(its), "converged": bool(ok),
+                       "torn": "solids throughput" + (f" (and water of {', '.join(wet)})" if wet else ""),
                        "residual_history": [float(h) for h in hist], "tolerance": tol}
     else:
         blocks, infos = _unit_blocks(fs, {})
         flows, lin = _linear_solve(fs, blocks)
 
-    reports = _unit_reports(fs, flows, infos, mass_tol)
+    water = solve_water(fs, flows, infos)
+    reports = _unit_reports(fs, flows, infos, mass_tol, water)
     solver = dict(lin)
     solver["structure"] = "nonlinear: tear iterations on mill throughputs" if torn else "all linear: one linear solve"
     solver["tear"] = tear_report
     return FlowsheetSolution(flowsheet=fs, flows=flows, units=reports, solver=solver,
-                             runtime_s=time.perf_counter() - t0, unit_blocks=blocks)
+                             runtime_s=time.perf_counter() - t0, unit_blocks=blocks, water=water)
 
 
 def _vector_err(gx, x):
@@ -428,16 +459,17 @@ def _solve_kinetic(fs, kin, method, tol, maxiter, t0, mass_tol=MASS_TOL):
                           f"{hist[-1] if hist else float('nan'):.3g})")
     g(np.asarray(X))  # final consistent pass
     flows, lin = state["flows"], state["info"]
-    reports = _unit_reports(fs, flows, infos, mass_tol)
+    water = solve_water(fs, flows, infos)
+    reports = _unit_reports(fs, flows, infos, mass_tol, water)
     solver = dict(lin)
     solver["structure"] = "non-linear kinetics: tear iterations on the inlet flow vectors of " + ", ".join(kin)
     solver["tear"] = {"method": method, "torn_units": kin, "torn": "inlet flow vector", "iterations": int(its),
                       "converged": True, "residual_history": [float(h) for h in hist], "tolerance": tol}
     return FlowsheetSolution(flowsheet=fs, flows=flows, units=reports, solver=solver,
-                             runtime_s=time.perf_counter() - t0, unit_blocks=blocks)
+                             runtime_s=time.perf_counter() - t0, unit_blocks=blocks, water=water)
 
 
-def _unit_reports(fs, flows, infos, mass_tol: float = MASS_TOL) -> dict:
+def _unit_reports(fs, flows, infos, mass_tol: float = MASS_TOL, water=None) -> dict:
     names = fs.stream_names
     tot = {n: math.fsum(flows[k]) for k, n in enumerate(names)}
     out = {}
@@ -455,6 +487,15 @@ def _unit_reports(fs, flows, infos, mass_tol: float = MASS_TOL) -> dict:
         if not rep["mass_balance_error"] <= mass_tol:
             raise SolverError(f"units.{uname}: mass balance error {rep['mass_balance_error']:.2g} "
                               f"(in {fin:.6g} kg/s, out {fout:.6g} kg/s) above mass_tol {mass_tol:.2g}")
+        if water is not None:
+            rep.update(water.units[uname])
+            if not rep["water_balance_error"] <= mass_tol:
+                raise SolverError(f"units.{uname}: water balance error {rep['water_balance_error']:.2g} above "
+                                  f"mass_tol {mass_tol:.2g}")
+        if unit.type == "mill":
+            tau = infos[uname].get("tau_s")
+            if tau is not None:
+                rep["holdup_kg"] = tau * fin  # solids hold-up at steady state, H = tau F
         if unit.type == "mill" and unit.power is not None and fin > 0:
             rep["power_kW"] = unit.power / 1e3
             rep["specific_energy_kWh_per_t"] = (unit.power / 1e3) / (fin * 3.6)

@@ -54,11 +54,13 @@ def mill_transfer_matrix(S, b, transport, d=None) -> tuple[np.ndarray, str]:
 # ------------------------------------------------------------------------- units
 @dataclass(frozen=True)
 class Feed:
-    """Fresh feed: a constant solids flow ``solids`` [kg/s] with mass fractions ``psd`` on the grid."""
+    """Fresh feed: a constant solids flow ``solids`` [kg/s] with mass fractions ``psd`` on the grid,
+    and ``water`` [kg/s] (0 for a dry feed; :mod:`millflow.flowsheet.water`)."""
 
     name: str
     solids: float
     psd: np.ndarray = field(repr=False)
+    water: float = 0.0
     type: ClassVar[str] = "feed"
     max_inlets: ClassVar[int | None] = 0
 
@@ -66,7 +68,7 @@ class Feed:
     def ports(self) -> tuple[str, ...]:
         return ("out",)
 
-    def blocks(self, grid, throughput=None):
+    def blocks(self, grid, throughput=None, water=None):
         return {}, {"method": "constant source", "error_estimate": 0.0, "runtime_s": 0.0}
 
     def source(self) -> dict:
@@ -88,7 +90,11 @@ class MillUnit:
     tau : float or None
         Mean residence time [s] (linear unit), or
     holdup : float or None
-        Solids hold-up [kg]; tau = holdup / throughput (nonlinear unit, torn by the solver).
+        Solids hold-up [kg]; tau = holdup / throughput (nonlinear unit, torn by the solver), or
+    slurry_volume : float or None
+        Slurry hold-up [m3] of a wet mill (its volume times the slurry filling); tau =
+        slurry_volume / Q, Q = S/rho_s + w/rho_w the volumetric slurry flow through it
+        (``slurry`` gives the densities; torn by the solver on its solids and water).
     classification : dict or None
         ``{"curve": name, **params}`` (sizes in m) of a discharge screen/grate; the
         efficiency c_i becomes d_i* = (1 - c_i)/(1 - c_N)
@@ -113,12 +119,18 @@ class MillUnit:
     classification: dict | None = None
     power: float | None = None
     kinetics: dict | None = None
+    slurry_volume: float | None = None
+    slurry: object = None
     type: ClassVar[str] = "mill"
     max_inlets: ClassVar[int | None] = None
 
     def __post_init__(self):
-        if (self.tau is None) == (self.holdup is None):
-            raise InputError(f"units.{self.name}: give exactly one of tau (e.g. tau_min) or holdup (e.g. holdup_t)")
+        if sum(v is not None for v in (self.tau, self.holdup, self.slurry_volume)) != 1:
+            raise InputError(f"units.{self.name}: give exactly one of tau (e.g. tau_min), holdup (e.g. holdup_t) "
+                             "or the slurry hold-up (slurry_volume_m3, or slurry_filling with dimensions)")
+        if self.slurry_volume is not None and self.slurry is None:
+            raise InputError(f"units.{self.name}: a mill given by its slurry hold-up needs the solids density "
+                             "([slurry] solids_density_t_m3)")
         if self.transport not in TRANSPORTS:
             raise InputError(f"units.{self.name}.transport: unknown model {self.transport!r}; "
                              f"valid names: {', '.join(sorted(TRANSPORTS))}")
@@ -181,7 +193,12 @@ class MillUnit:
 
     @property
     def nonlinear(self) -> bool:
-        return self.holdup is not None
+        return self.holdup is not None or self.slurry_volume is not None
+
+    @property
+    def needs_water(self) -> bool:
+        """True when the block depends on the water through the mill (slurry hold-up)."""
+        return self.slurry_volume is not None
 
     def discharge_efficiency(self, grid) -> np.ndarray | None:
         if self.classification is None:
@@ -189,9 +206,15 @@ class MillUnit:
         params = dict(self.classification)
         return efficiency(params.pop("curve"), grid.x, **params)
 
-    def residence_time(self, throughput=None) -> float:
+    def residence_time(self, throughput=None, water=None) -> float:
+        """tau [s]: given, H / F (solids hold-up), or V / Q (slurry hold-up, Q in m3/s)."""
         if self.tau is not None:
             return float(self.tau)
+        if self.slurry_volume is not None:
+            Q = self.slurry.volume_flow(float(throughput or 0.0), float(water or 0.0))
+            if not Q > 0:
+                raise SolverError(f"units.{self.name}: slurry hold-up given but no slurry flows through the mill")
+            return float(self.slurry_volume) / Q
         if throughput is None or not throughput > 0:
             raise SolverError(f"units.{self.name}: hold-up given but the throughput is {throughput!r} kg/s; "
                               "the mill receives no solids")
@@ -203,9 +226,9 @@ class MillUnit:
         b = np.asarray(fun(grid.x), dtype=float)
         return S, b
 
-    def blocks(self, grid, throughput=None):
+    def blocks(self, grid, throughput=None, water=None):
         t0 = time.perf_counter()
-        tau = self.residence_time(throughput)
+        tau = self.residence_time(throughput, water)
         S, b = self.breakage_functions(grid)
         c = self.discharge_efficiency(grid)
         d = None
@@ -243,13 +266,16 @@ class Classifier:
     """Hydrocyclone, screen or air separator: coarse = diag(c) feed, fine = diag(1 - c) feed.
 
     ``kind`` is a key of :data:`CLASSIFIER_PORTS`; ``curve`` a key of
-    :data:`millflow.classifiers.CURVES` with ``params`` (sizes in m).
+    :data:`millflow.classifiers.CURVES` with ``params`` (sizes in m). ``water`` says
+    where the feed's water goes: ``{"to_coarse": R_f}`` or ``{"coarse_solids_content": p}``
+    (:mod:`millflow.flowsheet.water`); a hydrocyclone's default is R_f = its bypass.
     """
 
     name: str
     kind: str
     curve: str
     params: dict
+    water: dict | None = None
     type: ClassVar[str] = "classifier"
     max_inlets: ClassVar[int | None] = None
 
@@ -260,7 +286,7 @@ class Classifier:
     def efficiency(self, grid) -> np.ndarray:
         return efficiency(self.curve, grid.x, **self.params)
 
-    def blocks(self, grid, throughput=None):
+    def blocks(self, grid, throughput=None, water=None):
         t0 = time.perf_counter()
         c = self.efficiency(grid)
         coarse, fine = self.ports
@@ -282,7 +308,7 @@ class Mixer:
     def ports(self) -> tuple[str, ...]:
         return ("out",)
 
-    def blocks(self, grid, throughput=None):
+    def blocks(self, grid, throughput=None, water=None):
         return {"out": np.ones(grid.n)}, {"method": "sum", "error_estimate": 0.0, "runtime_s": 0.0}
 
 
@@ -305,7 +331,7 @@ class Splitter:
     def ports(self) -> tuple[str, ...]:
         return tuple(self.fractions)
 
-    def blocks(self, grid, throughput=None):
+    def blocks(self, grid, throughput=None, water=None):
         return ({p: np.full(grid.n, float(f)) for p, f in self.fractions.items()},
                 {"method": "fixed fractions", "error_estimate": 0.0, "runtime_s": 0.0})
 
@@ -322,7 +348,7 @@ class Product:
     def ports(self) -> tuple[str, ...]:
         return ()
 
-    def blocks(self, grid, throughput=None):
+    def blocks(self, grid, throughput=None, water=None):
         return {}, {"method": "sink", "error_estimate": 0.0, "runtime_s": 0.0}
 
 
