@@ -345,7 +345,8 @@ def _mill(name: str, t: _Table, materials: dict, slurry=None) -> MillUnit:
         cls = {"curve": curve, **_curve_params(ct, curve)}
     kin = _kinetics(t.sub("kinetics")) if "kinetics" in t.data else None
     t.finish("type, material, rate, breakage, transport, tau_min, holdup_t, slurry_volume_m3, power_kW, "
-             "classification, kinetics, add_water_tph, or by dimensions: diameter_m, length_m, ball_filling, critical_speed_fraction, ball_size_mm, ... "
+             "classification, kinetics, add_water_tph, or by dimensions: diameter_m, length_m, ball_filling, "
+             "critical_speed_fraction, ball_size_mm, slurry_filling, ... "
              "(docs/scaleup.md)")
     unit = _wrap(f"units.{name}", MillUnit, name, rate, brk, model, tparams, tau, holdup, cls, power, kin,
                  slurry_volume, slurry)

@@ -119,7 +119,7 @@ def solve_water(fs, flows, infos) -> WaterSolution:
                           "with water_to_coarse = 1 or a splitter sending everything back)") from None
     w = w + np.linalg.solve(M, c - M @ w)  # one refinement step
     scale = max(float(np.max(np.abs(w))) if w.size else 0.0, 1e-300)
-    for uname, o in undefined.items():
+    for uname in undefined:
         win = math.fsum(w[sidx[i]] for i in fs.inlets(uname)) + added.get(uname, 0.0)
         if win > 0:
             raise InputError(f"units.{uname}: its feed carries {win * 3.6:.6g} t/h of water; say where it goes "
