@@ -131,15 +131,81 @@ def _grid(t: _Table) -> SizeGrid:
 
 
 # ------------------------------------------------------------------------ PSD
-def _feed_psd(t: _Table, grid: SizeGrid) -> np.ndarray:
+def _sieve_table(path: Path, where: str):
+    """Sizes [m] (descending) and cumulative passing [-] from a feed CSV: a size column with its
+    unit (size_um, size_mm, size_m) and one of passing_pct/_frac (cumulative passing),
+    cum_retained_pct/_frac (cumulative retained) or retained_pct/_frac (mass on each sieve,
+    a pan row with size 0 holding the rest; the column must sum to 100 % / 1)."""
+    from millflow.inputs import read_csv
+
+    if not path.is_file():
+        raise InputError(f"{where}.file: {path} not found")
+    df = read_csv(path, "feed PSD file")
+    cols = [c.strip() for c in df.columns]
+    df.columns = cols
+    size_cols = [c for c in cols if c.startswith("size_") and c[5:] in UNITS["length"]]
+    if len(size_cols) != 1:
+        raise InputError(f"{path}: expected one size column with its unit (size_um, size_mm or size_m); "
+                         f"columns: {', '.join(cols)}")
+    kinds = [c for c in cols if c.rsplit("_", 1)[0] in ("passing", "cum_retained", "retained")
+             and c.rsplit("_", 1)[-1] in ("pct", "frac")]
+    if len(kinds) != 1:
+        raise InputError(f"{path}: expected one of passing_pct, cum_retained_pct or retained_pct (or _frac); "
+                         f"columns: {', '.join(cols)}")
+    kind, unit = kinds[0].rsplit("_", 1)
+    scale = 0.01 if unit == "pct" else 1.0
+    out = {}
+    for col in (size_cols[0], kinds[0]):
+        vals = []
+        for row, v in enumerate(df[col].tolist(), start=2):
+            try:
+                fv = float(v)
+            except (TypeError, ValueError):
+                fv = float("nan")
+            if not math.isfinite(fv) or fv < 0:
+                raise InputError(f"{path}: row {row}, column {col} = {v!r}; expected a finite number >= 0")
+            vals.append(fv)
+        out[col] = np.array(vals)
+    size = out[size_cols[0]] * UNITS["length"][size_cols[0][5:]]
+    val = out[kinds[0]] * scale
+    if kind == "retained":
+        total = math.fsum(val)
+        if abs(total - 1.0) > 1e-6:
+            raise InputError(f"{path}: {kinds[0]} sums to {total / scale:.6g} {'%' if unit == 'pct' else ''}; "
+                             f"expected {1 / scale:g} (the mass on every sieve and the pan; millflow does not "
+                             "renormalise measured data)")
+        order = np.argsort(-size)
+        size, val = size[order], val[order]
+        passing = 1.0 - np.cumsum(val)
+        keep = size > 0  # the pan row (size 0) is the remainder, not a sieve
+        # the sum is checked to 1e-6 above: a remainder within that is the data's rounding, not mass
+        passing = np.where(np.abs(passing) <= 1e-6, 0.0, passing)
+        return size[keep], passing[keep]
+    if np.any(size <= 0):
+        raise InputError(f"{path}: sizes must be > 0 for cumulative data")
+    passing = 1.0 - val if kind == "cum_retained" else val
+    return size, passing
+
+
+def _feed_psd(t: _Table, grid: SizeGrid, base: Path | None = None) -> np.ndarray:
     form = t.plain("form", kind=str)
-    if form == "sieves":
-        size = t.quantity("size", "length", array=True)
-        if "passing_pct" in t.data or "passing_frac" in t.data:
-            passing = t.quantity("passing", "fraction", allow_zero=True, array=True)
+    if form in ("sieves", "csv"):
+        if form == "csv":
+            name = t.plain("file", kind=str)
+            path = Path(name) if Path(name).is_absolute() else (base or Path.cwd()) / name
+            size, passing = _sieve_table(path, t.where)
         else:
-            passing = t.quantity("passing", "fraction", array=True)  # raises the "units missing" error
-        t.finish("form, size_um, passing_pct")
+            size = t.quantity("size", "length", array=True)
+            if "passing_pct" in t.data or "passing_frac" in t.data:
+                passing = t.quantity("passing", "fraction", allow_zero=True, array=True)
+            else:
+                passing = t.quantity("passing", "fraction", array=True)  # raises the "units missing" error
+        tail = t.plain("tail", "sink", kind=str)
+        points = t.plain("tail_points", 3, kind=float)
+        if tail not in ("sink", "rosin_rammler", "ggs"):
+            raise InputError(f"{t.where}.tail = {tail!r}: expected sink (mass below the finest sieve goes to the "
+                             "grid's sink), rosin_rammler or ggs (fitted to the finest sieves, extrapolated)")
+        t.finish("form, size_um, passing_pct (or file), tail, tail_points")
         size, passing = np.atleast_1d(size), np.atleast_1d(passing)
         if size.shape != passing.shape:
             raise InputError(f"{t.where}: {size.size} sizes but {passing.size} passing values")
@@ -149,7 +215,7 @@ def _feed_psd(t: _Table, grid: SizeGrid) -> np.ndarray:
             raise GridError(f"{t.where}: the coarsest sieve ({size[0] * 1e6:.6g} um) passes only "
                             f"{passing[0] * 100:.6g} %; add a sieve that passes 100 %")
         try:
-            return from_sieves(size, passing, grid)
+            return from_sieves(size, passing, grid, tail=None if tail == "sink" else tail, tail_points=points)
         except GridError as exc:
             if size[0] <= grid.x[0] * (1 + 1e-12):  # the grid does cover it: say what is wrong instead
                 raise GridError(f"{t.where}: {exc}") from exc
@@ -385,13 +451,13 @@ def _classifier_water(t: _Table) -> dict | None:
     return None
 
 
-def _unit(name: str, t: _Table, grid: SizeGrid, materials: dict, slurry=None):
+def _unit(name: str, t: _Table, grid: SizeGrid, materials: dict, slurry=None, base: Path | None = None):
     utype = t.plain("type", kind=str)
     if utype not in UNIT_TYPES:
         raise InputError(f"units.{name}.type = {utype!r}: unknown unit type; valid: {', '.join(sorted(UNIT_TYPES))}")
     if utype == "feed":
         solids = t.quantity("solids", "mass_flow")
-        psd = _feed_psd(t.sub("psd"), grid)
+        psd = _feed_psd(t.sub("psd"), grid, base)
         t.plain("material", None)
         water = _feed_water(t, solids)
         t.finish("type, solids_tph, psd, material, water_tph or solids_content_pct")
@@ -424,8 +490,14 @@ def _unit(name: str, t: _Table, grid: SizeGrid, materials: dict, slurry=None):
     return Product(name)
 
 
-def from_dict(data: dict, *, source: str = "<dict>") -> Flowsheet:
-    """Build a Flowsheet from the parsed TOML document ``data`` (see docs/flowsheets.md)."""
+def from_dict(data: dict, *, source: str = "<dict>", base_dir=None) -> Flowsheet:
+    """Build a Flowsheet from the parsed TOML document ``data`` (see docs/flowsheets.md).
+
+    Files a flowsheet names (a feed PSD CSV, fit results) are read relative to ``base_dir``
+    (default: the folder of ``source`` when it is a file, else the current folder).
+    """
+    base = Path(base_dir) if base_dir is not None else (
+        Path(source).resolve().parent if source and not source.startswith("<") else None)
     top = _Table(data, "")
     title = top.plain("title", "", kind=str)
     grid = _grid(top.sub("grid"))
@@ -453,7 +525,7 @@ def from_dict(data: dict, *, source: str = "<dict>") -> Flowsheet:
     for uname in ut.data:
         u = ut.sub(uname)
         added = u.quantity("add_water", "mass_flow", None, allow_zero=True)
-        units[uname] = _unit(uname, u, grid, materials, slurry)
+        units[uname] = _unit(uname, u, grid, materials, slurry, base)
         if added is not None:
             if units[uname].type in ("feed", "product"):
                 raise InputError(f"units.{uname}.add_water: a {units[uname].type} takes no water addition "
