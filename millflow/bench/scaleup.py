@@ -21,11 +21,12 @@ DESCRIPTION = "closed-circuit scale-up with bands: delta method and 1,000-draw M
 TRUTH = {"ln_A0": math.log(1 / 240), "alpha": 1.0, "phi": 0.4, "gamma": 0.8, "beta": 3.5}
 
 
-def synthetic_lab_fit(theta: dict, grid, noise: float, rng, label: str = "synthetic lab fit"):
+def synthetic_lab_fit(theta: dict, grid, noise: float, rng, label: str = "synthetic lab fit", as_dict: bool = False):
     """A local eq. 9 fit to synthetic batch tests (1, 3, 9 min, 12 root-2 sieves from
     4 mm, feed in the top three sieve intervals) made from ``theta`` (eq. 5 rates, eq. 6
     breakage) on ``grid`` with Gaussian noise of sd ``noise`` on cumulative passing.
-    Returns (the fit as :func:`millflow.scaleup.fit_from_dict` reads it, the model)."""
+    Returns (the fit as :func:`millflow.scaleup.fit_from_dict` reads it, the model); with
+    ``as_dict`` the fit's JSON dict (as ``millflow fit --json`` prints it) instead of the first."""
     import pandas as pd
 
     from millflow.fitting.data import psd_data_from_frames
@@ -49,7 +50,7 @@ def synthetic_lab_fit(theta: dict, grid, noise: float, rng, label: str = "synthe
     model = ForwardModel(spec, psd_data_from_frames(pd.concat(rows), strict=False), grid)
     params = default_parameters(spec, {n: {"value": float(v)} for n, v in theta.items()})
     res = fit(model, params, global_search=False, starts=1, grid_check=False, quiet=True)
-    return fit_from_dict(res.to_dict(), label), model
+    return (res.to_dict() if as_dict else fit_from_dict(res.to_dict(), label)), model
 
 
 def make_case():

@@ -337,7 +337,112 @@ def _kinetics(t: _Table) -> dict:
     return out
 
 
-def _mill(name: str, t: _Table, materials: dict, slurry=None) -> MillUnit:
+class _FittedRate:
+    """S(x) [1/s] of a fitted breakage model at the flowsheet's process conditions (eq. 5/7 with eq. 10)."""
+
+    def __init__(self, fitted, process):
+        self.fitted, self.process = fitted, process
+
+    def __call__(self, x):
+        return self.fitted.rates(self.fitted.theta, np.asarray(x, float), self.process)
+
+    def __repr__(self):
+        return f"fitted rate ({self.fitted.source}, {self.fitted.spec['rate']} form, process {self.process})"
+
+
+class _FittedBreakage:
+    """b(x) of a fitted breakage model (eq. 6), evaluated exactly on the flowsheet's grid."""
+
+    def __init__(self, fitted):
+        self.fitted = fitted
+
+    def b(self, x):
+        return self.fitted.frac_b(self.fitted.theta, np.asarray(x, float))
+
+    def __repr__(self):
+        return f"fitted breakage ({self.fitted.source}, {self.fitted.spec['breakage']})"
+
+
+def _fitted_material(m: _Table, base: Path | None) -> dict:
+    """A material's rate and breakage from a ``millflow fit --json`` result: the estimate (eqs. 5-7),
+    A at the process values the flowsheet states (eq. 10, keys as the fit's process columns)."""
+    from millflow.scaleup.fitted import load_fit
+
+    name = m.plain("fit", kind=str)
+    process = m.plain("process", {})
+    if not isinstance(process, dict):
+        raise InputError(f"{m.where}.process = {process!r}: expected a table of the fit's process values")
+    m.finish("fit, process")
+    p = Path(name) if Path(name).is_absolute() else (base or Path.cwd()) / name
+    if p.is_dir():
+        p = p / "fit.json"
+    if not p.is_file():
+        raise InputError(f"{m.where}.fit: {p} not found")
+    fitted = load_fit(p)
+    cols = fitted.spec.get("rate_process", [])
+    extra = sorted(set(process) - set(cols))
+    if extra:
+        raise InputError(f"{m.where}.process.{extra[0]}: not a process variable of the fit (its eq. 10 uses "
+                         f"{cols or 'none'})")
+    for k, v in process.items():
+        if isinstance(v, bool) or not isinstance(v, (int, float)):
+            raise InputError(f"{m.where}.process.{k} = {v!r}: expected a number")
+    proc = fitted.check_process(process, f"{m.where}.process")
+    return {"rate": _FittedRate(fitted, proc), "breakage": _FittedBreakage(fitted)}
+
+
+def _rtd_fit(tr: _Table, base: Path | None, classified: bool):
+    """Transport from a ``millflow fit-rtd --json`` result (or its --out folder's fit.json):
+    the model and its shape parameters, and tau converted from the fit's time unit to s.
+    A tanks-in-series fit with real n and discharge classification (which needs whole
+    cells) uses the nearest whole n, said in the mill's method."""
+    import json
+
+    name = tr.plain("rtd_fit", kind=str)
+    tr.finish("rtd_fit (a 'millflow fit-rtd --json' result; nothing else with it)")
+    p = Path(name) if Path(name).is_absolute() else (base or Path.cwd()) / name
+    if p.is_dir():
+        p = p / "fit.json"
+    if not p.is_file():
+        raise InputError(f"{tr.where}.rtd_fit: {p} not found")
+    try:
+        d = json.loads(read_text(p, "fit-rtd result"))
+    except json.JSONDecodeError as exc:
+        raise InputError(f"{p}: not JSON ({exc.msg} at line {exc.lineno})") from None
+    if not isinstance(d, dict) or not isinstance(d.get("params"), dict) or "model" not in d:
+        raise InputError(f"{p}: not a 'millflow fit-rtd --json' result (needs 'model' and 'params')")
+    try:
+        model = rtd_names.canonical_name(d["model"])
+    except (ValueError, TypeError):
+        raise InputError(f"{p}: model = {d['model']!r}: not a transport model; valid: "
+                         f"{', '.join(sorted(TRANSPORTS))}") from None
+    unit = d.get("time_unit")
+    if unit not in UNITS["time"]:
+        raise InputError(f"{p}: time_unit = {unit!r}; expected one of {', '.join(UNITS['time'])} (a fitted tau "
+                         "without its unit cannot be used)")
+    values = {}
+    for k, v in d["params"].items():
+        val = v.get("value") if isinstance(v, dict) else None
+        if isinstance(val, bool) or not isinstance(val, (int, float)) or not math.isfinite(val):
+            raise InputError(f"{p}: params.{k}.value = {val!r}; expected a finite number")
+        values[k] = float(val)
+    if "tau" not in values or not values["tau"] > 0:
+        raise InputError(f"{p}: params.tau missing or not > 0")
+    entry = rtd_names.TRANSPORTS[model]
+    params = {k: values[k] for k in entry.required + entry.optional if k in values}
+    missing = [k for k in entry.required if k not in params]
+    if missing:
+        raise InputError(f"{p}: params {missing} missing for model {model!r}")
+    note = f"transport from {p.name} ({model}, fitted in {unit})"
+    if model == "tanks_in_series" and classified and params["n"] != round(params["n"]):
+        whole = max(1, round(params["n"]))
+        note += (f"; fitted n = {params['n']:.4g} -> {whole} tanks (nearest whole n: discharge classification "
+                 "needs whole cells)")
+        params["n"] = float(whole)
+    return model, params, values["tau"] * UNITS["time"][unit], note
+
+
+def _mill(name: str, t: _Table, materials: dict, slurry=None, base: Path | None = None) -> MillUnit:
     """A mill table: breakage from its material (or its own), transport, tau or hold-up."""
     mat_name = t.plain("material", None, kind=str)
     mat = {}
@@ -353,7 +458,10 @@ def _mill(name: str, t: _Table, materials: dict, slurry=None) -> MillUnit:
         raise InputError(f"units.{name}: missing parameter {missing!r} (give it in the mill or in its material)")
     tr = t.sub("transport", None)
     model, tparams = "perfect_mixing", {}
-    if tr is not None:
+    fitted_tau, rtd_note = None, None
+    if tr is not None and "rtd_fit" in tr.data:
+        model, tparams, fitted_tau, rtd_note = _rtd_fit(tr, base, "classification" in t.data)
+    elif tr is not None:
         raw = tr.plain("model", kind=str)
         try:  # the one table of transport names (rtd.names): canonical names and aliases
             model = rtd_names.canonical_name(raw)
@@ -379,6 +487,11 @@ def _mill(name: str, t: _Table, materials: dict, slurry=None) -> MillUnit:
     tau = t.quantity("tau", "time", None)
     holdup = t.quantity("holdup", "mass", None)
     slurry_volume = t.quantity("slurry_volume", "volume", None)
+    if fitted_tau is not None and tau is None and holdup is None and slurry_volume is None and design is None:
+        tau = fitted_tau  # the tracer fit's tau, converted from its time unit
+        rtd_note += f"; tau = {tau / 60:.6g} min from the fit"
+    elif fitted_tau is not None:
+        rtd_note += "; shape only (tau from this mill's tau, hold-up or dimensions)"
     filling = t.plain("slurry_filling", None, kind=float)
     if filling is not None:
         if design is None:
@@ -415,7 +528,7 @@ def _mill(name: str, t: _Table, materials: dict, slurry=None) -> MillUnit:
              "critical_speed_fraction, ball_size_mm, slurry_filling, ... "
              "(docs/scaleup.md)")
     unit = _wrap(f"units.{name}", MillUnit, name, rate, brk, model, tparams, tau, holdup, cls, power, kin,
-                 slurry_volume, slurry)
+                 slurry_volume, slurry, rtd_note)
     _wrap(f"units.{name}", TRANSPORTS[model], tau or 1.0, **tparams)
     return unit
 
@@ -463,7 +576,7 @@ def _unit(name: str, t: _Table, grid: SizeGrid, materials: dict, slurry=None, ba
         t.finish("type, solids_tph, psd, material, water_tph or solids_content_pct")
         return Feed(name, solids, psd, water)
     if utype == "mill":
-        return _mill(name, t, materials, slurry)
+        return _mill(name, t, materials, slurry, base)
     if utype in ("hydrocyclone", "screen", "air_separator", "dynamic_classifier"):
         kind = "air_separator" if utype == "dynamic_classifier" else utype
         default = {"hydrocyclone": None, "screen": "screen", "air_separator": "tromp"}[kind]
@@ -518,8 +631,11 @@ def from_dict(data: dict, *, source: str = "<dict>", base_dir=None) -> Flowsheet
     if mt is not None:
         for mname in mt.data:
             m = mt.sub(mname)
+            if "fit" in m.data:
+                materials[mname] = _fitted_material(m, base)
+                continue
             materials[mname] = {k: f(m.sub(k)) for k, f in (("rate", _rate), ("breakage", _breakage)) if k in m.data}
-            m.finish("rate, breakage")
+            m.finish("rate, breakage (or fit = \"fit.json\" with process = {...})")
     units, water_added = {}, {}
     ut = top.sub("units")
     for uname in ut.data:

@@ -121,6 +121,7 @@ class MillUnit:
     kinetics: dict | None = None
     slurry_volume: float | None = None
     slurry: object = None
+    transport_note: str | None = None
     type: ClassVar[str] = "mill"
     max_inlets: ClassVar[int | None] = None
 
@@ -245,6 +246,8 @@ class MillUnit:
         except SolverError as exc:
             raise SolverError(f"units.{self.name}: {exc}") from None
         err = float(np.max(np.abs(P.sum(axis=0) - 1.0)))
+        if self.transport_note:
+            how += f" [{self.transport_note}]"
         info = {"method": how + ("" if d is None else ", discharge classification d*"), "error_estimate": err,
                 "runtime_s": time.perf_counter() - t0, "tau_s": tau}
         if d is not None and retained.size:  # said, not silent: the floor is far below any rate that matters
