@@ -23,6 +23,8 @@ def add_parser(subparsers) -> None:
     p.add_argument("--overwrite", action="store_true",
                    help="replace an output folder that holds files millflow did not write")
     p.add_argument("--quiet", action="store_true", help="print nothing but errors (and --json output)")
+    p.add_argument("--no-grid-check", action="store_true",
+                   help="skip the second solve on a refined size grid (Principle IV)")
     p.add_argument("--method", default="wegstein", help="tear method for nonlinear units (wegstein, newton, "
                                                         "substitution)")
     p.set_defaults(func=run)
@@ -66,6 +68,15 @@ def format_summary(s: dict, out_dir: str | None, written: list[str] | None = Non
         w_worst = max((r.get("water_balance_error", 0.0) or 0.0) for r in s["units"].values())
         lines.append(f"water balance error: overall {_f(s.get('water_balance_error'), '{:.1e}')}, "
                      f"worst unit {w_worst:.1e}")
+    g = s.get("grid_check")
+    if g and g.get("status") in ("ok", "grid too coarse"):
+        line = (f"grid check ({g['refined_classes']} classes): P80, P50 and circulating loads move at most "
+                f"{100 * g['worst']:.2g} % ({g['worst_at']})")
+        if g["status"] == "ok":
+            lines.append(line + f": within {100 * g['threshold']:.3g} %")
+        else:
+            lines.append(line + f": the grid is too coarse for {100 * g['threshold']:.3g} % "
+                                "(refine grid.ratio or grid.n)")
     tear = s["solver"].get("tear")
     how = s["solver"]["structure"]
     if tear:
@@ -87,9 +98,14 @@ def run(args) -> int:
     check_target(out, overwrite=args.overwrite, input_path=path)  # before the work, not after
     fs = load(path)
     sol = solve(fs, method=args.method)
-    s = summary(sol)
+    check = None
+    if not args.no_grid_check:
+        from millflow.flowsheet.gridcheck import grid_check
+
+        check = grid_check(sol)
+    s = summary(sol, grid_check=check)
     with staged_folder(out, overwrite=args.overwrite, input_path=path, command="run") as tmp:
-        files = relocate(save(sol, tmp, plots=not args.no_plots).values(), tmp, out)
+        files = relocate(save(sol, tmp, plots=not args.no_plots, grid_check=check).values(), tmp, out)
     s["output_dir"] = str(out)
     s["files_written"] = [Path(f).name for f in files]
     if args.json:

@@ -664,7 +664,8 @@ def from_dict(data: dict, *, source: str = "<dict>", base_dir=None) -> Flowsheet
         streams[sname] = Stream(sname, uname, port, dst)
     top.finish("title, grid, report, slurry, materials, units, streams")
     return Flowsheet(grid=grid, units=units, streams=streams, title=title, passing_sizes=passing,
-                     source_file=source, slurry=slurry, water_added=water_added)
+                     source_file=source, slurry=slurry, water_added=water_added,
+                     meta={"document": data, "base_dir": None if base is None else str(base)})
 
 
 def loads(text: str, *, source: str = "<string>") -> Flowsheet:

@@ -126,7 +126,7 @@ def _specific_energy(sol) -> float | None:
     return (math.fsum(power) / 1e3) / (prod * TPH) if prod > 0 else float("nan")
 
 
-def to_dataset(sol, props=None):
+def to_dataset(sol, props=None, grid_check=None):
     """The solution as an xarray Dataset with dimensions ``stream``, ``size`` (and ``unit``, ``classifier``)."""
     import xarray as xr
 
@@ -202,6 +202,7 @@ def to_dataset(sol, props=None):
         "tear": json.dumps(sol.solver["tear"]) if sol.solver["tear"] else "none (all units linear)",
         "kernel": _kernel_status(),
         **_provenance(fs),
+        "grid_check": json.dumps(_clean(grid_check)) if grid_check else "not run",
         "conventions": "class 1 coarsest, class N the sink; size = upper class edge (Austin)",
     })
     return ds
@@ -240,7 +241,7 @@ def _kernel_status() -> str:
     return status()
 
 
-def summary(sol, props=None) -> dict:
+def summary(sol, props=None, grid_check=None) -> dict:
     """JSON-ready summary: streams, circulating_load, mass_balance_error, specific energy, units, runtime_s."""
     fs = sol.flowsheet
     props = props or stream_properties(sol)
@@ -281,6 +282,7 @@ def summary(sol, props=None) -> dict:
         "solver": {k: v for k, v in sol.solver.items()},
         "kernel": _kernel_status(),
         **_provenance(fs),
+        "grid_check": grid_check,
         "runtime_s": sol.runtime_s,
     })
 
@@ -337,7 +339,7 @@ def psd_table(sol, props=None):
 CSV_FLOAT_FORMAT = "%.10g"
 
 
-def save(sol, out_dir, *, plots: bool = True) -> dict:
+def save(sol, out_dir, *, plots: bool = True, grid_check=None) -> dict:
     """Write results.nc, streams.csv, units.csv, psd.csv, summary.json (and PNG plots) to ``out_dir``.
 
     Returns a dict name -> path of the files written.
@@ -346,7 +348,7 @@ def save(sol, out_dir, *, plots: bool = True) -> dict:
     out.mkdir(parents=True, exist_ok=True)
     props = stream_properties(sol)
     files = {}
-    ds = to_dataset(sol, props)
+    ds = to_dataset(sol, props, grid_check)
     files["netcdf"] = out / "results.nc"
     ds.to_netcdf(files["netcdf"], engine="scipy")
     files["streams_csv"] = out / "streams.csv"
@@ -356,7 +358,7 @@ def save(sol, out_dir, *, plots: bool = True) -> dict:
     files["psd_csv"] = out / "psd.csv"
     psd_table(sol, props).to_csv(files["psd_csv"], float_format=CSV_FLOAT_FORMAT)
     files["summary"] = out / "summary.json"
-    files["summary"].write_text(json.dumps(summary(sol, props), indent=2), encoding="utf-8")
+    files["summary"].write_text(json.dumps(summary(sol, props, grid_check), indent=2), encoding="utf-8")
     if plots:
         from millflow.flowsheet.plots import save_plots
 

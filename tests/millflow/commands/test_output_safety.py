@@ -86,8 +86,8 @@ def test_unwritable_targets_exit_1(tmp_path, capsys, target, expect):
 def _failing_save(exc_factory):
     real = flowsheet_pkg.save
 
-    def save(sol, out, *, plots=True):
-        real(sol, out, plots=plots)  # some files are complete when the failure comes
+    def save(sol, out, *, plots=True, **kw):
+        real(sol, out, plots=plots, **kw)  # some files are complete when the failure comes
         raise exc_factory()
     return save
 
