@@ -39,6 +39,9 @@ R_f and R_v [%], lambda = 10^(1.82 C_v) / (8.05 (1 - C_v)^2) the hindered-settli
 
 The K constants depend on the ore and on the units above; the defaults of
 :class:`NageswararaoConstants` are illustrative magnitudes, not values from the sources.
+R_v has no lambda term, as in the public implementations we compared with. Some
+implementations write the capacity with the head ratio, (P/(rho_p g D_c))^0.5, instead of
+(P/rho_p)^0.5: that changes what K_Q0 means, not the trends.
 
 Either model gives a :class:`CyclonePrediction`, whose :meth:`~CyclonePrediction.efficiency`
 is the actual curve c = R_f + (1 - R_f) c_corr (the water split as bypass) through
