@@ -183,6 +183,7 @@ UNITS = {
     "density": {"kg_m3": 1.0, "t_m3": 1000.0},
     "volume": {"m3": 1.0, "L": 1e-3},
     "pressure": {"Pa": 1.0, "kPa": 1e3, "bar": 1e5},
+    "viscosity": {"Pa_s": 1.0, "mPa_s": 1e-3, "cP": 1e-3},
 }
 
 

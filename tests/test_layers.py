@@ -16,7 +16,8 @@ PACKAGES = ("millflow", "rtd")
 # Layers, lowest first: a module may import from its own layer and the ones below.
 LAYERS = [
     ("base", ("millflow.errors", "millflow.grid", "millflow.compiled", "millflow.plotting", "millflow.inputs")),
-    ("kinetics", ("millflow.psd", "millflow.checks", "millflow.classifiers", "millflow.breakage", "millflow.linalg",
+    ("kinetics", ("millflow.psd", "millflow.checks", "millflow.classifiers", "millflow.cyclones", "millflow.breakage",
+                  "millflow.linalg",
                   "millflow.batch", "millflow.nonlinear")),  # nonlinear: where issue 12's kinetics land
     ("mill", ("millflow.mill",)),
     ("circuits", ("millflow.flowsheet", "millflow.fitting", "millflow.scaleup",

@@ -533,6 +533,38 @@ def _mill(name: str, t: _Table, materials: dict, slurry=None, base: Path | None 
     return unit
 
 
+_CYCLONE_SIZES = (("diameter", True), ("inlet_diameter", True), ("vortex_finder", True), ("apex", True),
+                  ("free_vortex_height", True), ("cylinder_length", False))
+_CALIBRATION = {"plitt": ("F1", "F2", "F3", "F4", "density_exponent"),
+                "nageswararao": ("K_D0", "K_Q0", "K_V1", "K_W1", "alpha")}
+
+
+def _predicted_cyclone(name: str, t: _Table, slurry):
+    """A hydrocyclone cluster predicted by Plitt's or Nageswararao's model (millflow.cyclones)."""
+    from millflow.cyclones import CycloneGeometry, NageswararaoConstants, PlittCalibration
+    from millflow.flowsheet.cyclone import CYCLONE_MODELS, PredictedCyclone
+
+    model = t.plain("model", kind=str)
+    if model not in CYCLONE_MODELS:
+        raise InputError(f"units.{name}.model = {model!r}: unknown hydrocyclone model; valid: "
+                         f"{', '.join(CYCLONE_MODELS)} (or a fixed curve: curve = \"plitt\" with d50c_um, m, bypass)")
+    sizes = {f"{k}_m": t.quantity(k, "length", ... if required else None) for k, required in _CYCLONE_SIZES}
+    angle = t.plain("cone_angle_deg", None, kind=float)
+    count = t.plain("cyclones", 1, kind=float)
+    if count != int(count) or count < 1:
+        raise InputError(f"units.{name}.cyclones = {count!r}: expected a whole number >= 1 (cyclones in the cluster)")
+    viscosity = t.quantity("viscosity", "viscosity", 1.0e-3)
+    cal = {k: t.plain(k, kind=float) for k in _CALIBRATION[model] if k in t.data}
+    t.finish("type, model, cyclones, diameter_mm, inlet_diameter_mm, vortex_finder_mm, apex_mm, "
+             "free_vortex_height_mm, cylinder_length_mm, cone_angle_deg, viscosity_mPa_s, add_water_tph, "
+             + ", ".join(_CALIBRATION[model]))
+    geometry = _wrap(f"units.{name}", CycloneGeometry, **{k: v for k, v in sizes.items() if v is not None},
+                     cone_angle_deg=angle)
+    calibration = _wrap(f"units.{name}", PlittCalibration if model == "plitt" else NageswararaoConstants, **cal)
+    return _wrap(f"units.{name}", PredictedCyclone, name, model, geometry, int(count), slurry, calibration,
+                 viscosity)
+
+
 def _feed_water(t: _Table, solids: float) -> float:
     """Water of a feed [kg/s]: water_<mass flow> or solids_content_<fraction> (% solids by mass)."""
     water = t.quantity("water", "mass_flow", None, allow_zero=True)
@@ -580,9 +612,12 @@ def _unit(name: str, t: _Table, grid: SizeGrid, materials: dict, slurry=None, ba
     if utype in ("hydrocyclone", "screen", "air_separator", "dynamic_classifier"):
         kind = "air_separator" if utype == "dynamic_classifier" else utype
         default = {"hydrocyclone": None, "screen": "screen", "air_separator": "tromp"}[kind]
+        if kind == "hydrocyclone" and "model" in t.data:
+            return _predicted_cyclone(name, t, slurry)
         curve = t.plain("curve", default, kind=str)
         if curve is None:
-            raise InputError(f"units.{name}: missing parameter 'curve' (whiten or plitt for a hydrocyclone)")
+            raise InputError(f"units.{name}: missing parameter 'curve' (whiten or plitt for a hydrocyclone), or "
+                             "model = \"plitt\" or \"nageswararao\" with the cyclone's dimensions")
         water = _classifier_water(t)
         return Classifier(name, kind, curve, _curve_params(t, curve, skip=("type", "water_to_coarse",
                                                                              "coarse_solids_content_pct",

@@ -41,7 +41,8 @@ def plot_classifiers(sol, ax):
     for name, unit in fs.units.items():
         c = None
         if unit.type == "classifier":
-            c, label = unit.efficiency(fs.grid), f"{name} ({unit.kind}, {unit.curve}) to {unit.ports[0]}"
+            c = np.asarray(sol.unit_blocks[name][unit.ports[0]], float)  # the curve the solve used
+            label = f"{name} ({unit.kind}, {unit.curve}) to {unit.ports[0]}"
         elif unit.type == "mill" and unit.classification is not None:
             c = unit.discharge_efficiency(fs.grid)
             label = f"{name} discharge ({unit.classification['curve']}), retained"
@@ -113,14 +114,17 @@ def plot_flowsheet(sol, ax):
 
 
 def save_plots(sol, ds, out_dir) -> dict:
-    """Write psd.png, classifiers.png and flowsheet.png to ``out_dir``; returns name -> path."""
+    """Write psd.png, classifiers.png (only when the circuit classifies) and flowsheet.png to
+    ``out_dir``; returns name -> path."""
     out = Path(out_dir)
     files = {}
-    for key, fname, fun, arg, size in (
-        ("psd_png", "psd.png", plot_psd, ds, (8, 5)),
-        ("classifiers_png", "classifiers.png", plot_classifiers, sol, (8, 5)),
-        ("flowsheet_png", "flowsheet.png", plot_flowsheet, sol, (10, 5)),
-    ):
+    classifies = any(u.type == "classifier" or (u.type == "mill" and u.classification is not None)
+                     for u in sol.flowsheet.units.values())
+    plots = [("psd_png", "psd.png", plot_psd, ds, (8, 5))]
+    if classifies:
+        plots.append(("classifiers_png", "classifiers.png", plot_classifiers, sol, (8, 5)))
+    plots.append(("flowsheet_png", "flowsheet.png", plot_flowsheet, sol, (10, 5)))
+    for key, fname, fun, arg, size in plots:
         fig, ax = figure(figsize=size)
         fun(arg, ax)
         files[key] = save(fig, out / fname, dpi=110)

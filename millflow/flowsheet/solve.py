@@ -86,12 +86,11 @@ MASS_TOL = 1e-9
 
 
 def _unit_blocks(fs, state):
-    """Blocks of every unit; ``state`` maps a torn unit to its (solids, water) throughput [kg/s]."""
+    """Blocks of every unit; ``state`` maps a torn unit to its torn inlet values (``throughput``
+    [kg/s] of solids, ``water`` [kg/s], ``recovery`` C [-]) passed as keywords."""
     blocks, infos = {}, {}
     for name, unit in fs.units.items():
-        solids, water = state.get(name, (None, None))
-        blocks[name], infos[name] = unit.blocks(fs.grid, solids, water) if water is not None \
-            else unit.blocks(fs.grid, solids)
+        blocks[name], infos[name] = unit.blocks(fs.grid, **state.get(name, {}))
     return blocks, infos
 
 
@@ -251,6 +250,9 @@ def _wegstein(g, x0, tol, maxiter, qmin=-5.0, qmax=0.0):
         q = np.clip(np.nan_to_num(q), qmin, qmax)
         x_prev, g_prev = x, gx
         x = q * x + (1.0 - q) * gx
+        # torn values (flows, water, recovery) are >= 0: where the extrapolation would make one
+        # negative, that component takes the plain substitution step
+        x = np.where(x < 0, gx, x)
     return x, maxiter, hist, False
 
 
@@ -312,20 +314,27 @@ def solve(fs, *, method="wegstein", tol: float = 1e-13, maxiter: int = 200,
         return _solve_kinetic(fs, kin, method, tol, maxiter, t0, mass_tol)
     torn = [n for n, u in fs.units.items() if getattr(u, "nonlinear", False)]
     wet = [n for n in torn if getattr(fs.units[n], "needs_water", False)]
+    recov = [n for n in torn if getattr(fs.units[n], "needs_recovery", False)]
     names = fs.stream_names
 
     def state_of(flows, infos):
-        """Torn variables: each torn unit's solids throughput, then the water of those that need it."""
+        """Torn variables: each torn unit's solids throughput, the water of those that need it,
+        and the corrected recovery C of the predicted cyclones that need it."""
         F = [math.fsum(math.fsum(flows[names.index(s)]) for s in fs.inlets(u)) for u in torn]
         if wet:
             w = solve_water(fs, flows, infos)
             F += [w.units[u]["water_in_kg_s"] for u in wet]
+        for u in recov:
+            inflow = sum(flows[names.index(s)] for s in fs.inlets(u))
+            F.append(fs.units[u].corrected_recovery(fs.grid, inflow, infos[u]))
         return np.array(F)
 
     def unit_state(X):
-        state = {u: (X[k], None) for k, u in enumerate(torn)}
+        state = {u: {"throughput": X[k]} for k, u in enumerate(torn)}
         for k, u in enumerate(wet):
-            state[u] = (state[u][0], X[len(torn) + k])
+            state[u]["water"] = X[len(torn) + k]
+        for k, u in enumerate(recov):
+            state[u]["recovery"] = X[len(torn) + len(wet) + k]
         return state
 
     tear_report = None
@@ -341,7 +350,7 @@ def solve(fs, *, method="wegstein", tol: float = 1e-13, maxiter: int = 200,
             state.update(blocks=blocks, infos=infos, flows=flows, info=info)
             return state_of(flows, infos)
 
-        X0 = np.array([float(fresh)] * len(torn) + [float(water0)] * len(wet))
+        X0 = np.array([float(fresh)] * len(torn) + [float(water0)] * len(wet) + [0.5] * len(recov))
         X, its, hist, ok = tear(g, X0, tol, maxiter)
         if not ok:
             raise SolverError(f"tear iterations on the throughput of {', '.join(torn)} did not converge "
@@ -351,7 +360,8 @@ def solve(fs, *, method="wegstein", tol: float = 1e-13, maxiter: int = 200,
         blocks, infos, flows, lin = state["blocks"], state["infos"], state["flows"], state["info"]
         tear_report = {"method": method if isinstance(method, str) else getattr(method, "__name__", "custom"),
                        "torn_units": torn, "iterations": int(its), "converged": bool(ok),
-                       "torn": "solids throughput" + (f" (and water of {', '.join(wet)})" if wet else ""),
+                       "torn": "solids throughput" + (f" (and water of {', '.join(wet)})" if wet else "")
+                               + (f" (and corrected recovery C of {', '.join(recov)})" if recov else ""),
                        "residual_history": [float(h) for h in hist], "tolerance": tol}
     else:
         blocks, infos = _unit_blocks(fs, {})
@@ -360,7 +370,8 @@ def solve(fs, *, method="wegstein", tol: float = 1e-13, maxiter: int = 200,
     water = solve_water(fs, flows, infos)
     reports = _unit_reports(fs, flows, infos, mass_tol, water)
     solver = dict(lin)
-    solver["structure"] = "nonlinear: tear iterations on mill throughputs" if torn else "all linear: one linear solve"
+    solver["structure"] = ("nonlinear: tear iterations on the inlet flows of " + ", ".join(torn) if torn
+                           else "all linear: one linear solve")
     solver["tear"] = tear_report
     return FlowsheetSolution(flowsheet=fs, flows=flows, units=reports, solver=solver,
                              runtime_s=time.perf_counter() - t0, unit_blocks=blocks, water=water)
@@ -425,8 +436,9 @@ def _solve_kinetic(fs, kin, method, tol, maxiter, t0, mass_tol=MASS_TOL):
     """Tear the inlet flow vectors of the mills with non-linear kinetics (see the module)."""
     others = [n for n, u in fs.units.items() if getattr(u, "nonlinear", False) and n not in kin]
     if others:
-        raise InputError(f"units {', '.join(others)}: a hold-up mill with linear kinetics in the same flowsheet as "
-                         f"a mill with non-linear kinetics ({', '.join(kin)}) is not supported; give tau_<unit>")
+        raise InputError(f"units {', '.join(others)}: a unit torn on its throughput (a hold-up or slurry-volume mill, "
+                         f"a predicted hydrocyclone) in the same flowsheet as a mill with non-linear kinetics "
+                         f"({', '.join(kin)}) is not supported; give the mill tau_<unit> or the cyclone a fixed curve")
     if not isinstance(method, str) or method not in _VECTOR_TEARS:
         raise InputError(f"method = {method!r}: the inlet-vector tear of non-linear mills takes one of "
                          f"{', '.join(_VECTOR_TEARS)}")

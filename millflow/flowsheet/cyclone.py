@@ -1,0 +1,144 @@
+"""A hydrocyclone cluster predicted from its geometry and its feed (:mod:`millflow.cyclones`).
+
+Unlike the fixed-curve :class:`~millflow.flowsheet.units.Classifier`, its cut size,
+sharpness and water split depend on the slurry it receives: the volumetric flow per
+cyclone Q/n (n cyclones in the cluster) and the solids volume fraction phi =
+(S/rho_s)/Q. The solver therefore tears it like a hold-up mill, on its solids and water
+throughput, and, for Plitt's model, on C = sum_i w_i c_corr,i (the corrected recovery of
+its feed PSD w), from which the water split R_f follows in closed form
+(:func:`millflow.cyclones.plitt_water_split`). The actual curve is
+c = R_f + (1 - R_f) c_corr: the water split is the bypass (fines follow the water).
+Its unit report gives d50c, sharpness, pressure drop, flow per cyclone, volume split and
+R_f; the water balance takes R_f from it (:mod:`millflow.flowsheet.water`).
+"""
+from __future__ import annotations
+
+import time
+from dataclasses import dataclass, field
+from typing import ClassVar
+
+import numpy as np
+
+from millflow.classifiers import plitt, whiten
+from millflow.errors import InputError, SolverError
+
+__all__ = ["PredictedCyclone", "CYCLONE_MODELS"]
+
+#: Cyclone models by the name used in flowsheet files.
+CYCLONE_MODELS = ("plitt", "nageswararao")
+
+
+@dataclass(frozen=True)
+class PredictedCyclone:
+    """Hydrocyclone cluster by model (``plitt`` or ``nageswararao``), geometry and count.
+
+    Parameters
+    ----------
+    geometry : :class:`millflow.cyclones.CycloneGeometry` (one cyclone, SI).
+    cyclones : number of cyclones in the cluster (the flow divides equally).
+    slurry : :class:`~millflow.flowsheet.water.Slurry` (densities).
+    calibration : PlittCalibration or NageswararaoConstants.
+    viscosity : liquid viscosity [Pa s].
+    """
+
+    name: str
+    model: str
+    geometry: object
+    cyclones: int
+    slurry: object
+    calibration: object = None
+    viscosity: float = 1.0e-3
+    kind: str = field(default="hydrocyclone", init=False)
+    type: ClassVar[str] = "classifier"
+    max_inlets: ClassVar[int | None] = None
+
+    def __post_init__(self):
+        if self.model not in CYCLONE_MODELS:
+            raise InputError(f"units.{self.name}.model = {self.model!r}: expected one of {', '.join(CYCLONE_MODELS)}")
+        if self.slurry is None:
+            raise InputError(f"units.{self.name}: a hydrocyclone predicted by {self.model} needs the solids density; "
+                             "add [slurry] solids_density_t_m3 = ...")
+
+    @property
+    def ports(self) -> tuple[str, ...]:
+        return ("underflow", "overflow")
+
+    @property
+    def curve(self) -> str:
+        return self.model
+
+    nonlinear: ClassVar[bool] = True
+    needs_water: ClassVar[bool] = True
+
+    @property
+    def needs_recovery(self) -> bool:
+        """Plitt's water split needs C, the corrected recovery of the feed PSD (torn)."""
+        return self.model == "plitt"
+
+    def feed(self, solids: float, water: float):
+        from millflow.cyclones import CycloneFeed
+
+        if not (solids > 0 and water > 0):
+            raise SolverError(f"units.{self.name}: receives {solids * 3.6:.6g} t/h of solids and {water * 3.6:.6g} "
+                              f"t/h of water; a hydrocyclone predicted by {self.model} needs both (add water "
+                              "upstream, e.g. add_water_tph at the sump)")
+        Q = self.slurry.volume_flow(solids, water)
+        phi = solids / self.slurry.solids_density / Q
+        return CycloneFeed(phi, self.slurry.solids_density, self.slurry.water_density, self.viscosity), Q
+
+    def predict(self, solids: float, water: float, recovery: float | None = None):
+        """(CyclonePrediction-like dict, corrected curve function) at the given feed [kg/s]."""
+        from millflow import cyclones as cy
+
+        feed, Q = self.feed(solids, water)
+        q = Q / self.cyclones
+        where = f"units.{self.name}"
+        try:
+            if self.model == "plitt":
+                cal = self.calibration or cy.PlittCalibration()
+                d50c = cy.plitt_d50c(self.geometry, feed, q, cal)
+                pressure = cy.plitt_pressure(self.geometry, feed, q, cal)
+                split = cy.plitt_split(self.geometry, feed, pressure, cal)
+                m = cy.plitt_sharpness(self.geometry, q, split, cal)
+                rf = cy.plitt_water_split(split, feed.solids_volume_fraction,
+                                          corrected_recovery=0.5 if recovery is None else float(recovery))
+
+                def corrected(x):
+                    return plitt(x, d50c, m)
+            else:
+                cal = self.calibration or cy.NageswararaoConstants()
+                pred = cy.nageswararao_cyclone(self.geometry, feed, flow_m3_s=q, constants=cal)
+                d50c, m, pressure, split, rf = (pred.d50c_m, pred.sharpness, pred.pressure_Pa, pred.volume_split,
+                                                pred.water_split)
+
+                def corrected(x):
+                    return whiten(x, d50c, m)
+        except InputError as exc:
+            raise SolverError(f"{where}: at {Q * 3600:.6g} m3/h of slurry ({100 * feed.solids_volume_fraction:.3g} % "
+                              f"solids by volume, {self.cyclones} cyclones): {exc}") from None
+        return {"d50c_m": d50c, "sharpness": m, "pressure_Pa": pressure, "flow_per_cyclone_m3_s": q,
+                "volume_split": split, "water_split": rf, "solids_volume_fraction": feed.solids_volume_fraction}, \
+            corrected
+
+    def blocks(self, grid, throughput=None, water=None, recovery=None):
+        t0 = time.perf_counter()
+        if throughput is None or water is None:
+            raise SolverError(f"units.{self.name}: a predicted hydrocyclone needs its feed flows (torn by the solver)")
+        pred, corrected = self.predict(float(throughput), float(water), recovery)
+        rf = pred["water_split"]
+        c = rf + (1.0 - rf) * np.asarray(corrected(grid.x), float)
+        info = {"method": f"{self.model} model ({self.cyclones} cyclones): d50c {pred['d50c_m'] * 1e6:.4g} um, "
+                          f"pressure {pred['pressure_Pa'] / 1e3:.4g} kPa, R_f {rf:.4g}",
+                "error_estimate": 0.0, "runtime_s": time.perf_counter() - t0, **pred}
+        return {"underflow": c, "overflow": 1.0 - c}, info
+
+    def corrected_recovery(self, grid, inflow, info) -> float:
+        """C = sum_i w_i c_corr,i of the inlet PSD w under the curve in ``info``."""
+        total = float(np.sum(inflow))
+        if not total > 0:
+            return 0.5
+        if self.model == "plitt":
+            cc = plitt(grid.x, info["d50c_m"], info["sharpness"])
+        else:
+            cc = whiten(grid.x, info["d50c_m"], info["sharpness"])
+        return float(np.dot(np.asarray(inflow, float) / total, cc))
