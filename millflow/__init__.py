@@ -25,7 +25,21 @@ from millflow.mill import Mill, steady_mill, transfer_matrix
 from millflow.mill.well_mixed import solve_well_mixed
 
 __version__ = "0.1.0"
+
+#: Names served from higher layers on first use (the package root imports only the core).
+_LAZY = {"Flowsheet": "millflow.flowsheet"}
+
+
+def __getattr__(name):
+    if name in _LAZY:
+        import importlib
+
+        return getattr(importlib.import_module(_LAZY[name]), name)
+    raise AttributeError(f"module 'millflow' has no attribute {name!r}")
+
+
 __all__ = [
+    "Flowsheet",
     "AustinRate",
     "BreakageError",
     "GridError",

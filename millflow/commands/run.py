@@ -56,7 +56,8 @@ def format_summary(s: dict, out_dir: str | None, written: list[str] | None = Non
     lines.append("")
     cl = s["circulating_load"]
     if cl:
-        lines.append("circulating load: " + ", ".join(f"{u} {100 * v:.1f} %" for u, v in cl.items()))
+        lines.append("circulating load (recycle / new feed): " + ", ".join(
+            f"{u} {_f(100 * v, '{:.1f}')} %" for u, v in cl.items()))
     for u, r in s["units"].items():
         if r.get("specific_energy_kWh_per_t") is not None:
             lines.append(f"{u}: {r['power_kW']:.4g} kW, {r['specific_energy_kWh_per_t']:.3g} kWh/t of mill feed")

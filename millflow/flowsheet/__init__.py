@@ -12,8 +12,8 @@ linear system when every unit is linear, tear iterations only for nonlinear unit
 >>> sol = solve(load("flowsheets/closed_circuit_ball_mill.toml"))  # doctest: +SKIP
 >>> summary(sol)["circulating_load"]  # doctest: +SKIP
 """
-from millflow.flowsheet.graph import Flowsheet, Stream
-from millflow.flowsheet.io import from_dict, load, loads
+from millflow.flowsheet.graph import Stream
+from millflow.flowsheet.io import Flowsheet, from_dict, load, loads
 from millflow.flowsheet.results import circulating_loads, save, stream_table, summary, to_dataset, unit_table
 from millflow.flowsheet.solve import TEAR_METHODS, FlowsheetSolution, solve
 from millflow.flowsheet.units import (CLASSIFIER_PORTS, TRANSPORTS, UNIT_TYPES, Classifier, Feed, Mill, MillUnit, Mixer,

@@ -19,7 +19,8 @@ import numpy as np
 from millflow.breakage import AustinRate, NonNormalizedBreakage, NormalizedBreakage, PowerLawRate
 from millflow.classifiers import CURVES
 from millflow.errors import GridError, InputError, MillflowError
-from millflow.flowsheet.graph import Flowsheet, Stream
+from millflow.flowsheet import graph
+from millflow.flowsheet.graph import Stream
 from millflow.flowsheet.water import Slurry
 from millflow.flowsheet.units import (TRANSPORTS, UNIT_TYPES, Classifier, Feed, MillUnit, Mixer,
                                       Product, Splitter)
@@ -28,7 +29,21 @@ from rtd import names as rtd_names
 from millflow.inputs import UNITS, quantity, read_text, suffixes
 from millflow.psd import from_distribution, from_sieves, gates_gaudin_schuhmann, rosin_rammler
 
-__all__ = ["load", "loads", "from_dict", "DIMENSIONS"]
+__all__ = ["Flowsheet", "load", "loads", "from_dict", "DIMENSIONS"]
+
+
+class Flowsheet(graph.Flowsheet):
+    """A flowsheet (:class:`millflow.flowsheet.graph.Flowsheet`) with its readers:
+    ``Flowsheet.from_dict(data)`` (the document a TOML file would hold, as a dict) and
+    ``Flowsheet.load(path)``."""
+
+    @classmethod
+    def from_dict(cls, data: dict, *, source: str = "<dict>", base_dir=None) -> Flowsheet:
+        return from_dict(data, source=source, base_dir=base_dir)
+
+    @classmethod
+    def load(cls, path) -> Flowsheet:
+        return load(path)
 
 #: Accepted unit suffixes per dimension, with the factor to SI (the one table:
 #: :data:`millflow.inputs.UNITS`, shared with fit configs and plant files).

@@ -4,10 +4,9 @@ Everything is computed from :class:`~millflow.flowsheet.solve.FlowsheetSolution`
 (stream flows per size class [kg/s] and unit reports). Per stream: solids rate,
 mass fractions and cumulative passing on the grid, P80, P50 and % passing named sizes
 (monotone PCHIP interpolation in log size, :mod:`millflow.psd`). Per unit: method,
-error estimate, run time and mass balance error |out - in| / in. Circulating load of a
-unit with several outlets inside a recycle loop (classifier or splitter): the flow of
-its outlets that return into the loop divided by the flow of those that leave it; for a
-classifier whose coarse stream returns, coarse / fine (U/O of a closed-circuit cyclone).
+error estimate, run time and mass balance error |out - in| / in. Circulating load of each
+recycle stream (one leaving a classifier or splitter and returning into its loop): its
+flow over the loop's new feed (U/F_new of a closed-circuit cyclone).
 Specific energy of a mill [kWh/t] = power [kW] /
 mill throughput [t/h]; of the circuit = total mill power / total product rate.
 
@@ -77,27 +76,54 @@ def is_wet(sol) -> bool:
     return sol.water is not None and bool(np.any(sol.water.flows > 0))
 
 
-def circulating_loads(sol) -> dict:
-    """Circulating load [-] of each multi-outlet unit in a recycle loop: returning / leaving flow.
+def recycle_streams(fs) -> list[str]:
+    """The streams that close recycle loops: back edges of a depth-first walk of each loop
+    from where its new feed enters, following streams in file order (for a ball mill with
+    cyclones, the underflow; a splitter's returning branch is another)."""
+    lab = dict(zip(fs.units, fs.components()))
+    out, seen = [], set()
+    entries = [st.target for st in fs.streams.values() if lab[st.source] != lab[st.target]]
+    for start in entries:
+        if start in seen:
+            continue
+        stack, on_path = [(start, iter(fs.outlets(start)))], {start}
+        seen.add(start)
+        while stack:
+            unit, it = stack[-1]
+            s = next(it, None)
+            if s is None:
+                stack.pop()
+                on_path.discard(unit)
+                continue
+            nxt = fs.streams[s].target
+            if lab[nxt] != lab[unit]:
+                continue
+            if nxt in on_path:
+                out.append(s)
+            elif nxt not in seen:
+                seen.add(nxt)
+                on_path.add(nxt)
+                stack.append((nxt, iter(fs.outlets(nxt))))
+    return [s for s in fs.stream_names if s in out]
 
-    For a classifier whose coarse outlet returns into its loop: coarse / fine (U/O), whatever
-    happens to the fine stream downstream.
+
+def circulating_loads(sol) -> dict:
+    """Circulating load [-] of each recycle stream (:func:`recycle_streams`), as the engineer
+    reads it: the stream's solids flow over the new feed of its recycle loop (the solids of
+    the streams entering the loop from outside). For a closed ball-mill/cyclone circuit this
+    is U/F_new (= U/O at steady state).
     """
     fs = sol.flowsheet
     lab = dict(zip(fs.units, fs.components()))
     tot = {n: math.fsum(sol.flows[k]) for k, n in enumerate(fs.stream_names)}
+    new_feed = {}
+    for n, st in fs.streams.items():
+        if lab[st.source] != lab[st.target]:
+            new_feed[lab[st.target]] = new_feed.get(lab[st.target], 0.0) + tot[n]
     out = {}
-    for uname, unit in fs.units.items():
-        outs = fs.outlets(uname)
-        if len(outs) < 2:
-            continue
-        back = [s for s in outs if lab[fs.streams[s].target] == lab[uname]]
-        if unit.type == "classifier" and fs.outlet(uname, unit.ports[0]) in back:
-            back = [fs.outlet(uname, unit.ports[0])]  # classic U/O: coarse returns, fine is the product side
-        if not back or len(back) == len(outs):
-            continue
-        leave = math.fsum(tot[s] for s in outs if s not in back)
-        out[uname] = math.fsum(tot[s] for s in back) / leave if leave > 0 else float("inf")
+    for n in recycle_streams(fs):
+        fresh = new_feed.get(lab[fs.streams[n].source], 0.0)
+        out[n] = tot[n] / fresh if fresh > 0 else float("nan")
     return out
 
 

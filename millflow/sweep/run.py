@@ -28,7 +28,7 @@ def _products(data: dict) -> list[str]:
 
 def solve_case(data: dict, case: dict, source: str = "<sweep>") -> dict:
     """One case: the flowsheet dict with the case's values set, solved. Returns
-    ``{"p80_um": {stream: v}, "p50_um": {...}, "circulating_load": {unit: v},
+    ``{"p80_um": {stream: v}, "p50_um": {...}, "circulating_load": {recycle stream: v},
     "specific_energy_kWh_per_t", "mass_balance_error", "runtime_s", "reason"}``; a case
     that cannot be built or solved returns NaNs and its one-line reason."""
     from millflow.flowsheet import from_dict, solve, summary
@@ -87,12 +87,12 @@ def run_sweep(path, vary: list[Axis], *, samples: int | None = None, seed: int =
     ds = xr.Dataset(
         {"p80_um": (("case", "product"), p80, {"units": "um", "long_name": "P80 of the product stream"}),
          "p50_um": (("case", "product"), p50, {"units": "um", "long_name": "P50 of the product stream"}),
-         "circulating_load": (("case", "classifier"), cl, {"units": "1", "long_name": "recycle / new feed"}),
+         "circulating_load": (("case", "recycle_stream"), cl, {"units": "1", "long_name": "recycle / new feed"}),
          "specific_energy_kWh_per_t": ("case", scalar["specific_energy_kWh_per_t"], {"units": "kWh/t"}),
          "mass_balance_error": ("case", scalar["mass_balance_error"], {"units": "1"}),
          "runtime_s": ("case", scalar["runtime_s"], {"units": "s"}),
          "reason": ("case", reason.astype(str), {"long_name": "why a case failed ('' if solved)"})},
-        coords={"case": np.arange(n), "product": products, "classifier": loads,
+        coords={"case": np.arange(n), "product": products, "recycle_stream": loads,
                 **{k: ("case", np.array([c[k] for c in cases]), {"long_name": f"varied: {k}"}) for k in keys}})
     ds.attrs.update(source_file=source, design="grid" if samples is None else f"latin hypercube, seed {seed}",
                     n_cases=n, n_failed=int(np.sum(reason != "")), scheduler=scheduler,

@@ -47,15 +47,16 @@ def _two_product(f, u, o):
     return np.sum((f - o) * (u - f)) / np.sum((u - f) ** 2)
 
 
-@pytest.mark.parametrize("path,unit,feed,coarse,fine", [
-    (CLOSED, "cyclones", "mill_discharge", "underflow", "overflow"),
-    (FLOWSHEETS / "cement_two_compartment_mill.toml", "separator", "mill_discharge", "rejects", "fines"),
+@pytest.mark.parametrize("path,stream,feed,coarse,fine", [
+    (CLOSED, "underflow", "mill_discharge", "underflow", "overflow"),
+    (FLOWSHEETS / "cement_two_compartment_mill.toml", "rejects", "mill_discharge", "rejects", "fines"),
 ])
-def test_circulating_load_two_product_formula(path, unit, feed, coarse, fine):
+def test_circulating_load_two_product_formula(path, stream, feed, coarse, fine):
+    """Recycle / new feed equals U/O at steady state (O = new feed): the two-product formula."""
     sol = solve(load(path))
     f, u, o = (cum_passing(sol.flow(s) / sol.flow(s).sum()) for s in (feed, coarse, fine))
     C = _two_product(f, u, o)
-    assert circulating_loads(sol)[unit] == pytest.approx(C, rel=1e-9)
+    assert circulating_loads(sol)[stream] == pytest.approx(C, rel=1e-9)
     assert 1.0 < C < 5.0
 
 
@@ -120,7 +121,7 @@ def test_cli_table_and_error(tmp_path, capsys, monkeypatch):
     monkeypatch.chdir(tmp_path)
     assert main(["run", str(CLOSED), "--no-plots"]) == 0
     out = capsys.readouterr().out
-    assert "P80 um" in out and "circulating load: cyclones" in out
+    assert "P80 um" in out and "circulating load (recycle / new feed): underflow" in out
     assert "closed_circuit_ball_mill-results" in out
     assert (tmp_path / "closed_circuit_ball_mill-results" / "summary.json").exists()
     # the files line names what was written, and only that: no plots with --no-plots
@@ -169,7 +170,8 @@ def test_python_api_without_toml():
         ("s7", "split", "out", "p")]}
     sol = solve(Flowsheet(grid, units, streams))
     assert sol.flow("s7").sum() == pytest.approx(10.0, rel=1e-13)
-    assert set(circulating_loads(sol)) == {"cyc", "split"}
+    assert set(circulating_loads(sol)) == {"s4", "s6"}  # the recycle streams
+    assert circulating_loads(sol)["s6"] == pytest.approx(0.3 * sol.flow("s5").sum() / 10.0, rel=1e-12)
     with pytest.raises(InputError, match="fractions summing to 1"):
         Splitter("s", {"a": 0.5, "b": 0.6})
     with pytest.raises(InputError, match="exactly one of tau"):
