@@ -74,3 +74,43 @@ def test_compare_two_flowsheets(tmp_path, capsys):
     assert {"compare.csv", "compare.json", "compare.png"} <= {p.name for p in (tmp_path / "c").iterdir()}
     assert main(["compare", str(a), str(paths.FLOWSHEETS / "hammer_mill_screen.toml"), "--quiet",
                  "--out", str(tmp_path / "d")]) in (0, 2)  # no shared stream: exit 2 with a line
+
+
+def _exit_soon():
+    """Run on a worker: end its process 50 ms later, as a crash would (no clean shutdown)."""
+    import os
+    import threading
+
+    threading.Timer(0.05, os._exit, args=(1,)).start()
+
+
+def test_a_killed_worker_is_replaced_and_the_dataset_is_complete(tmp_path):
+    """A worker process that dies mid-sweep (os._exit in the worker) loses its chunk; the
+    scheduler runs it again on another worker (the nanny restarts the dead one): every
+    case is solved and none is dropped."""
+    import threading
+    import time
+
+    from dask.distributed import Client, LocalCluster
+
+    axes = [parse_vary("units.ball_mill.tau_min=2:6:12"), parse_vary("units.cyclones.d50c_um=100:200:6")]
+    with LocalCluster(n_workers=2, threads_per_worker=1, processes=True, dashboard_address=None) as cluster, \
+            Client(cluster) as client:
+        killed = []
+
+        def kill_one_worker():
+            while not client.processing() or not any(client.processing().values()):
+                time.sleep(0.02)  # wait until chunks are running
+            busy = [w for w, tasks in client.processing().items() if tasks]
+            client.run(_exit_soon, workers=busy[:1])  # returns, then the worker process dies
+            killed.append(busy[0])
+
+        t = threading.Thread(target=kill_one_worker, daemon=True)
+        t.start()
+        ds = run_sweep(CLOSED, axes, scheduler=cluster.scheduler_address, chunk=3, progress=False)
+        t.join(timeout=30)
+    assert killed, "no worker was killed: the test did not exercise the retry"
+    assert ds.attrs["n_cases"] == 72 and ds.attrs["n_failed"] == 0
+    assert np.isfinite(ds["p80_um"].values).all()
+    serial = run_sweep(CLOSED, axes, scheduler="serial", progress=False)
+    np.testing.assert_allclose(ds["p80_um"].values, serial["p80_um"].values, rtol=1e-12)
