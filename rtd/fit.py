@@ -16,6 +16,7 @@ import dataclasses
 import inspect
 import math
 from dataclasses import dataclass, field
+from typing import ClassVar
 
 import numpy as np
 from scipy import optimize, stats
@@ -68,6 +69,19 @@ class FitResult:
     message: str = ""
     nfev: int = 0
     notes: tuple = field(default_factory=tuple)
+    time_unit: str = ""
+
+    #: Seconds per time unit of the data (a TracerCurve's ``time_unit``).
+    SECONDS: ClassVar[dict] = {"s": 1.0, "min": 60.0, "h": 3600.0}
+
+    def model_in_seconds(self):
+        """The fitted model with its times in seconds (millflow's unit): tau scaled from the
+        data's ``time_unit``; refused when the data's times carried no unit."""
+        f = self.SECONDS.get(self.time_unit)
+        if f is None:
+            raise RTDError(f"the fitted times carry no unit (time_unit = {self.time_unit!r}); fit a TracerCurve "
+                           "read from a CSV with time_s, time_min or time_h, or scale tau yourself")
+        return self.model.replace(tau=self.model.tau * f)
     inlet: np.ndarray | None = None
 
     def curve(self, t) -> np.ndarray:
@@ -134,7 +148,7 @@ class FitResult:
             "scale": {"value": num(self.scale), "se": num(self.scale_se)},
             "ssr": num(self.ssr), "ser": num(self.ser), "r2": num(self.r2),
             "aic": num(self.aic), "bic": num(self.bic),
-            "n_data": self.n_data, "n_params": self.n_params, "kind": self.kind,
+            "n_data": self.n_data, "n_params": self.n_params, "kind": self.kind, "time_unit": self.time_unit,
             "notes": list(self.notes),
             "lack_of_fit": {k: (num(v) if isinstance(v, float) else v) for k, v in self.lack_of_fit.items()},
         }
@@ -224,6 +238,7 @@ def fit(model, t, c=None, *, kind: str | None = None, inlet=None, vary=None,
     -------
     FitResult
     """
+    unit = getattr(t, "time_unit", "") or ""
     t, c, kind, inlet, notes = _unpack(t, c, kind, inlet)
     cls, kw, instance = resolve_model(model, **fixed)
     mom = moments(t, c, tail) if kind == "pulse" else step_moments(t, c)
@@ -242,12 +257,13 @@ def fit(model, t, c=None, *, kind: str | None = None, inlet=None, vary=None,
                        f"{[k for k in start.param_names if k in BOUNDS]} (the number of cells "
                        "is an integer: fix it with n=... and compare fits)")
     if cls is PlugFlow and inlet is None:
-        return _plug_by_moments(start, t, c, kind, mom, notes)
+        return dataclasses.replace(_plug_by_moments(start, t, c, kind, mom, notes), time_unit=unit)
     # The fit is scale-free: solve for c / peak (so curves in any concentration unit, 1e-90
     # or 1e90, meet the same bounds and tolerances) and return A, SSR, SER, AIC, BIC, data,
     # fitted curve and residuals in the data's units.
     k = float(np.max(np.abs(c)))
     res = _least_squares(start, names, t, c / k, kind, inlet, mom, notes, None if scale is None else scale / k)
+    res = dataclasses.replace(res, time_unit=unit)
     if k == 1.0:
         return res
     shift = 2 * res.n_data * math.log(k)  # n ln(SSR/n) grows by n ln k^2

@@ -26,6 +26,10 @@ WHERE = ("discharge", "cells", "axis")
 
 # ----------------------------------------------------------------------- checking
 def _kind(transport) -> str:
+    if hasattr(transport, "model_in_seconds"):  # an rtd.FitResult, not a model
+        unit = getattr(transport, "time_unit", "") or "no unit"
+        raise InputError(f"transport is an rtd fit result (times in {unit}); pass result.model_in_seconds() "
+                         "(millflow's times are seconds)")
     if isinstance(transport, rtd.PerfectMixing):
         return "perfect_mixing"
     if isinstance(transport, rtd.PlugFlow):

@@ -356,3 +356,14 @@ def test_bad_definitions(call, match):
 def test_negative_tau_is_refused():
     with pytest.raises(ValueError, match="tau"):
         rtd.PerfectMixing(-1.0)
+
+
+def test_an_rtd_fit_result_is_not_a_transport():
+    """Issue 14 §2: a fit of minutes data passed as it is would be read in seconds; refused."""
+    import rtd as _rtd
+
+    t = np.linspace(0, 40, 81)
+    res = _rtd.fit("tis", t, _rtd.TanksInSeries(6.0, 3.0).pdf(t))
+    S, b, f = np.array([0.01, 0.0]), np.array([[0.0, 0.0], [1.0, 0.0]]), np.array([1.0, 0.0])
+    with pytest.raises(InputError, match="model_in_seconds"):
+        steady_mill(S, b, f, res)
