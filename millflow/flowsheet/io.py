@@ -277,13 +277,44 @@ def _rate(t: _Table):
         mu = t.quantity("mu", "length")
         Lam = t.plain("Lambda", kind=float)
         x0 = t.quantity("x0", "length", 1e-3)
-        t.finish("form, A_per_min, alpha, mu_um, Lambda, x0_um")
-        return _wrap(t.where, AustinRate, A, alpha, mu, Lam, x0=x0)
+        xi = t.plain("xi", 0.0, kind=float)
+        eta = t.plain("eta", 0.0, kind=float)
+        xb = t.quantity("x_b", "length", None)
+        xb0 = t.quantity("x_b0", "length", None)
+        t.finish("form, A_per_min, alpha, mu_um, Lambda, x0_um, and for ball size: x_b_mm (ball), x_b0_mm "
+                 "(reference ball), xi, eta")
+        return _wrap(t.where, AustinRate, A, alpha, mu, Lam, xi=xi, x_b=xb, x_b0=xb0, eta=eta, x0=x0)
     raise InputError(f"{t.where}.form = {form!r}: unknown rate form; valid: austin, power")
 
 
-def _breakage(t: _Table):
+def _breakage_table(t: _Table, base: Path | None, grid: SizeGrid | None):
+    """A user's b_ij or B_ij matrix from a CSV file (N x N numbers, no header, class 1 first)."""
+    from millflow.breakage import TabulatedBreakage
+
+    name = t.plain("file", kind=str)
+    kind = t.plain("matrix", kind=str)
+    t.finish("form, file, matrix (\"b\" or \"B\")")
+    if kind not in ("b", "B"):
+        raise InputError(f"{t.where}.matrix = {kind!r}: expected \"b\" (fractional, eq. 2) or \"B\" (cumulative)")
+    p = Path(name) if Path(name).is_absolute() else (base or Path.cwd()) / name
+    if not p.is_file():
+        raise InputError(f"{t.where}.file: {p} not found")
+    try:
+        M = np.loadtxt(p, delimiter=",", ndmin=2)
+    except ValueError as exc:
+        raise InputError(f"{p}: not a CSV matrix of numbers ({exc})") from None
+    if M.shape[0] != M.shape[1]:
+        raise InputError(f"{p}: a {M.shape[0]} x {M.shape[1]} matrix; expected square (N x N)")
+    if grid is not None and M.shape[0] != grid.n:
+        raise InputError(f"{p}: a {M.shape[0]} x {M.shape[0]} matrix but the grid has {grid.n} classes; give the "
+                         "matrix on the flowsheet's grid")
+    return _wrap(str(p), TabulatedBreakage, **{kind: M})
+
+
+def _breakage(t: _Table, base: Path | None = None, grid: SizeGrid | None = None):
     form = t.plain("form", kind=str)
+    if form == "table":
+        return _breakage_table(t, base, grid)
     if form == "normalized":
         args = [t.plain(k, kind=float) for k in ("phi", "gamma", "beta")]
         t.finish("form, phi, gamma, beta")
@@ -293,7 +324,7 @@ def _breakage(t: _Table):
         xmax = t.quantity("x_max", "length", None)
         t.finish("form, phi0, gamma, beta, theta, x_max_um")
         return _wrap(t.where, NonNormalizedBreakage, *args, xmax)
-    raise InputError(f"{t.where}.form = {form!r}: unknown breakage form; valid: non_normalized, normalized")
+    raise InputError(f"{t.where}.form = {form!r}: unknown breakage form; valid: non_normalized, normalized, table")
 
 
 # --------------------------------------------------------------- curves
@@ -457,7 +488,8 @@ def _rtd_fit(tr: _Table, base: Path | None, classified: bool):
     return model, params, values["tau"] * UNITS["time"][unit], note
 
 
-def _mill(name: str, t: _Table, materials: dict, slurry=None, base: Path | None = None) -> MillUnit:
+def _mill(name: str, t: _Table, materials: dict, slurry=None, base: Path | None = None,
+          grid: SizeGrid | None = None) -> MillUnit:
     """A mill table: breakage from its material (or its own), transport, tau or hold-up."""
     mat_name = t.plain("material", None, kind=str)
     mat = {}
@@ -467,7 +499,7 @@ def _mill(name: str, t: _Table, materials: dict, slurry=None, base: Path | None 
                              f"{', '.join(materials) or 'none (add a [materials.NAME] table)'}")
         mat = materials[mat_name]
     rate = _rate(t.sub("rate")) if "rate" in t.data else mat.get("rate")
-    brk = _breakage(t.sub("breakage")) if "breakage" in t.data else mat.get("breakage")
+    brk = _breakage(t.sub("breakage"), base, grid) if "breakage" in t.data else mat.get("breakage")
     if rate is None or brk is None:
         missing = "rate" if rate is None else "breakage"
         raise InputError(f"units.{name}: missing parameter {missing!r} (give it in the mill or in its material)")
@@ -623,7 +655,7 @@ def _unit(name: str, t: _Table, grid: SizeGrid, materials: dict, slurry=None, ba
         t.finish("type, solids_tph, psd, material, water_tph or solids_content_pct")
         return Feed(name, solids, psd, water)
     if utype == "mill":
-        return _mill(name, t, materials, slurry, base)
+        return _mill(name, t, materials, slurry, base, grid)
     if utype in ("hydrocyclone", "screen", "air_separator", "dynamic_classifier"):
         kind = "air_separator" if utype == "dynamic_classifier" else utype
         default = {"hydrocyclone": None, "screen": "screen", "air_separator": "tromp"}[kind]
@@ -684,7 +716,11 @@ def from_dict(data: dict, *, source: str = "<dict>", base_dir=None) -> Flowsheet
             if "fit" in m.data:
                 materials[mname] = _fitted_material(m, base)
                 continue
-            materials[mname] = {k: f(m.sub(k)) for k, f in (("rate", _rate), ("breakage", _breakage)) if k in m.data}
+            materials[mname] = {}
+            if "rate" in m.data:
+                materials[mname]["rate"] = _rate(m.sub("rate"))
+            if "breakage" in m.data:
+                materials[mname]["breakage"] = _breakage(m.sub("breakage"), base, grid)
             m.finish("rate, breakage (or fit = \"fit.json\" with process = {...})")
     units, water_added = {}, {}
     ut = top.sub("units")
