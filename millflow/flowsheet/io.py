@@ -23,7 +23,7 @@ from millflow.flowsheet import graph
 from millflow.flowsheet.graph import Stream
 from millflow.flowsheet.water import Slurry
 from millflow.flowsheet.units import (TRANSPORTS, UNIT_TYPES, Classifier, Feed, MillUnit, Mixer,
-                                      Product, Splitter)
+                                      Product, Splitter, build_transport)
 from millflow.grid import SizeGrid
 from rtd import names as rtd_names
 from millflow.inputs import UNITS, quantity, read_text, suffixes
@@ -437,6 +437,41 @@ def _fitted_material(m: _Table, base: Path | None) -> dict:
     return {"rate": _FittedRate(fitted, proc), "breakage": _FittedBreakage(fitted)}
 
 
+def _transport_table(tr: _Table, extra: tuple = ()) -> tuple[str, dict]:
+    """(canonical model name, parameters) of a transport table (rtd.names: names and aliases)."""
+    raw = tr.plain("model", kind=str)
+    try:
+        model = rtd_names.canonical_name(raw)
+    except ValueError:
+        raise InputError(f"{tr.where}.model = {raw!r}: unknown transport model; valid: "
+                         f"{', '.join(sorted(TRANSPORTS))}, series (aliases: {', '.join(rtd_names.ALIASES)})") from None
+    entry = rtd_names.TRANSPORTS[model]
+    tparams = {}
+    for k in entry.required:
+        tparams[k] = tr.plain(k, kind=float)
+        if tparams[k] <= 0:
+            raise InputError(f"{tr.where}.{k} = {tparams[k]!r}: expected > 0")
+    for k in entry.optional:
+        if k in tr.data:
+            tparams[k] = tr.plain(k, kind=float)
+    for k in extra:
+        tr.used.add(k)
+    tr.finish(", ".join(["model", *entry.required, *entry.optional, *extra]))
+    return model, tparams
+
+
+def _transport_part(data, where: str) -> tuple:
+    """(model, parameters, tau_fraction) of one part of a series transport."""
+    t = _Table(data, where)
+    frac = t.plain("tau_fraction", kind=float)
+    if not 0.0 < frac <= 1.0:
+        raise InputError(f"{where}.tau_fraction = {frac!r}: expected a fraction in (0, 1]")
+    if t.data.get("model") == "series":
+        raise InputError(f"{where}.model: a series inside a series; list its parts in the outer one")
+    model, params = _transport_table(t, extra=("tau_fraction",))
+    return model, params, frac
+
+
 def _rtd_fit(tr: _Table, base: Path | None, classified: bool):
     """Transport from a ``millflow fit-rtd --json`` result (or its --out folder's fit.json):
     the model and its shape parameters, and tau converted from the fit's time unit to s.
@@ -508,22 +543,20 @@ def _mill(name: str, t: _Table, materials: dict, slurry=None, base: Path | None 
     fitted_tau, rtd_note = None, None
     if tr is not None and "rtd_fit" in tr.data:
         model, tparams, fitted_tau, rtd_note = _rtd_fit(tr, base, "classification" in t.data)
+    elif tr is not None and tr.data.get("model") == "series":
+        tr.plain("model")
+        parts = tr.plain("parts")
+        tr.finish("model = \"series\", parts = [{model = ..., tau_fraction = ..., ...}, ...]")
+        if not isinstance(parts, list) or len(parts) < 2:
+            raise InputError(f"{tr.where}.parts: expected a list of at least two transport tables")
+        model, tparams = "series", {"parts": [_transport_part(p, f"{tr.where}.parts[{k}]")
+                                              for k, p in enumerate(parts)]}
+        total = math.fsum(p[2] for p in tparams["parts"])
+        if abs(total - 1.0) > 1e-12:
+            raise InputError(f"{tr.where}.parts: tau_fraction values sum to {total:.12g}; expected 1 (each part's "
+                             "share of the mill's mean residence time)")
     elif tr is not None:
-        raw = tr.plain("model", kind=str)
-        try:  # the one table of transport names (rtd.names): canonical names and aliases
-            model = rtd_names.canonical_name(raw)
-        except ValueError:
-            raise InputError(f"{tr.where}.model = {raw!r}: unknown transport model; valid: "
-                             f"{', '.join(sorted(TRANSPORTS))} (aliases: {', '.join(rtd_names.ALIASES)})") from None
-        entry = rtd_names.TRANSPORTS[model]
-        for k in entry.required:
-            tparams[k] = tr.plain(k, kind=float)
-            if tparams[k] <= 0:
-                raise InputError(f"{tr.where}.{k} = {tparams[k]!r}: expected > 0")
-        for k in entry.optional:
-            if k in tr.data:
-                tparams[k] = tr.plain(k, kind=float)
-        tr.finish(", ".join(["model", *entry.required, *entry.optional]))
+        model, tparams = _transport_table(tr)
     design = None
     from millflow.scaleup.flowsheet import ScaledRate, design_from_table, is_design
     if is_design(t.data):  # a mill by dimensions and operation: hold-up, power (and rate) computed
@@ -568,7 +601,14 @@ def _mill(name: str, t: _Table, materials: dict, slurry=None, base: Path | None 
     if "classification" in t.data:
         ct = t.sub("classification")
         curve = ct.plain("curve", kind=str)
-        cls = {"curve": curve, **_curve_params(ct, curve)}
+        where = ct.plain("where", None)
+        if where is not None and not (isinstance(where, str) or (
+                isinstance(where, list) and all(isinstance(k, int) and not isinstance(k, bool) for k in where))):
+            raise InputError(f"{ct.where}.where = {where!r}: expected \"discharge\", \"cells\", \"axis\" or a "
+                             "list of cell numbers (1 = first)")
+        cls = {"curve": curve, **_curve_params(ct, curve, skip=("where",))}
+        if where is not None:
+            cls["where"] = where
     kin = _kinetics(t.sub("kinetics")) if "kinetics" in t.data else None
     t.finish("type, material, rate, breakage, transport, tau_min, holdup_t, slurry_volume_m3, power_kW, "
              "classification, kinetics, add_water_tph, or by dimensions: diameter_m, length_m, ball_filling, "
@@ -576,7 +616,7 @@ def _mill(name: str, t: _Table, materials: dict, slurry=None, base: Path | None 
              "(docs/scaleup.md)")
     unit = _wrap(f"units.{name}", MillUnit, name, rate, brk, model, tparams, tau, holdup, cls, power, kin,
                  slurry_volume, slurry, rtd_note)
-    _wrap(f"units.{name}", TRANSPORTS[model], tau or 1.0, **tparams)
+    _wrap(f"units.{name}", build_transport, model, tau or 1.0, tparams)
     return unit
 
 

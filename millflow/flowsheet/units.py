@@ -43,12 +43,30 @@ def _transport_registry() -> dict:
 TRANSPORTS = _transport_registry()
 
 
+def build_transport(model: str, tau: float, params: dict):
+    """The rtd model of a mill: a name of :data:`TRANSPORTS` with its parameters, or
+    ``"series"`` with ``params["parts"]`` = [(model, parameters, tau_fraction), ...]
+    (rtd.Series of the parts, part k with tau_k = tau_fraction_k tau)."""
+    if model == "series":
+        import rtd
+
+        return rtd.Series(*[TRANSPORTS[m](tau * f, **p) for m, p, f in params["parts"]])
+    return TRANSPORTS[model](tau, **params)
+
+
+#: Transports a mill with non-linear kinetics runs with (millflow.mill.nonlinear).
+_KINETIC_TRANSPORTS = ("perfect_mixing", "tanks_in_series", "plug_flow", "axial_dispersion")
+
+
 # ------------------------------------------------------------------ mill transfer
-def mill_transfer_matrix(S, b, transport, d=None) -> tuple[np.ndarray, str]:
+def mill_transfer_matrix(S, b, transport, d=None, where=None) -> tuple[np.ndarray, str]:
     """P with product = P @ feed (:func:`millflow.mill.transfer_matrix`) and the method used."""
     from millflow.mill import transfer_matrix
 
-    return transfer_matrix(S, b, transport, d), f"millflow.mill.transfer_matrix({transport!r})"
+    if where is None:
+        return transfer_matrix(S, b, transport, d), f"millflow.mill.transfer_matrix({transport!r})"
+    return (transfer_matrix(S, b, transport, d, where=where),
+            f"millflow.mill.transfer_matrix({transport!r}, where={where!r})")
 
 
 # ------------------------------------------------------------------------- units
@@ -132,9 +150,12 @@ class MillUnit:
         if self.slurry_volume is not None and self.slurry is None:
             raise InputError(f"units.{self.name}: a mill given by its slurry hold-up needs the solids density "
                              "([slurry] solids_density_t_m3)")
-        if self.transport not in TRANSPORTS:
+        if self.transport not in TRANSPORTS and self.transport != "series":
             raise InputError(f"units.{self.name}.transport: unknown model {self.transport!r}; "
                              f"valid names: {', '.join(sorted(TRANSPORTS))}")
+        if self.kinetics is not None and self.transport not in _KINETIC_TRANSPORTS:
+            raise InputError(f"units.{self.name}: non-linear kinetics run with transport "
+                             f"{', '.join(_KINETIC_TRANSPORTS)}; got {self.transport!r}")
         if self.kinetics is not None and self.classification is not None:
             raise InputError(f"units.{self.name}: non-linear kinetics with discharge classification is not "
                              "supported; give one of kinetics, classification")
@@ -205,6 +226,7 @@ class MillUnit:
         if self.classification is None:
             return None
         params = dict(self.classification)
+        params.pop("where", None)
         return efficiency(params.pop("curve"), grid.x, **params)
 
     def residence_time(self, throughput=None, water=None) -> float:
@@ -242,7 +264,9 @@ class MillUnit:
             retained = np.flatnonzero(d <= 1e-12)
             d = np.maximum(d, 1e-12)  # c = 1 in floating point: retained, leaves only as breakage products
         try:
-            P, how = mill_transfer_matrix(S, b, TRANSPORTS[self.transport](tau, **self.transport_params), d)
+            where = None if self.classification is None else self.classification.get("where")
+            where = tuple(where) if isinstance(where, list) else where
+            P, how = mill_transfer_matrix(S, b, build_transport(self.transport, tau, self.transport_params), d, where)
         except SolverError as exc:
             raise SolverError(f"units.{self.name}: {exc}") from None
         err = float(np.max(np.abs(P.sum(axis=0) - 1.0)))
