@@ -30,6 +30,8 @@ Parameters (positive ones in logs, named ``ln_...``):
   geometric mean over the conditions), parameter ``n_screen``: the
   limit of ``screen`` when c50 is far below the measured sizes (then only
   A / c50^n is identifiable from product samples: the fit reports correlation 1).
+  ``screen_power_cut``: the same with a hard cut at the opening (classes whose lower
+  edge is at or above it cannot pass: d* = 1e-12).
 - mode ``batch`` (eq. 4, times from the table), ``plug_flow`` (eq. 4 at t = tau),
   ``well_mixed`` (eq. 3; ``n_tanks`` > 1: equal well-mixed tanks in series, tau/n each,
   the same classification in each). For continuous modes tau comes from a process column
@@ -110,7 +112,8 @@ def canonical_location(loc) -> str:
     if loc.startswith("cell_") and loc[5:].isdigit():
         return "cell:" + loc[5:]
     return loc
-CLASSIFICATIONS = {None: (), "screen": ("ln_c50", "ln_sharp"), "screen_power": ("n_screen",)}
+CLASSIFICATIONS = {None: (), "screen": ("ln_c50", "ln_sharp"), "screen_power": ("n_screen",),
+                   "screen_power_cut": ("n_screen",)}
 
 _DEFAULTS = {  # value, min, max
     "ln_A0": (0.0, -12.0, 12.0), "alpha": (1.0, -2.0, 4.0), "ln_mu": (1.0, -5.0, 8.0), "Lambda": (3.0, 0.5, 8.0),
@@ -444,7 +447,7 @@ class ForwardModel:
     def _process_matrix(self):
         spec, proc = self.spec, self.data.process
         cols = list(spec.rate_process) + [col for _, col in spec.param_process]
-        if spec.classification in ("screen", "screen_power"):
+        if spec.classification in ("screen", "screen_power", "screen_power_cut"):
             cols.append(spec.screen_column)
         if spec.rate == "austin_ball":
             cols.append(spec.ball_column)
@@ -665,11 +668,17 @@ class ForwardModel:
         if self.spec.classification is None:
             return np.ones((n_pop, C, self.n))
         screen = self._proc[self.spec.screen_column] * 1e-3
-        if self.spec.classification == "screen_power":
+        if self.spec.classification in ("screen_power", "screen_power_cut"):
             # normalised so that d* = 1 at x = x0 for the geometric-mean screen: ln_A0 is
             # then the rate at x0 for a typical screen, which decorrelates it from n_screen
             ref = float(np.exp(np.log(self.data.process[self.spec.screen_column].to_numpy(float)).mean())) * 1e-3
-            return screen_power_discharge(self.x, self.cond_param(p, "n_screen"), self.spec.x0_m * screen / ref)
+            d = screen_power_discharge(self.x, self.cond_param(p, "n_screen"), self.spec.x0_m * screen / ref)
+            if self.spec.classification == "screen_power_cut":
+                # hard cut: a class whose lower edge is at or above the opening cannot pass
+                # (d* = 1e-12: it leaves only as breakage products, as in the flowsheet mill)
+                lower = np.r_[self.x[1:], 0.0]
+                d = np.where((lower[None, :] >= screen[:, None])[None], 1e-12, d)
+            return d
         d50 = np.exp(p["ln_c50"])[:, None] * screen[None, :]
         return screen_discharge(self.x, d50, np.exp(p["ln_sharp"])[:, None])
 

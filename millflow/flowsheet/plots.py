@@ -80,15 +80,39 @@ def _levels(fs) -> dict:
     return level
 
 
-def plot_flowsheet(sol, ax):
-    """Boxes for units, arrows for streams with their solids rates [t/h]."""
-    fs = sol.flowsheet
+#: Layers per row of the flowsheet drawing: longer circuits wrap onto further rows.
+LAYERS_PER_ROW = 6
+_DX, _DY = 3.6, 1.7  # spacing of layers and of units within a layer [data units]
+
+
+def flowsheet_layout(fs) -> tuple[dict, dict, tuple]:
+    """Positions of units (layers by distance from the feeds, wrapped after
+    :data:`LAYERS_PER_ROW` layers, alternate rows running back), their layers, and the figure size [in] that keeps
+    boxes and labels legible for circuits of 10-20 units."""
     level = _levels(fs)
-    pos, count = {}, {}
+    per_level = {}
     for u in fs.units:
-        k = count.get(level[u], 0)
-        count[level[u]] = k + 1
-        pos[u] = (3.0 * level[u], -1.6 * k)
+        per_level.setdefault(level[u], []).append(u)
+    depth = max(len(v) for v in per_level.values())
+    n_levels = max(level.values()) + 1
+    row_height = _DY * depth + 1.8
+    pos = {}
+    for lv, units in per_level.items():
+        row, col = divmod(lv, LAYERS_PER_ROW)
+        if row % 2:  # boustrophedon: the next row runs back, so a wrapped loop stays short
+            col = LAYERS_PER_ROW - 1 - col
+        for k, u in enumerate(units):
+            pos[u] = (_DX * col, -row * row_height - _DY * k)
+    rows = (n_levels - 1) // LAYERS_PER_ROW + 1
+    cols = min(n_levels, LAYERS_PER_ROW)
+    size = (max(6.0, 1.9 * cols + 1.5), max(3.5, 1.25 * rows * (depth + 1) + 1.0))
+    return pos, level, size
+
+
+def plot_flowsheet(sol, ax):
+    """Boxes for units, arrows for streams with their solids rates [t/h] (recycles in red)."""
+    fs = sol.flowsheet
+    pos, level, _ = flowsheet_layout(fs)
     for u, (x, y) in pos.items():
         unit = fs.units[u]
         ax.text(x, y, f"{u}\n[{getattr(unit, 'kind', unit.type)}]", ha="center", va="center", fontsize=8,
@@ -97,18 +121,22 @@ def plot_flowsheet(sol, ax):
     for n, s in fs.streams.items():
         (x0, y0), (x1, y1) = pos[s.source], pos[s.target]
         back = level[s.target] <= level[s.source]
-        rad = 0.5 if back else 0.0
+        dist = max(float(np.hypot(x1 - x0, y1 - y0)), 1e-9)
+        rad = 0.45 * min(1.0, 2.0 * _DX / dist) if back else 0.0  # arcs about one layer high at most
         if back and (x0, y0) == (x1, y1):
             x1, y1 = x1 + 0.01, y1 - 0.01
-        ax.annotate("", xy=(x1, y1), xytext=(x0, y0),
-                    arrowprops=dict(arrowstyle="-|>", color="#a03030" if back else "#303030", shrinkA=30,
-                                    shrinkB=30, connectionstyle=f"arc3,rad={rad}"))
-        mx, my = (x0 + x1) / 2, (y0 + y1) / 2 + (0.9 if back else 0.25)
-        ax.text(mx, my, f"{n}\n{tot[n]:.4g} t/h", ha="center", va="center", fontsize=7, color="#202020")
+        ax.annotate("", xy=(x1, y1), xytext=(x0, y0), zorder=2,
+                    arrowprops=dict(arrowstyle="-|>", color="#a03030" if back else "#303030", shrinkA=34,
+                                    shrinkB=34, connectionstyle=f"arc3,rad={rad}"))
+        # label at the arc's apex (mid + rad/2 (dy, -dx)) or just above a straight arrow
+        mx, my = (x0 + x1) / 2 + 0.5 * rad * (y1 - y0), (y0 + y1) / 2 - 0.5 * rad * (x1 - x0)
+        my += 0.35 if not back else (0.3 if my >= (y0 + y1) / 2 else -0.3)
+        ax.text(mx, my, f"{n}\n{tot[n]:.4g} t/h", ha="center", va="center", fontsize=7, color="#202020",
+                bbox=dict(boxstyle="round,pad=0.1", fc="white", ec="none", alpha=0.8), zorder=4)
     xs = [p[0] for p in pos.values()]
     ys = [p[1] for p in pos.values()]
-    ax.set_xlim(min(xs) - 1.5, max(xs) + 1.5)
-    ax.set_ylim(min(ys) - 1.5, max(ys) + 2.0)
+    ax.set_xlim(min(xs) - 1.8, max(xs) + 1.8)
+    ax.set_ylim(min(ys) - 0.6 - 0.5 * _DX, max(ys) + 0.6 + 0.5 * _DX)
     ax.set_axis_off()
     ax.set_title(fs.title or "flowsheet", fontsize=10)
 
@@ -123,7 +151,7 @@ def save_plots(sol, ds, out_dir) -> dict:
     plots = [("psd_png", "psd.png", plot_psd, ds, (8, 5))]
     if classifies:
         plots.append(("classifiers_png", "classifiers.png", plot_classifiers, sol, (8, 5)))
-    plots.append(("flowsheet_png", "flowsheet.png", plot_flowsheet, sol, (10, 5)))
+    plots.append(("flowsheet_png", "flowsheet.png", plot_flowsheet, sol, flowsheet_layout(sol.flowsheet)[2]))
     for key, fname, fun, arg, size in plots:
         fig, ax = figure(figsize=size)
         fun(arg, ax)

@@ -268,3 +268,23 @@ def test_mill_mode_plug_flow_vectorised_equals_the_mill(cls):
     tau, extra = m.transport_values(p)
     m._predict_mill(m.rates(p), m.frac_b(p, 4), m.discharge(p, 4) if cls else None, tau, extra, slow)
     np.testing.assert_allclose(fast, slow, rtol=0, atol=1e-12)
+
+
+def test_screen_hard_cut_keeps_the_product_below_the_opening():
+    """Issue 15 §2 (physics tried on the knife mill): classification "screen_power_cut" is
+    "screen_power" with classes whose lower edge is at or above the opening held back
+    (d* = 1e-12): the product carries at most ~1e-10 of its mass above the opening, while
+    below it the two forms agree (the cut changes only what the held classes break into)."""
+    d = _data(["c1", "c2"], ["product"], PROC)
+    spec = dict(mode="well_mixed", breakage="single", classification="screen_power", tau_column="tau_s")
+    plain = ForwardModel(ModelSpec(**spec), d, GRID)
+    cut = ForwardModel(ModelSpec(**{**spec, "classification": "screen_power_cut"}), d, GRID)
+    assert plain.param_names == cut.param_names
+    theta = np.array([[-4.0, 1.0, 0.8, 1.0]])
+    p_plain, p_cut = plain.predict_grid(theta)[0], cut.predict_grid(theta)[0]
+    lower = np.r_[X[1:], 0.0]
+    for g, opening_mm in enumerate((1.0, 2.0)):
+        above = lower >= opening_mm * 1e-3
+        assert above.any() and p_plain[g][above].sum() > 1e-3  # the smooth screen lets some through
+        assert p_cut[g][above].sum() < 1e-10
+        np.testing.assert_allclose(p_cut[g].sum(), 1.0, rtol=1e-12)  # mass conserved
