@@ -367,3 +367,30 @@ def test_an_rtd_fit_result_is_not_a_transport():
     S, b, f = np.array([0.01, 0.0]), np.array([[0.0, 0.0], [1.0, 0.0]]), np.array([1.0, 0.0])
     with pytest.raises(InputError, match="model_in_seconds"):
         steady_mill(S, b, f, res)
+
+
+@pytest.mark.parametrize("rate, n, tau", [(0.01, 2.5, 600.0), (0.05, 3.04, 600.0), (0.001, 7.3, 60.0)])
+def test_segregated_real_n_equal_rates_estimate_is_honest(rate, n, tau):
+    """Issue 10 §2: segregated flow with equal rates (a defective K) and a real-n tanks in
+    series. Reference: P = exp(-n log(I - K tau/n)) f in 40-digit arithmetic (mpmath). The
+    reported error estimate must not be below the actual error by more than a factor 3."""
+    import mpmath as mp
+
+    mp.mp.dps = 40
+    N = 20
+    g = SizeGrid.geometric(4e-3, 2 ** 0.5, N)
+    b = b_from_B(normalized_B(g.x, 0.5, 0.8, 3.0))
+    S = np.full(N, rate)
+    S[-1] = 0.0
+    f = np.zeros(N)
+    f[:3] = [0.3, 0.4, 0.3]
+    ds = steady_mill(S, b, f, rtd.TanksInSeries(tau, n), method="segregated")
+    K = mp.matrix(N, N)
+    for i in range(N):
+        for j in range(N):
+            K[i, j] = mp.mpf(b[i, j]) * mp.mpf(S[j]) - (mp.mpf(S[j]) if i == j else 0)
+    P = mp.expm(-mp.mpf(n) * mp.logm(mp.eye(N) - K * mp.mpf(tau) / mp.mpf(n)))
+    ref = np.array([float(v) for v in P * mp.matrix(f.tolist())])
+    err = float(np.max(np.abs(ds["product"].values - ref)))
+    assert err <= 3 * ds.attrs["error_estimate"] + 1e-300
+    assert err < 1e-13  # and the answer is exact to rounding
