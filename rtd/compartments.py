@@ -143,9 +143,23 @@ class CompartmentNetwork:
     def _w(self) -> np.ndarray:
         return self.outlet / self.volumes
 
+    #: Cells from which a tridiagonal network (a chain) is inverted from its transform
+    #: (O(n) per frequency) when its eigenvectors are ill-conditioned (a strongly
+    #: advective chain), instead of one expm per time (O(n^3) each); from
+    #: CHAIN_ALWAYS_CELLS on always (the eigen-decomposition itself then costs more).
+    CHAIN_MIN_CELLS = 64
+    CHAIN_ALWAYS_CELLS = 160
+
+    def _chain(self) -> bool:
+        if self.n < self.CHAIN_MIN_CELLS or self._bands is None:
+            return False
+        return self.n >= self.CHAIN_ALWAYS_CELLS or self._modes is None
+
     def pdf(self, t):
         """E(t) [1/time] without the bypass atom at t = 0."""
         t = as_time(t)
+        if self._chain():
+            return self._chain_inverse(t, integral=False)
         flat = np.maximum(t.ravel(), 0.0)
         expm_u = self._expm_u(flat)
         out = (1 - self.bypass) * (expm_u @ self._w())
@@ -154,10 +168,57 @@ class CompartmentNetwork:
     def cdf(self, t):
         """F(t) [-], including the bypass atom at t = 0."""
         t = as_time(t)
+        if self._chain():
+            return self._chain_inverse(t, integral=True)
         flat = np.maximum(t.ravel(), 0.0)
         remaining = self._expm_u(flat).sum(axis=1)
         out = self.bypass + (1 - self.bypass) * (1 - remaining)
         return np.where(t.ravel() >= 0, np.clip(out, 0, 1), 0.0).reshape(t.shape)
+
+    @functools.cached_property
+    def _bands(self):
+        """(sub, diagonal, super) of A when A is tridiagonal (a chain of cells), else None."""
+        a = self.system_matrix()
+        if self.n < 3 or np.any(np.triu(a, 2)) or np.any(np.tril(a, -2)):
+            return None
+        return np.diag(a, -1).copy(), np.diag(a).copy(), np.diag(a, 1).copy()
+
+    def _resolvent(self, s: np.ndarray) -> np.ndarray:
+        """w^T (s I - A)^-1 u for a tridiagonal A at complex s (1-D): the Thomas algorithm,
+        vectorised over s, O(n) per s. s I - A is diagonally dominant for Re s >= 0 (each
+        cell's outflow covers its inflow), so no pivoting is needed there."""
+        lo, di, up = self._bands
+        n, u, w = self.n, self.inlet, self._w()
+        check_memory(32.0 * n * s.size, f"{type(self).__name__} chain of {n} cells at {s.size} frequencies")
+        cp = np.empty((n, s.size), complex)
+        dp = np.empty((n, s.size), complex)
+        den = s - di[0]
+        cp[0], dp[0] = -up[0] / den, u[0] / den
+        for k in range(1, n):
+            den = (s - di[k]) + lo[k - 1] * cp[k - 1]
+            cp[k] = -up[k] / den if k < n - 1 else 0.0
+            dp[k] = (u[k] + lo[k - 1] * dp[k - 1]) / den
+        x = dp[n - 1]
+        acc = w[n - 1] * x
+        for k in range(n - 2, -1, -1):
+            x = dp[k] - cp[k] * x
+            acc = acc + w[k] * x
+        return acc
+
+    def _chain_inverse(self, t: np.ndarray, integral: bool) -> np.ndarray:
+        """E(t) or F(t) of a long chain by Fourier inversion of its exact transform
+        (:func:`rtd.inversion.fourier_inverse`: aliasing below e^-45, nodes until
+        |E_hat| < 1e-17): the eigenvectors of a strongly advective chain are too
+        ill-conditioned for the eigen route, and one expm per time is O(n^3)."""
+        from rtd.inversion import fourier_inverse
+
+        flat = t.ravel()
+        part = fourier_inverse(self._resolvent, np.maximum(flat, 0.0), self.analytic_for_re_s_greater_than,
+                               integral=integral)
+        if integral:
+            out = self.bypass + (1 - self.bypass) * part
+            return np.where(flat >= 0, np.clip(out, 0, 1), 0.0).reshape(t.shape)
+        return np.where(flat >= 0, (1 - self.bypass) * part, 0.0).reshape(t.shape)
 
     @functools.cached_property
     def _modes(self):
@@ -182,6 +243,9 @@ class CompartmentNetwork:
         """E_hat(s) = b + (1 - b) w^T (s I - A)^-1 u for real or complex s (any shape)."""
         s, real = as_s(s)
         flat = s.ravel().astype(complex)
+        if self._bands is not None and self.n >= self.CHAIN_MIN_CELLS:
+            out = (self.bypass + (1 - self.bypass) * self._resolvent(flat)).reshape(s.shape)
+            return (out.real if real else out)[()]
         a = self.system_matrix()
         m = flat[:, None, None] * np.eye(self.n)[None] - a[None]
         x = np.linalg.solve(m, np.broadcast_to(self.inlet, (flat.size, self.n))[..., None])[..., 0]
@@ -206,7 +270,16 @@ class CompartmentNetwork:
 
     @property
     def analytic_for_re_s_greater_than(self) -> float:
-        """Largest real part of the poles (eigenvalues of A)."""
+        """Largest real part of the poles (eigenvalues of A). A chain's A has the
+        characteristic polynomial of the symmetric tridiagonal matrix with off-diagonals
+        sqrt(sub * super) (only those products enter it): real eigenvalues, computed
+        stably by scipy.linalg.eigvalsh_tridiagonal."""
+        if self._bands is not None:
+            from scipy.linalg import eigvalsh_tridiagonal
+
+            lo, di, up = self._bands
+            return float(eigvalsh_tridiagonal(di, np.sqrt(lo * up), select="i",
+                                              select_range=(self.n - 1, self.n - 1))[0])
         return float(np.linalg.eigvals(self.system_matrix()).real.max())
 
     @property

@@ -22,6 +22,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from rtd.compartments import CompartmentNetwork
+from rtd.inversion import fourier_inverse  # noqa: F401  (re-exported: rtd.compose is where it was)
 from rtd.models import ParameterError, PlugFlow, RTDModel, as_s, as_time
 
 TALBOT_M = 24  # nodes; in double precision more nodes lose accuracy to round-off
@@ -53,47 +54,6 @@ def talbot_inverse(transform, t, m: int = TALBOT_M) -> np.ndarray:
     # own round-off (far tails) are noise of either sign and are returned as 0
     noise = 10 * np.finfo(float).eps * (r[:, 0] / m) * (np.abs(first) + np.abs(terms).sum(axis=1))
     out[pos] = np.where(np.abs(value) > noise, value, 0.0)
-    return out.reshape(t.shape)
-
-
-def fourier_inverse(transform, t, edge: float, integral: bool = False,
-                    max_nodes: int = 400_000) -> np.ndarray:
-    """E(t) (or F(t)) of a density on t >= 0 from its transform on Re s = 0.
-
-    Trapezoid rule = Fourier series of the density periodised with period T:
-    E = (1/T)[1 + 2 Re sum_k E_hat(i w_k) e^{i w_k t}], w_k = 2 pi k/T,
-    F = t/T + (2/T) Re sum_k E_hat(i w_k)(e^{i w_k t} - 1)/(i w_k).
-    The tail decays like exp(edge t) (edge = rightmost singularity < 0), so
-    T = max t + 45/|edge| keeps aliasing below e^-45; nodes run until |E_hat(i w)| < 1e-17.
-    Suited to transforms that decay fast on the imaginary axis (axial dispersion parts),
-    where the Talbot contour fails on the delay-like front.
-    """
-    t = np.asarray(t, dtype=float)
-    flat = t.ravel()
-    out = np.zeros_like(flat)
-    pos = flat > 0
-    if not np.any(pos):
-        return out.reshape(t.shape)
-    period = float(flat[pos].max()) + 45.0 / abs(edge)
-    w_max = 2 * math.pi / period
-    while abs(transform(np.array([1j * w_max]))[0]) > 1e-17:
-        w_max *= 1.25
-    n = int(math.ceil(w_max * period / (2 * math.pi)))
-    if n > max_nodes:
-        raise ParameterError(f"Series: Fourier inversion would need {n} nodes; "
-                             "the transform decays too slowly on the imaginary axis")
-    w = 2 * math.pi * np.arange(1, n + 1) / period
-    coef = transform(1j * w)
-    if integral:
-        coef = coef / (1j * w)
-    tp = flat[pos]
-    vals = np.empty_like(tp)
-    step = max(1, 2_000_000 // n)
-    for i in range(0, tp.size, step):
-        ph = np.exp(1j * np.outer(tp[i:i + step], w))
-        vals[i:i + step] = 2 * ((ph - 1.0 if integral else ph) @ coef).real
-    res = (tp + vals) / period if integral else (1.0 + vals) / period
-    out[pos] = np.clip(res, 0.0, 1.0) if integral else np.maximum(res, 0.0)
     return out.reshape(t.shape)
 
 

@@ -69,8 +69,23 @@ def test_a_curve_no_model_fits_is_flagged(tmp_path):
 
 
 def test_rtd_arrays_beyond_the_memory_budget_are_refused():
-    """RecirculatingCells(1, 1000, 1).pdf at 20001 times asked for 149 GiB."""
+    """RecirculatingCells(1, 1000, 1).pdf at 20001 times asked for 149 GiB; a chain is now
+    inverted from its transform (tests/rtd/test_chain_inversion.py) and needs megabytes.
+    A network that is not a chain and whose eigenvectors are ill-conditioned still takes
+    one expm per time: refused before allocating, with the size it would need."""
+    t = np.linspace(0.0, 5.0, 20001)
+    e = rtd.RecirculatingCells(1.0, 1000, 1.0).pdf(t)
+    assert np.all(np.isfinite(e)) and abs(e.sum() * (t[1] - t[0]) - 1.0) < 1e-6  # trapezoid on a smooth E
+    from rtd.compartments import CompartmentNetwork
+
+    n = 1000
+    flows = np.zeros((n, n))
+    flows[np.arange(1, n), np.arange(n - 1)] = 1.0  # a plug-like chain ...
+    flows[2, 0] += 0.01  # ... with an exchange between cells 1 and 3: not tridiagonal
+    flows[0, 2] += 0.01
+    inlet, outlet = np.eye(n)[0], np.eye(n)[-1]
+    net = CompartmentNetwork(np.full(n, 1.0 / n), flows, inlet, outlet)
     with pytest.raises(rtd.ParameterError, match=r"1000 cells at 20001 times .* 149 GiB"):
-        rtd.RecirculatingCells(1.0, 1000, 1.0).pdf(np.linspace(0.0, 5.0, 20001))
+        net.pdf(t)
     with pytest.raises(rtd.ParameterError, match="RTD_MEMORY_BUDGET_GB"):
         rtd.TanksInSeries(600.0, 1e9).network()
