@@ -189,6 +189,15 @@ class CompartmentNetwork:
         cell's outflow covers its inflow), so no pivoting is needed there."""
         lo, di, up = self._bands
         n, u, w = self.n, self.inlet, self._w()
+        if not np.any(w[:-1]):  # exit from the last cell only: x_n from the forward sweep alone
+            cp = -up[0] / (s - di[0])
+            dp = u[0] / (s - di[0])
+            for k in range(1, n):
+                den = (s - di[k]) + lo[k - 1] * cp
+                dp = (u[k] + lo[k - 1] * dp) / den if u[k] else (lo[k - 1] * dp) / den
+                if k < n - 1:
+                    cp = -up[k] / den
+            return w[-1] * dp
         check_memory(32.0 * n * s.size, f"{type(self).__name__} chain of {n} cells at {s.size} frequencies")
         cp = np.empty((n, s.size), complex)
         dp = np.empty((n, s.size), complex)
@@ -254,10 +263,19 @@ class CompartmentNetwork:
 
     def _moment(self, k: int) -> float:
         """k-th raw moment k! w^T (-A)^-(k+1) u times (1 - b)."""
-        a = -self.system_matrix()
         x = self.inlet.copy()
-        for _ in range(k + 1):
-            x = np.linalg.solve(a, x)
+        if self._bands is not None:  # a chain: banded solves, O(n)
+            from scipy.linalg import solve_banded
+
+            lo, di, up = self._bands
+            ab = np.zeros((3, self.n))
+            ab[0, 1:], ab[1], ab[2, :-1] = -up, -di, -lo
+            for _ in range(k + 1):
+                x = solve_banded((1, 1), ab, x)
+        else:
+            a = -self.system_matrix()
+            for _ in range(k + 1):
+                x = np.linalg.solve(a, x)
         return (1 - self.bypass) * math.factorial(k) * float(self._w() @ x)
 
     @property

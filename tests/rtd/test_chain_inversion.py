@@ -67,3 +67,24 @@ def test_edge_is_the_largest_eigenvalue():
 def test_non_chain_networks_keep_their_route():
     net = CompartmentNetwork.cells_in_series(np.full(3, 1.0), 1.5, 0.5)
     assert not net._chain()
+
+
+def test_chain_with_a_side_outlet_uses_the_full_sweep():
+    """Exits from two cells: the backward sweep of the Thomas algorithm is needed too."""
+    n, B = 70, 0.2
+    flows = np.zeros((n, n))
+    F = np.where(np.arange(n - 1) < 34, 1.0 + B, 0.7)
+    flows[np.arange(1, n), np.arange(n - 1)] = F
+    flows[np.arange(n - 1), np.arange(1, n)] = B
+    outlet = np.zeros(n)
+    outlet[34], outlet[-1] = 0.5, 0.5
+    net = CompartmentNetwork(np.full(n, 1.0 / n), flows, np.eye(n)[0], outlet)
+    ref = CompartmentNetwork(net.volumes, net.flows, net.inlet, net.outlet)
+    object.__setattr__(ref, "CHAIN_MIN_CELLS", 10 ** 9)
+    object.__setattr__(net, "CHAIN_ALWAYS_CELLS", 64)  # this instance: the chain route whatever its modes
+    assert net._chain() and not ref._chain()
+    t = np.linspace(0.0, 4.0, 41)
+    np.testing.assert_allclose(net.pdf(t), ref.pdf(t), rtol=0, atol=1e-11 * ref.pdf(t).max())
+    s = np.array([0.5, 1.0 + 3j])
+    dense = [net._w() @ np.linalg.solve(x * np.eye(n) - net.system_matrix(), net.inlet) for x in s]
+    np.testing.assert_allclose(net._resolvent(s), dense, rtol=1e-12)
