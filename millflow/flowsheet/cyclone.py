@@ -113,9 +113,10 @@ class PredictedCyclone:
 
                 def corrected(x):
                     return whiten(x, d50c, m)
-        except InputError as exc:
+        except (InputError, OverflowError, ZeroDivisionError, ValueError) as exc:
+            why = str(exc) if isinstance(exc, InputError) else "the model's power laws overflow at this operating point"
             raise SolverError(f"{where}: at {Q * 3600:.6g} m3/h of slurry ({100 * feed.solids_volume_fraction:.3g} % "
-                              f"solids by volume, {self.cyclones} cyclones): {exc}") from None
+                              f"solids by volume, {self.cyclones} cyclones): {why}") from None
         return {"d50c_m": d50c, "sharpness": m, "pressure_Pa": pressure, "flow_per_cyclone_m3_s": q,
                 "volume_split": split, "water_split": rf, "solids_volume_fraction": feed.solids_volume_fraction}, \
             corrected

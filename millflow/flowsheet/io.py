@@ -154,7 +154,7 @@ def _sieve_table(path: Path, where: str):
     from millflow.inputs import read_csv
 
     if not path.is_file():
-        raise InputError(f"{where}.file: {path} not found")
+        raise InputError(f"{where}.file: {path} not found (or not a file)")
     df = read_csv(path, "feed PSD file")
     cols = [c.strip() for c in df.columns]
     df.columns = cols
@@ -602,10 +602,10 @@ def _mill(name: str, t: _Table, materials: dict, slurry=None, base: Path | None 
         ct = t.sub("classification")
         curve = ct.plain("curve", kind=str)
         where = ct.plain("where", None)
-        if where is not None and not (isinstance(where, str) or (
-                isinstance(where, list) and all(isinstance(k, int) and not isinstance(k, bool) for k in where))):
+        if where is not None and not (isinstance(where, str) or (isinstance(where, list) and where and all(
+                isinstance(k, int) and not isinstance(k, bool) and k >= 1 for k in where))):
             raise InputError(f"{ct.where}.where = {where!r}: expected \"discharge\", \"cells\", \"axis\" or a "
-                             "list of cell numbers (1 = first)")
+                             "list of cell numbers (1 = first, at least one)")
         cls = {"curve": curve, **_curve_params(ct, curve, skip=("where",))}
         if where is not None:
             cls["where"] = where
@@ -645,6 +645,9 @@ def _predicted_cyclone(name: str, t: _Table, slurry):
     t.finish("type, model, cyclones, diameter_mm, inlet_diameter_mm, vortex_finder_mm, apex_mm, "
              "free_vortex_height_mm, cylinder_length_mm, cone_angle_deg, viscosity_mPa_s, add_water_tph, "
              + ", ".join(_CALIBRATION[model]))
+    if slurry is not None and slurry.solids_density <= slurry.water_density:
+        raise InputError(f"units.{name}: a hydrocyclone separates solids denser than the liquid; [slurry] gives "
+                         f"solids {slurry.solids_density / 1e3:g} t/m3, water {slurry.water_density / 1e3:g} t/m3")
     geometry = _wrap(f"units.{name}", CycloneGeometry, **{k: v for k, v in sizes.items() if v is not None},
                      cone_angle_deg=angle)
     calibration = _wrap(f"units.{name}", PlittCalibration if model == "plitt" else NageswararaoConstants, **cal)
@@ -747,7 +750,7 @@ def from_dict(data: dict, *, source: str = "<dict>", base_dir=None) -> Flowsheet
         rho_s = sl.quantity("solids_density", "density")
         rho_w = sl.quantity("water_density", "density", 1000.0)
         sl.finish("solids_density_t_m3, water_density_kg_m3")
-        slurry = _wrap("slurry", Slurry, rho_s, rho_w)
+        slurry = Slurry(rho_s, rho_w)  # its errors name slurry.<key>
     materials = {}
     mt = top.sub("materials", None)
     if mt is not None:

@@ -43,11 +43,15 @@ class Slurry:
     solids_density: float
     water_density: float = 1000.0
 
+    #: Densest solid (osmium, 22.6 t/m3) rounded up: a density above it is a unit slip.
+    MAX_DENSITY = 25_000.0
+
     def __post_init__(self):
         for k in ("solids_density", "water_density"):
             v = getattr(self, k)
-            if not (isinstance(v, (int, float)) and math.isfinite(v) and v > 0):
-                raise InputError(f"slurry.{k} = {v!r}: expected a finite density > 0 [kg/m3]")
+            if not (isinstance(v, (int, float)) and math.isfinite(v) and 0 < v <= self.MAX_DENSITY):
+                raise InputError(f"slurry.{k} = {v!r} kg/m3: expected a density in (0, {self.MAX_DENSITY:g}] kg/m3 "
+                                 "(check the unit: t_m3 or kg_m3)")
 
     def volume_flow(self, solids: float, water: float) -> float:
         """Q = S/rho_s + w/rho_w [m3/s] of solids S and water w [kg/s]."""
