@@ -252,7 +252,7 @@ def _local(prob: _Problem, z0, tight: bool = False):
 
 def fit(model: ForwardModel, params: dict | None = None, *, global_search: bool = True, starts: int = 20,
         popsize: int = 15, maxiter: int = 200, seed: int = 0, de_tol: float = 1e-3, grid_check: bool = True,
-        progress=None, quiet: bool = False) -> FitResult:
+        progress=None, quiet: bool = False, profile: bool = True) -> FitResult:
     """Fit a :class:`ForwardModel`; see the module docstring for the steps.
 
     Parameters
@@ -261,6 +261,8 @@ def fit(model: ForwardModel, params: dict | None = None, *, global_search: bool 
     params : name -> :class:`Parameter` (start values, bounds, vary); default
         :func:`default_parameters` of the model's spec.
     global_search : run differential evolution first (``False``: local starts only).
+    profile : compute profile-likelihood intervals for parameters at or across a bound
+        (``False`` where only the estimate and its prediction are used: validation folds).
     starts : number of local least-squares starts: the DE optimum (if any) and
         ``starts - 1`` scrambled-Sobol points (or the given values and Sobol points
         without global search). ``starts=1, global_search=False`` is one local fit
@@ -312,7 +314,8 @@ def fit(model: ForwardModel, params: dict | None = None, *, global_search: bool 
               for n, v in zip(model.param_names, theta)}
     gc = _grid_check(model, params, theta, zb, sb, st) if grid_check else {}
     _flag_parameters(st, gc, sols, prob.names, model.n_data)
-    _profile_intervals(prob, zb, sb, st, model.n_data)
+    if profile:
+        _profile_intervals(prob, zb, sb, st, model.n_data)
     names = prob.names
     solutions = [(float(s), {n: float(v) for n, v in zip(names, z)}) for s, z in sols]
     say(f"done: SSR {sb:.6g}, spread {spread:.3g}, {time.perf_counter() - t0:.1f} s")
@@ -370,25 +373,41 @@ def _profile_intervals(prob: _Problem, zb, sb: float, st: dict, n_data: int) -> 
         sub_prob.full = prob.expand(zb)[0].copy()
         others = np.asarray(zb, float)[keep]
 
-        def profile(v, sub_prob=sub_prob, k=k, keep=keep, others=others):
+        start = {"z": others}
+
+        def profile(v, sub_prob=sub_prob, k=k, keep=keep, start=start):
             sub_prob.full[prob.idx[k]] = v
             if keep.size == 0:
                 r = sub_prob.resid(np.zeros(0))
                 return float(r @ r)
-            return _local(sub_prob, others)[1]
+            z, ssr = _local(sub_prob, start["z"])
+            if np.all(np.isfinite(z)):
+                start["z"] = z  # continuation: the next point starts from this optimum
+            return ssr
 
         ends = []
         for bound in (lo_b, hi_b):
-            if profile(bound) <= limit:
+            start["z"] = others
+            f_bound = profile(bound) - limit
+            if f_bound <= 0:
                 ends.append(bound)  # the data cannot exclude the bound: the interval reaches it
                 continue
-            inside, outside = float(zb[k]), bound
-            for _ in range(40):
-                mid = 0.5 * (inside + outside)
-                inside, outside = (mid, outside) if profile(mid) <= limit else (inside, mid)
-                if abs(outside - inside) <= 1e-3 * (hi_b - lo_b):
+            # the crossing of SSR(v) = limit between the estimate (SSR = sb, below) and the
+            # bound (above): regula falsi with the Illinois modification on the known end
+            # values (superlinear, each step one profile fit), to 1e-3 of the range
+            x0, f0, x1, f1 = float(zb[k]), sb - limit, float(bound), f_bound
+            tol = 1e-3 * (hi_b - lo_b)
+            for _ in range(60):
+                x2 = x1 - f1 * (x1 - x0) / (f1 - f0)
+                f2 = profile(x2) - limit
+                if f2 * f1 < 0:
+                    x0, f0 = x1, f1
+                else:
+                    f0 *= 0.5
+                x1, f1 = x2, f2
+                if abs(x1 - x0) <= tol or f2 == 0:
                     break
-            ends.append(0.5 * (inside + outside))
+            ends.append(x1)
         s["ci95_wald"] = [lo_w, hi_w]
         s["ci95"] = [min(ends), max(ends)]
         s["flags"].append(f"95 % interval from the profile likelihood [{min(ends):.4g}, {max(ends):.4g}] "

@@ -50,7 +50,7 @@ def leave_out(model: ForwardModel, params: dict | None, held_out="each", *, prog
     groups = _groups(conds, held_out)
     for k, (group, train) in enumerate(groups):
         say(f"fold {k + 1}/{len(groups)}: predicting {', '.join(group)}")
-        res = fit(model.for_conditions(train), params, grid_check=False, quiet=True, **fit_kwargs)
+        res = fit(model.for_conditions(train), params, grid_check=False, quiet=True, profile=False, **fit_kwargs)
         pred = condition_rmse(model.for_conditions(group), res.theta)
         rmse.update(pred)
         folds.append({"held_out": group, "rmse": pred, "params": {n: p.value for n, p in res.params.items()},
@@ -124,6 +124,7 @@ def nested_leave_out(candidates: dict, params: dict | None = None, held_out="eac
         say(f"outer fold {k + 1}/{len(groups)}: choosing among {len(labels)} structures without "
             f"{', '.join(group)}")
         fits = {label: fit(candidates[label].for_conditions(train), params.get(label), grid_check=False, quiet=True,
+                           profile=False,
                            **fit_kwargs)
                 for label in labels}
         scores = {label: float(r.criteria[criterion]) for label, r in fits.items()}
