@@ -169,6 +169,8 @@ def _sieve_table(path: Path, where: str):
                          f"columns: {', '.join(cols)}")
     kind, unit = kinds[0].rsplit("_", 1)
     scale = 0.01 if unit == "pct" else 1.0
+    if len(df) < 2:
+        raise InputError(f"{path}: {len(df)} data row(s); expected at least two sieves")
     out = {}
     for col in (size_cols[0], kinds[0]):
         vals = []

@@ -90,3 +90,9 @@ def test_missing_feed_csv_names_the_key(tmp_path):
     (tmp_path / "feed.csv").unlink()
     with pytest.raises(InputError, match=r"units.f.psd.file: .*feed.csv not found"):
         load(p)
+
+
+@pytest.mark.parametrize("csv", ["size_um,passing_pct\n", "size_um,passing_pct\n6700,100\n"])
+def test_feed_csv_with_fewer_than_two_rows_is_named(tmp_path, csv):
+    with pytest.raises(InputError, match="expected at least two sieves"):
+        load(_write(tmp_path, csv))
