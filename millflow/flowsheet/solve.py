@@ -35,6 +35,7 @@ The tear report records the method, iterations and residual history.
 """
 from __future__ import annotations
 
+import functools
 import math
 import time
 from dataclasses import dataclass, field
@@ -218,30 +219,35 @@ def _relative_change(gx, x) -> float:
     return float(np.max(np.where(d == 0, 0.0, d / np.where(gx != 0, np.abs(gx), 1e-300))))
 
 
-def _substitution(g, x0, tol, maxiter):
+def _substitute_negative(x, gx):
+    """Torn values (flows, water, recovery) are >= 0: where the extrapolation would make one
+    negative, that component takes the plain substitution step."""
+    return np.where(x < 0, gx, x)
+
+
+def _substitution(g, x0, tol, maxiter, err=_relative_change):
     x, hist = x0, []
     for it in range(1, maxiter + 1):
         gx = g(x)
-        err = _relative_change(gx, x)
-        hist.append(err)
+        hist.append(err(gx, x))
         x = gx
-        if err < tol:
+        if hist[-1] < tol:
             return x, it, hist, True
     return x, maxiter, hist, False
 
 
-def _wegstein(g, x0, tol, maxiter, qmin=-5.0, qmax=0.0):
-    """Wegstein's accelerated substitution, componentwise, q bounded to [qmin, qmax]."""
+def _wegstein(g, x0, tol, maxiter, qmin=-5.0, qmax=0.0, err=_relative_change, bound=_substitute_negative):
+    """Wegstein's accelerated substitution, componentwise, q bounded to [qmin, qmax]; ``err``
+    measures the change, ``bound(x, g(x))`` keeps the extrapolated iterate physical."""
     x_prev, g_prev = x0, g(x0)
-    hist = [_relative_change(g_prev, x_prev)]
+    hist = [err(g_prev, x_prev)]
     if hist[-1] < tol:
         return g_prev, 1, hist, True
     x = g_prev
     for it in range(2, maxiter + 1):
         gx = g(x)
-        err = _relative_change(gx, x)
-        hist.append(err)
-        if err < tol:
+        hist.append(err(gx, x))
+        if hist[-1] < tol:
             return gx, it, hist, True
         dx = x - x_prev
         with np.errstate(divide="ignore", invalid="ignore"):
@@ -249,10 +255,7 @@ def _wegstein(g, x0, tol, maxiter, qmin=-5.0, qmax=0.0):
             q = np.where(s != 1, s / (s - 1.0), 0.0)
         q = np.clip(np.nan_to_num(q), qmin, qmax)
         x_prev, g_prev = x, gx
-        x = q * x + (1.0 - q) * gx
-        # torn values (flows, water, recovery) are >= 0: where the extrapolation would make one
-        # negative, that component takes the plain substitution step
-        x = np.where(x < 0, gx, x)
+        x = bound(q * x + (1.0 - q) * gx, gx)
     return x, maxiter, hist, False
 
 
@@ -381,37 +384,9 @@ def _vector_err(gx, x):
     return float(np.max(np.abs(gx - x)) / max(float(np.sum(np.abs(gx))), 1e-300))
 
 
-def _vector_substitution(g, x0, tol, maxiter):
-    x, hist = x0, []
-    for it in range(1, maxiter + 1):
-        gx = g(x)
-        hist.append(_vector_err(gx, x))
-        x = gx
-        if hist[-1] < tol:
-            return x, it, hist, True
-    return x, maxiter, hist, False
-
-
-def _vector_wegstein(g, x0, tol, maxiter, qmin=-5.0, qmax=0.0):
-    """Wegstein componentwise on a flow vector (bounded q), change relative to the total."""
-    x_prev, g_prev = x0, g(x0)
-    hist = [_vector_err(g_prev, x_prev)]
-    if hist[-1] < tol:
-        return g_prev, 1, hist, True
-    x = g_prev
-    for it in range(2, maxiter + 1):
-        gx = g(x)
-        hist.append(_vector_err(gx, x))
-        if hist[-1] < tol:
-            return gx, it, hist, True
-        dx = x - x_prev
-        with np.errstate(divide="ignore", invalid="ignore"):
-            s = np.where(dx != 0, (gx - g_prev) / dx, 0.0)
-            q = np.where(s != 1, s / (s - 1.0), 0.0)
-        q = np.clip(np.nan_to_num(q), qmin, qmax)
-        x_prev, g_prev = x, gx
-        x = np.maximum(q * x + (1.0 - q) * gx, 0.0)  # a flow cannot be negative: q-extrapolation is bounded at 0
-    return x, maxiter, hist, False
+#: The tears of inlet flow vectors: change relative to the total flow, a flow cut at 0.
+_vector_substitution = functools.partial(_substitution, err=_vector_err)
+_vector_wegstein = functools.partial(_wegstein, err=_vector_err, bound=lambda x, gx: np.maximum(x, 0.0))
 
 
 def _vector_newton(g, x0, tol, maxiter):
