@@ -12,6 +12,8 @@ import json
 import math
 from pathlib import Path
 
+from millflow.commands.output import add_output_flags
+
 
 def add_parser(subparsers) -> None:
     p = subparsers.add_parser("compare", help="solve two flowsheets and compare the streams they share",
@@ -20,12 +22,9 @@ def add_parser(subparsers) -> None:
                                      "flowsheets/closed_circuit_ball_mill.toml")
     p.add_argument("a", help="first flowsheet file (TOML)")
     p.add_argument("b", help="second flowsheet file (TOML)")
-    p.add_argument("--out", default=None, help="output folder (default: <A stem>-vs-<B stem>)")
-    p.add_argument("--json", action="store_true", help="print one JSON object instead of the table")
-    p.add_argument("--no-plots", action="store_true", help="do not write compare.png")
-    p.add_argument("--quiet", action="store_true", help="print nothing but errors (and --json output)")
-    p.add_argument("--overwrite", action="store_true",
-                   help="replace an output folder that holds files millflow did not write")
+    add_output_flags(p, out="output folder (default: <A stem>-vs-<B stem>)",
+                     json="print one JSON object instead of the table",
+                     plots="do not write compare.png", quiet="print nothing but errors (and --json output)")
     p.set_defaults(func=run)
 
 

@@ -12,17 +12,16 @@ import json
 import sys
 from pathlib import Path
 
+from millflow.commands.output import add_output_flags
+
 
 def add_parser(subparsers) -> None:
     p = subparsers.add_parser("falsify", help="measure how model error falsifies fitted breakage kinetics",
                               description=__doc__.splitlines()[0])
     p.add_argument("config", help="TOML configuration (see docs/model-error.md)")
-    p.add_argument("--json", action="store_true", help="print one JSON object instead of the text summary")
-    p.add_argument("--out", default=None, help="output folder (default falsify-results/ beside the config)")
-    p.add_argument("--overwrite", action="store_true",
-                   help="replace an output folder that holds files millflow did not write")
-    p.add_argument("--no-plots", action="store_true", help="do not write plots")
-    p.add_argument("--quiet", action="store_true", help="no progress messages")
+    add_output_flags(p, out="output folder (default falsify-results/ beside the config)",
+                     json="print one JSON object instead of the text summary",
+                     plots="do not write plots", quiet="no progress messages")
     p.set_defaults(func=run)
 
 

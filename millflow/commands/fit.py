@@ -11,18 +11,17 @@ import json
 import sys
 from pathlib import Path
 
+from millflow.commands.output import add_output_flags
+
 
 def add_parser(subparsers) -> None:
     p = subparsers.add_parser("fit", help="fit breakage (and classification) parameters to PSD data",
                               description=__doc__.splitlines()[0])
     p.add_argument("config", help="TOML configuration (see docs/fitting.md)")
-    p.add_argument("--json", action="store_true", help="print one JSON object instead of the text summary")
+    add_output_flags(p, out="output folder (overrides output.dir of the config)",
+                     json="print one JSON object instead of the text summary",
+                     plots="do not write plots", quiet="no progress messages")
     p.add_argument("--data-dir", default=None, help="SPRITE data folder (overrides data.sprite_folder)")
-    p.add_argument("--out", default=None, help="output folder (overrides output.dir of the config)")
-    p.add_argument("--no-plots", action="store_true", help="do not write plots")
-    p.add_argument("--quiet", action="store_true", help="no progress messages")
-    p.add_argument("--overwrite", action="store_true",
-                   help="replace an output folder that holds files millflow did not write")
     p.set_defaults(func=run)
 
 

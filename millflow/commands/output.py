@@ -139,3 +139,16 @@ def _replace(tmp: Path, out: Path) -> None:
 def relocate(paths, tmp: Path, out: Path) -> list[str]:
     """Paths written under ``tmp`` as they are named once moved to ``out``."""
     return [str(Path(out) / Path(p).relative_to(tmp)) for p in paths]
+
+
+def add_output_flags(p, *, out: str, json: str, plots: str, quiet: str) -> None:
+    """The output flags every writing command shares, one meaning each: ``--out DIR`` (a
+    folder), ``--json``, ``--no-plots``, ``--quiet``, ``--overwrite``; the help texts say what
+    they mean for that command."""
+    p.add_argument("--out", default=None, help=out)
+    p.add_argument("--json", action="store_true", help=json)
+    p.add_argument("--no-plots", action="store_true", help=plots)
+    p.add_argument("--quiet", action="store_true", help=quiet)
+    p.add_argument("--overwrite", action="store_true",
+                   help="replace an output folder that holds files millflow did not write")
+

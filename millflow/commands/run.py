@@ -12,17 +12,16 @@ import json
 import math
 from pathlib import Path
 
+from millflow.commands.output import add_output_flags
+
 
 def add_parser(subparsers) -> None:
     p = subparsers.add_parser("run", help="solve a flowsheet file (TOML) and write its results",
                               description=__doc__.split("\n\n")[1] if __doc__ else None)
     p.add_argument("file", help="flowsheet file (TOML), e.g. flowsheets/closed_circuit_ball_mill.toml")
-    p.add_argument("--out", default=None, help="output folder (default: <file stem>-results)")
-    p.add_argument("--json", action="store_true", help="print one JSON object instead of the table")
-    p.add_argument("--no-plots", action="store_true", help="do not write the PNG plots")
-    p.add_argument("--overwrite", action="store_true",
-                   help="replace an output folder that holds files millflow did not write")
-    p.add_argument("--quiet", action="store_true", help="print nothing but errors (and --json output)")
+    add_output_flags(p, out="output folder (default: <file stem>-results)",
+                     json="print one JSON object instead of the table",
+                     plots="do not write the PNG plots", quiet="print nothing but errors (and --json output)")
     p.add_argument("--no-grid-check", action="store_true",
                    help="skip the second solve on a refined size grid (Principle IV)")
     p.add_argument("--method", default="wegstein", help="tear method for nonlinear units (wegstein, newton, "

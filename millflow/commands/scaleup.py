@@ -13,6 +13,8 @@ from __future__ import annotations
 import json
 from pathlib import Path
 
+from millflow.commands.output import add_output_flags
+
 
 def add_parser(subparsers) -> None:
     p = subparsers.add_parser("scaleup", help="predict a plant mill/circuit from a lab fit, with uncertainty",
@@ -22,14 +24,11 @@ def add_parser(subparsers) -> None:
     p.add_argument("fit", help="result of 'millflow fit --json' (JSON file)")
     p.add_argument("--to", required=True, dest="plant", help="plant file (TOML, see docs/scaleup.md)")
     p.add_argument("--target-p80-um", type=float, default=None, help="target product P80 [um]: solve for throughput")
-    p.add_argument("--json", action="store_true", help="print one JSON object instead of the text summary")
-    p.add_argument("--out", default=None, help="output folder (default: <plant stem>-scaleup)")
+    add_output_flags(p, out="output folder (default: <plant stem>-scaleup)",
+                     json="print one JSON object instead of the text summary",
+                     plots="do not write scaleup.png", quiet="print nothing but errors (and --json output)")
     p.add_argument("--draws", type=int, default=1000, help="Monte Carlo draws (default 1000)")
     p.add_argument("--method", choices=["both", "delta", "mc"], default="both", help="band method(s)")
-    p.add_argument("--no-plots", action="store_true", help="do not write scaleup.png")
-    p.add_argument("--overwrite", action="store_true",
-                   help="replace an output folder that holds files millflow did not write")
-    p.add_argument("--quiet", action="store_true", help="print nothing but errors (and --json output)")
     p.set_defaults(func=run)
 
 
@@ -61,11 +60,10 @@ def format_summary(s: dict) -> str:
 
 
 def run(args) -> int:
+    from millflow.commands.output import check_target, staged_folder
     from millflow.scaleup.api import predict_plant
     from millflow.scaleup.fitted import load_fit
     from millflow.scaleup.plantfile import load_plant
-
-    from millflow.commands.output import check_target, staged_folder
 
     out = Path(args.out) if args.out else Path.cwd() / f"{Path(args.plant).stem}-scaleup"
     check_target(out, overwrite=args.overwrite, input_path=args.plant)  # before the work, not after

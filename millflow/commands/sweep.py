@@ -14,6 +14,8 @@ import json
 import sys
 from pathlib import Path
 
+from millflow.commands.output import add_output_flags
+
 
 def add_parser(subparsers) -> None:
     p = subparsers.add_parser("sweep", help="solve a flowsheet over a grid or sample of its inputs (Dask)",
@@ -29,12 +31,9 @@ def add_parser(subparsers) -> None:
     p.add_argument("--scheduler", default="local",
                    help="'local' (a LocalCluster, default), 'serial', or a Dask scheduler address")
     p.add_argument("--workers", type=int, default=None, help="LocalCluster workers (default: all cores)")
-    p.add_argument("--out", default=None, help="output folder (default: <file stem>-sweep)")
-    p.add_argument("--json", action="store_true", help="print a JSON summary instead of the text one")
-    p.add_argument("--no-plots", action="store_true", help="do not write the plots")
-    p.add_argument("--quiet", action="store_true", help="no progress bar")
-    p.add_argument("--overwrite", action="store_true",
-                   help="replace an output folder that holds files millflow did not write")
+    add_output_flags(p, out="output folder (default: <file stem>-sweep)",
+                     json="print a JSON summary instead of the text one",
+                     plots="do not write the plots", quiet="no progress bar")
     p.set_defaults(func=run)
 
 
