@@ -813,7 +813,11 @@ def loads(text: str, *, source: str = "<string>") -> Flowsheet:
 
 def load(path) -> Flowsheet:
     """Flowsheet from a TOML file."""
+    import hashlib
+
     p = Path(path)
     if not p.is_file():
         raise InputError(f"{p}: flowsheet file not found")
-    return loads(read_text(p, "flowsheet file"), source=str(p))
+    fs = loads(read_text(p, "flowsheet file"), source=str(p))
+    fs.meta["input_sha256"] = hashlib.sha256(p.read_bytes()).hexdigest()  # once, not per summary
+    return fs

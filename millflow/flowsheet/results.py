@@ -248,15 +248,12 @@ def _clean(v):
 
 
 def _provenance(fs) -> dict:
-    """millflow version and the SHA-256 of the input file (when the flowsheet came from one)."""
-    import hashlib
-
+    """millflow version and the SHA-256 of the input file (hashed once, when it was read)."""
     from millflow import __version__
 
     out = {"millflow_version": __version__}
-    src = Path(fs.source_file) if fs.source_file and not fs.source_file.startswith("<") else None
-    if src is not None and src.is_file():
-        out["input_sha256"] = hashlib.sha256(src.read_bytes()).hexdigest()
+    if fs.meta.get("input_sha256"):
+        out["input_sha256"] = fs.meta["input_sha256"]
     return out
 
 
