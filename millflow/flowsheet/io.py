@@ -26,7 +26,7 @@ from millflow.flowsheet.units import (TRANSPORTS, UNIT_TYPES, Classifier, Feed, 
                                       Product, Splitter, build_transport)
 from millflow.grid import SizeGrid
 from rtd import names as rtd_names
-from millflow.inputs import UNITS, quantity, read_text, suffixes
+from millflow.inputs import UNITS, quantity, read_json, read_text, suffixes
 from millflow.psd import from_distribution, from_sieves, gates_gaudin_schuhmann, rosin_rammler
 
 __all__ = ["Flowsheet", "load", "loads", "from_dict", "DIMENSIONS"]
@@ -479,7 +479,6 @@ def _rtd_fit(tr: _Table, base: Path | None, classified: bool):
     the model and its shape parameters, and tau converted from the fit's time unit to s.
     A tanks-in-series fit with real n and discharge classification (which needs whole
     cells) uses the nearest whole n, said in the mill's method."""
-    import json
 
     name = tr.plain("rtd_fit", kind=str)
     tr.finish("rtd_fit (a 'millflow fit-rtd --json' result; nothing else with it)")
@@ -488,10 +487,7 @@ def _rtd_fit(tr: _Table, base: Path | None, classified: bool):
         p = p / "fit.json"
     if not p.is_file():
         raise InputError(f"{tr.where}.rtd_fit: {p} not found")
-    try:
-        d = json.loads(read_text(p, "fit-rtd result"))
-    except json.JSONDecodeError as exc:
-        raise InputError(f"{p}: not JSON ({exc.msg} at line {exc.lineno})") from None
+    d = read_json(p, "fit-rtd result")
     if not isinstance(d, dict) or not isinstance(d.get("params"), dict) or "model" not in d:
         raise InputError(f"{p}: not a 'millflow fit-rtd --json' result (needs 'model' and 'params')")
     try:
