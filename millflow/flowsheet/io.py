@@ -146,6 +146,13 @@ def _grid(t: _Table) -> SizeGrid:
 
 
 # ------------------------------------------------------------------------ PSD
+def _named_file(name: str, base: Path | None, folder_file: str | None = None) -> Path:
+    """A file a flowsheet names, relative to the flowsheet's folder (``base``; the current
+    folder without one); a folder stands for its ``folder_file`` (a fit's --out folder)."""
+    p = Path(name) if Path(name).is_absolute() else (base or Path.cwd()) / name
+    return p / folder_file if folder_file and p.is_dir() else p
+
+
 def _sieve_table(path: Path, where: str):
     """Sizes [m] (descending) and cumulative passing [-] from a feed CSV: a size column with its
     unit (size_um, size_mm, size_m) and one of passing_pct/_frac (cumulative passing),
@@ -209,7 +216,7 @@ def _feed_psd(t: _Table, grid: SizeGrid, base: Path | None = None) -> np.ndarray
     if form in ("sieves", "csv"):
         if form == "csv":
             name = t.plain("file", kind=str)
-            path = Path(name) if Path(name).is_absolute() else (base or Path.cwd()) / name
+            path = _named_file(name, base)
             size, passing = _sieve_table(path, t.where)
         else:
             size = t.quantity("size", "length", array=True)
@@ -298,7 +305,7 @@ def _breakage_table(t: _Table, base: Path | None, grid: SizeGrid | None):
     t.finish("form, file, matrix (\"b\" or \"B\")")
     if kind not in ("b", "B"):
         raise InputError(f"{t.where}.matrix = {kind!r}: expected \"b\" (fractional, eq. 2) or \"B\" (cumulative)")
-    p = Path(name) if Path(name).is_absolute() else (base or Path.cwd()) / name
+    p = _named_file(name, base)
     if not p.is_file():
         raise InputError(f"{t.where}.file: {p} not found")
     try:
@@ -421,9 +428,7 @@ def _fitted_material(m: _Table, base: Path | None) -> dict:
     if not isinstance(process, dict):
         raise InputError(f"{m.where}.process = {process!r}: expected a table of the fit's process values")
     m.finish("fit, process")
-    p = Path(name) if Path(name).is_absolute() else (base or Path.cwd()) / name
-    if p.is_dir():
-        p = p / "fit.json"
+    p = _named_file(name, base, folder_file="fit.json")
     if not p.is_file():
         raise InputError(f"{m.where}.fit: {p} not found")
     fitted = load_fit(p)
@@ -482,9 +487,7 @@ def _rtd_fit(tr: _Table, base: Path | None, classified: bool):
 
     name = tr.plain("rtd_fit", kind=str)
     tr.finish("rtd_fit (a 'millflow fit-rtd --json' result; nothing else with it)")
-    p = Path(name) if Path(name).is_absolute() else (base or Path.cwd()) / name
-    if p.is_dir():
-        p = p / "fit.json"
+    p = _named_file(name, base, folder_file="fit.json")
     if not p.is_file():
         raise InputError(f"{tr.where}.rtd_fit: {p} not found")
     d = read_json(p, "fit-rtd result")
