@@ -461,9 +461,20 @@ def _transport_table(tr: _Table, extra: tuple = ()) -> tuple[str, dict]:
     for k in entry.optional:
         if k in tr.data:
             tparams[k] = tr.plain(k, kind=float)
+    keys = ["model", *entry.required, *entry.optional, *extra]
+    if model == "axial_dispersion_open":  # where the discharge is taken (millflow.mill.axial_open)
+        from millflow.mill.axial_open import DISCHARGES
+
+        discharge = tr.plain("discharge", None, kind=str)
+        if discharge is not None:
+            if discharge not in DISCHARGES:
+                raise InputError(f"{tr.where}.discharge = {discharge!r}: expected one of "
+                                 f"{', '.join(map(repr, DISCHARGES))}")
+            tparams["discharge"] = discharge
+        keys.append("discharge")
     for k in extra:
         tr.used.add(k)
-    tr.finish(", ".join(["model", *entry.required, *entry.optional, *extra]))
+    tr.finish(", ".join(keys))
     return model, tparams
 
 
@@ -476,6 +487,9 @@ def _transport_part(data, where: str) -> tuple:
     if t.data.get("model") == "series":
         raise InputError(f"{where}.model: a series inside a series; list its parts in the outer one")
     model, params = _transport_table(t, extra=("tau_fraction",))
+    if "discharge" in params:
+        raise InputError(f"{where}.discharge: a part of a series has the open density's (sampled) discharge; "
+                         "a flux discharge needs the open vessel as the whole mill")
     return model, params, frac
 
 

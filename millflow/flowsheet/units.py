@@ -50,8 +50,13 @@ def build_transport(model: str, tau: float, params: dict):
     if model == "series":
         import rtd
 
-        return rtd.Series(*[TRANSPORTS[m](tau * f, **p) for m, p, f in params["parts"]])
-    return TRANSPORTS[model](tau, **params)
+        return rtd.Series(*[TRANSPORTS[m](tau * f, **_model_params(p)) for m, p, f in params["parts"]])
+    return TRANSPORTS[model](tau, **_model_params(params))
+
+
+def _model_params(params: dict) -> dict:
+    """The rtd model's own parameters (``discharge`` is the mill's: where the open vessel's product is taken)."""
+    return {k: v for k, v in params.items() if k != "discharge"}
 
 
 #: Transports a mill with non-linear kinetics runs with (millflow.mill.nonlinear).
@@ -59,14 +64,13 @@ _KINETIC_TRANSPORTS = ("perfect_mixing", "tanks_in_series", "plug_flow", "axial_
 
 
 # ------------------------------------------------------------------ mill transfer
-def mill_transfer_matrix(S, b, transport, d=None, where=None) -> tuple[np.ndarray, str]:
+def mill_transfer_matrix(S, b, transport, d=None, where=None, discharge=None) -> tuple[np.ndarray, str]:
     """P with product = P @ feed (:func:`millflow.mill.transfer_matrix`) and the method used."""
     from millflow.mill import transfer_matrix
 
-    if where is None:
-        return transfer_matrix(S, b, transport, d), f"millflow.mill.transfer_matrix({transport!r})"
-    return (transfer_matrix(S, b, transport, d, where=where),
-            f"millflow.mill.transfer_matrix({transport!r}, where={where!r})")
+    said = "".join(f", {k}={v!r}" for k, v in (("where", where), ("discharge", discharge)) if v is not None)
+    return (transfer_matrix(S, b, transport, d, where=where, discharge=discharge),
+            f"millflow.mill.transfer_matrix({transport!r}{said})")
 
 
 # ------------------------------------------------------------------------- units
@@ -266,7 +270,8 @@ class MillUnit:
         try:
             where = None if self.classification is None else self.classification.get("where")
             where = tuple(where) if isinstance(where, list) else where
-            P, how = mill_transfer_matrix(S, b, build_transport(self.transport, tau, self.transport_params), d, where)
+            P, how = mill_transfer_matrix(S, b, build_transport(self.transport, tau, self.transport_params), d, where,
+                                          self.transport_params.get("discharge"))
         except SolverError as exc:
             raise SolverError(f"units.{self.name}: {exc}") from None
         err = float(np.max(np.abs(P.sum(axis=0) - 1.0)))

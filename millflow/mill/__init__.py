@@ -13,6 +13,8 @@ scene, :func:`transient_mill` the dynamics. Modules, one job each:
 - :mod:`~millflow.mill.cells`: compartment networks (tanks, recirculating cells),
   one class at a time;
 - :mod:`~millflow.mill.axial`: the axial-dispersion PDE by finite volumes;
+- :mod:`~millflow.mill.axial_open`: the open vessel's PDE on the whole line (sampled or
+  flux discharge);
 - :mod:`~millflow.mill.transient`: the dynamic response;
 - :mod:`~millflow.mill.nonlinear`: mills with non-linear kinetics (aggregation,
   population-dependent rates; issue 12): perfect mixing by Newton, tanks in series,

@@ -46,7 +46,7 @@ from scipy.linalg import lapack
 
 from millflow.errors import SolverError
 
-__all__ = ["AxialSolution", "solve_axial_grid", "solve_axial"]
+__all__ = ["AxialSolution", "solve_axial_grid", "solve_axial", "refine_grids"]
 
 
 @dataclass(frozen=True)
@@ -81,20 +81,24 @@ _gtsv = lapack.get_lapack_funcs("gtsv", dtype=np.float64)
 def _gth_factors(alpha: np.ndarray, beta: np.ndarray, loss: np.ndarray) -> np.ndarray:
     """Pivots d'_k (N, M + 1) of the LU factors of each class's tridiagonal M-matrix.
 
-    Matrix of class i: diagonal l_k + alpha [k < M] + beta [k > 0], sub-diagonal -alpha,
-    super-diagonal -beta, so column k sums to l_k >= 0 (``loss``). Eliminating node k-1
-    keeps that form with reduced column sums l'_k = l_k + beta l'_(k-1) / d'_(k-1) and
-    pivots d'_k = l'_k + alpha [k < M]: only additions, products and divisions of
-    non-negative numbers (Grassmann-Taksar-Heyman), where the usual pivot
-    d_k - alpha beta / d'_(k-1) cancels catastrophically when alpha, beta >> l (small Pe).
+    Matrix of class i: diagonal l_k + alpha_k [k < M] + beta_(k-1) [k > 0], sub-diagonal
+    -alpha_(k-1), super-diagonal -beta_k (alpha_k, beta_k of the face between nodes k and
+    k + 1: scalars per class or (N, M) arrays), so column k sums to l_k >= 0 (``loss``).
+    Eliminating node k-1 keeps that form with reduced column sums l'_k = l_k +
+    beta_(k-1) l'_(k-1) / d'_(k-1) and pivots d'_k = l'_k + alpha_k [k < M]: only additions,
+    products and divisions of non-negative numbers (Grassmann-Taksar-Heyman), where the
+    usual pivot d_k - alpha beta / d'_(k-1) cancels catastrophically when alpha, beta >> l
+    (small Pe).
     """
     n_cls, n = loss.shape
+    alpha = np.broadcast_to(np.asarray(alpha, dtype=float).reshape(n_cls, -1), (n_cls, max(n - 1, 1)))
+    beta = np.broadcast_to(np.asarray(beta, dtype=float).reshape(n_cls, -1), (n_cls, max(n - 1, 1)))
     piv = np.empty((n_cls, n))
     red = loss[:, 0].copy()  # l'_0
     for k in range(n):
         if k:
-            red = loss[:, k] + beta * red / piv[:, k - 1]
-        piv[:, k] = red + (alpha if k < n - 1 else 0.0)
+            red = loss[:, k] + beta[:, k - 1] * red / piv[:, k - 1]
+        piv[:, k] = red + (alpha[:, k] if k < n - 1 else 0.0)
     return piv
 
 
@@ -221,16 +225,35 @@ def solve_axial(S, b, feed, tau: float, pe: float, d=None, w=None, *, tol: float
         z, c, p = solve_axial_grid(S, b, feed, tau, pe, m_cells, d, w)
         return AxialSolution(p, z, tau * c, _holdup(z, tau * c), float("nan"), float("nan"), [])
     ratio = v_arr / w_arr
-    cell_pe = float(ratio.max()) * pe  # divided by M: cell Peclet number of the grid
+    product, estimate, order, history, finest, _, _ = refine_grids(
+        lambda M: solve_axial_grid(S, b, feed, tau, pe, M, d, w), float(ratio.max()) * pe,
+        tol=tol, m_start=m_start, m_max=m_max)
+    z, c, _ = finest
+    density = tau * c
+    return AxialSolution(product, z, density, _holdup(z, density), estimate, order, history)
+
+
+def refine_grids(solve_grid, cell_pe: float, *, tol: float, m_start: int, m_max: int):
+    """Grids of M, 2M, 4M, ... volumes until the error estimate of the product is below ``tol``.
+
+    ``solve_grid(M)`` returns a tuple whose third item is the product on that grid;
+    ``cell_pe`` is the largest v Pe / w (the cell Peclet number of a grid is cell_pe / M).
+    From three successive grids the observed order q = log2(|p_2M - p_M| / |p_4M - p_2M|);
+    when it is 2 and stable and the cell Peclet number <= 1 the product is
+    Richardson-extrapolated (estimate: the change of the extrapolation since the previous
+    grid), otherwise the finest product is taken with the estimate |p_4M - p_2M| / (2^q - 1).
+    Returns (product >= 0, estimate, order, history, finest grid's tuple, the one before,
+    extrapolated: True when the product is the Richardson extrapolation).
+    """
     M = int(m_start)
-    grids = [solve_axial_grid(S, b, feed, tau, pe, M * k, d, w) for k in (1, 2)]
+    grids = [solve_grid(M * k) for k in (1, 2)]
     history = [(M, float("nan")), (2 * M, float(np.abs(grids[1][2] - grids[0][2]).max()))]
     r_prev = None
     order_prev = float("nan")
     M *= 2
     while True:
         M *= 2
-        grids = [grids[-2], grids[-1], solve_axial_grid(S, b, feed, tau, pe, M, d, w)]
+        grids = [grids[-2], grids[-1], solve_grid(M)]
         p1, p2, p3 = (g[2] for g in grids)
         d1, d2 = float(np.abs(p2 - p1).max()), float(np.abs(p3 - p2).max())
         history.append((M, d2))
@@ -256,11 +279,9 @@ def solve_axial(S, b, feed, tau: float, pe: float, d=None, w=None, *, tol: float
         converged = estimate <= tol
         if converged or 2 * M > m_max:
             break
-    z, c, _ = grids[-1]
     product = np.maximum(product, 0.0)  # extrapolation may dip below 0 by < estimate
-    density = tau * c
     history.append(("converged", bool(converged)))
-    return AxialSolution(product, z, density, _holdup(z, density), float(estimate), order, history)
+    return product, float(estimate), order, history, grids[-1], grids[-2], q is not None and d2 != 0.0
 
 
 #: Below this Pe v/w the mill is solved as its Pe -> 0 limit (1/Pe would overflow on fine grids).

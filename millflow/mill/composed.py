@@ -37,9 +37,10 @@ class Mill:
     where: str | None = None
     dispersion: np.ndarray | None = field(default=None, repr=False)
     x: np.ndarray | None = field(default=None, repr=False)
+    discharge: str | None = None
 
     def __post_init__(self):
-        sc = _scene(self.S, self.b, self.transport, self.d, self.where, self.dispersion)
+        sc = _scene(self.S, self.b, self.transport, self.d, self.where, self.dispersion, discharge=self.discharge)
         object.__setattr__(self, "S", sc.S)
         object.__setattr__(self, "b", sc.b)
         object.__setattr__(self, "d", sc.d)
@@ -75,12 +76,12 @@ class Mill:
     def steady(self, feed, **kwargs) -> xr.Dataset:
         """:func:`steady_mill` for this mill."""
         return steady_mill(self.S, self.b, feed, self.transport, self.d, where=self.where,
-                           dispersion=self.dispersion, x=self.x, **kwargs)
+                           dispersion=self.dispersion, discharge=self.discharge, x=self.x, **kwargs)
 
     def transfer_matrix(self, **kwargs) -> np.ndarray:
         """:func:`transfer_matrix` for this mill."""
         return transfer_matrix(self.S, self.b, self.transport, self.d, where=self.where,
-                               dispersion=self.dispersion, **kwargs)
+                               dispersion=self.dispersion, discharge=self.discharge, **kwargs)
 
     def transient(self, t, **kwargs) -> xr.Dataset:
         """:func:`millflow.mill.transient.transient_mill` for this mill."""

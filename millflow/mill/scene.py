@@ -13,9 +13,10 @@ import numpy as np
 import rtd
 from millflow import checks
 from millflow.errors import InputError
+from millflow.mill.axial_open import check_discharge
 from millflow.mill.cells import network_of
 
-__all__ = ["METHODS", "WHERE", "choose_method"]
+__all__ = ["METHODS", "WHERE", "AXIAL_KINDS", "choose_method"]
 
 #: Steady-state methods by name (see the module docstring).
 METHODS = ("well_mixed", "cells", "plug_flow", "segregated", "axial_fv", "composed", "quadrature")
@@ -35,7 +36,7 @@ def _kind(transport) -> str:
     if isinstance(transport, rtd.PlugFlow):
         return "plug"
     if isinstance(transport, rtd.AxialDispersion):
-        return "axial" if transport.bc == "closed" else "rtd"
+        return "axial" if transport.bc == "closed" else "axial_open"
     if isinstance(transport, rtd.Series):
         return "series"
     if isinstance(transport, rtd.Parallel):
@@ -54,11 +55,15 @@ _WHERE_OK = {
     "network": ("discharge", "cells"),
     "plug": ("axis",),
     "axial": ("axis",),
+    "axial_open": ("axis",),
     "rtd": (),
     "series": (),
     "parallel": (),
 }
-_WHERE_DEFAULT = {"perfect_mixing": "discharge", "network": "discharge", "plug": "axis", "axial": "axis"}
+_WHERE_DEFAULT = {"perfect_mixing": "discharge", "network": "discharge", "plug": "axis", "axial": "axis",
+                  "axial_open": "axis"}
+#: Transport kinds solved on the axis (finite volumes when classified).
+AXIAL_KINDS = ("axial", "axial_open")
 
 
 def _check_feed(feed, n: int) -> np.ndarray:
@@ -84,19 +89,29 @@ class _Scene:
     method: str
     network: object = None
     forced: bool = False
+    discharge: str | None = None
 
 
-def _scene(S, b, transport, d=None, where=None, dispersion=None, method=None) -> _Scene:
+def _scene(S, b, transport, d=None, where=None, dispersion=None, method=None, discharge=None) -> _Scene:
     S, b = checks.kernel(S, b)
     n = S.size
     kind = _kind(transport)
     if d is not None:
         d = checks.class_vector(d, n, "d", "normalised discharge rate d_i*", positive=True)
     if dispersion is not None:
-        if kind != "axial":
+        if kind not in AXIAL_KINDS:
             raise InputError(f"dispersion is given but transport {transport!r} has no axial "
-                             "dispersion; expected rtd.AxialDispersion(bc='closed')")
+                             "dispersion; expected rtd.AxialDispersion")
         dispersion = checks.class_vector(dispersion, n, "dispersion", "relative dispersion", positive=True)
+    if discharge is not None:
+        if kind != "axial_open":
+            raise InputError(f"discharge = {discharge!r} is given but transport {transport!r} is not the open "
+                             "vessel; expected rtd.AxialDispersion(bc='open') or discharge=None")
+        v = np.ones(n) if d is None else d
+        check_discharge(discharge, v, v if dispersion is None else dispersion)
+    elif kind == "axial_open" and (d is not None or dispersion is not None):
+        v = np.ones(n) if d is None else d
+        check_discharge("sampled", v, v if dispersion is None else dispersion)
     if d is not None:
         allowed = _WHERE_OK[kind]
         if not allowed:
@@ -104,7 +119,7 @@ def _scene(S, b, transport, d=None, where=None, dispersion=None, method=None) ->
                 f"transport {transport!r} cannot carry classification d (it has no cells or axis "
                 "to place it on); expected rtd.PerfectMixing, rtd.TanksInSeries (integer n), "
                 "rtd.RecirculatingCells, a CompartmentNetwork, rtd.PlugFlow or "
-                "rtd.AxialDispersion(bc='closed'), or d=None")
+                "rtd.AxialDispersion, or d=None")
         where = _WHERE_DEFAULT[kind] if where is None else where
         if kind == "network" and not isinstance(where, str):
             where = _cell_list(where, network_of(transport).n)
@@ -113,16 +128,16 @@ def _scene(S, b, transport, d=None, where=None, dispersion=None, method=None) ->
                              f"expected one of {', '.join(map(repr, allowed))}")
     elif where is not None and isinstance(where, str) and where not in WHERE:
         raise InputError(f"where = {where!r}; expected one of {', '.join(map(repr, WHERE))}")
-    chosen = choose_method(kind, d is not None or dispersion is not None)
+    chosen = choose_method(kind, d is not None or dispersion is not None or discharge == "flux")
     if method is None:
         method = chosen
     elif method not in METHODS:
         raise InputError(f"method = {method!r} is unknown; expected one of {', '.join(METHODS)}")
-    elif method != chosen and not _method_applies(method, kind, d, dispersion):
+    elif method != chosen and not _method_applies(method, kind, d, dispersion, discharge):
         raise InputError(f"method = {method!r} does not apply to {transport!r}"
                          f"{' with classification' if d is not None else ''}; the exact method is {chosen!r}")
     net = network_of(transport) if method == "cells" else None
-    return _Scene(S, b, transport, kind, d, where, dispersion, method, net, method != chosen)
+    return _Scene(S, b, transport, kind, d, where, dispersion, method, net, method != chosen, discharge)
 
 
 def _cell_list(where, n: int) -> tuple:
@@ -145,20 +160,20 @@ def choose_method(kind: str, classified: bool) -> str:
         return "cells"
     if kind == "plug":
         return "plug_flow"
-    if kind == "axial":
+    if kind in AXIAL_KINDS:
         return "axial_fv" if classified else "segregated"
     if kind in ("series", "parallel"):
         return "composed"
     return "segregated"
 
 
-def _method_applies(method, kind, d, dispersion) -> bool:
+def _method_applies(method, kind, d, dispersion, discharge=None) -> bool:
     if method in ("segregated", "quadrature"):
-        return d is None and dispersion is None and kind != "plug"
+        return d is None and dispersion is None and kind != "plug" and discharge != "flux"
     if method == "cells":
         return kind in ("perfect_mixing", "network")
     if method == "axial_fv":
-        return kind == "axial"
+        return kind in AXIAL_KINDS
     return False
 
 

@@ -14,9 +14,11 @@ method that is exact for them (``METHODS``):
   classification along the axis = class i travelling at d_i* u (rates S/d*);
 - ``segregated``: any other ``rtd`` model without classification, product
   E_hat(-K) f (exact for first-order breakage, :mod:`millflow.mill.segregated`);
-- ``axial_fv``: ``rtd.AxialDispersion`` (closed) with size-dependent axial velocity
-  or dispersion, finite volumes with Richardson extrapolation (:mod:`millflow.mill.axial`);
-  also the fallback of axial dispersion when the eigenbasis of segregated flow cancels;
+- ``axial_fv``: ``rtd.AxialDispersion`` with size-dependent axial velocity or
+  dispersion, finite volumes with Richardson extrapolation: the closed vessel on [0, 1]
+  (:mod:`millflow.mill.axial`), the open vessel on the whole line with a sampled or flux
+  discharge (:mod:`millflow.mill.axial_open`); also the fallback of axial dispersion when
+  the eigenbasis of segregated flow cancels;
 - ``quadrature`` (on request only): segregated flow as int E(t) exp(K t) f dt by adaptive
   quadrature, for rates whose eigenbasis cancels (slow: seconds);
 - ``composed``: ``rtd.Series`` (each part grinds the previous part's product: the
@@ -43,9 +45,10 @@ import xarray as xr
 
 from millflow.errors import InputError, SolverError
 from millflow.mill.accuracy import check_accuracy
-from millflow.mill.scene import (METHODS, WHERE, _check_feed, _part_scene, _Scene, _scene, _tau,
-                                 choose_method)
+from millflow.mill.scene import (AXIAL_KINDS, METHODS, WHERE, _check_feed, _part_scene, _Scene, _scene,
+                                 _tau, choose_method)
 from millflow.mill.axial import solve_axial
+from millflow.mill.axial_open import solve_axial_open
 from millflow.mill.cells import solve_cells
 from millflow.mill.segregated import plug_flow, segregated, segregated_quadrature
 from millflow.mill.well_mixed import solve_well_mixed
@@ -118,17 +121,17 @@ def _segregated(sc, feed, out, *, tol, holdup, cache):
     try:
         p, h, err, info = segregated(sc.S, sc.b, feed, sc.transport, holdup=holdup, blocks=blocks)
     except SolverError as exc:
-        if sc.forced or sc.kind != "axial":
+        if sc.forced or sc.kind not in AXIAL_KINDS:
             raise
         p, err, info = None, np.inf, {"fallback_reason": str(exc)}
     scale = float(np.abs(feed).sum(axis=0).max()) if np.size(feed) else 0.0
     too_large = err > max(tol, 1e-10) * max(scale, 1.0)
-    if not sc.forced and sc.kind != "axial" and too_large:
+    if not sc.forced and sc.kind not in AXIAL_KINDS and too_large:
         info["advice"] = ("the eigenbasis cancels for these rates; method='quadrature' integrates "
                           "E(t) exp(K t) f over t instead (slower, exact to its tolerance)")
     out["extras"].update(info)
     _keep_blocks(out, cache, "segregated")
-    if sc.kind == "axial" and not sc.forced and too_large:
+    if sc.kind in AXIAL_KINDS and not sc.forced and too_large:
         # rates so close over many classes that the eigenbasis cancels: the finite
         # volumes never divide by rate differences
         out["extras"]["fallback"] = f"segregated error estimate {err:.1e} > tol; axial_fv"
@@ -151,12 +154,21 @@ def _composed(sc, feed, out, *, tol, holdup, cache):
     return sc
 
 
-def _axial_fv(sc, feed, out, *, tol, holdup, cache):
+def _axial_solution(sc, feed, tol):
     T = sc.transport
-    sol = solve_axial(sc.S, sc.b, feed, T.tau, T.pe, d=sc.d, w=sc.dispersion, tol=tol)
+    if sc.kind == "axial_open":
+        return solve_axial_open(sc.S, sc.b, feed, T.tau, T.pe, d=sc.d, w=sc.dispersion,
+                                discharge=sc.discharge or "sampled", tol=tol)
+    return solve_axial(sc.S, sc.b, feed, T.tau, T.pe, d=sc.d, w=sc.dispersion, tol=tol)
+
+
+def _axial_fv(sc, feed, out, *, tol, holdup, cache):
+    sol = _axial_solution(sc, feed, tol)
     out.update(product=sol.product, holdup=sol.holdup, error=sol.error_estimate)
     out["axial"] = sol
     out["extras"].update(order=sol.order, control_volumes=int(sol.z.size - 1))
+    if sc.kind == "axial_open":
+        out["extras"]["discharge"] = sc.discharge or "sampled"
     return sc
 
 
@@ -186,7 +198,7 @@ def _triangular_error(p) -> float:
     return float(np.abs(p).max() * p.shape[0] * np.finfo(float).eps) if np.size(p) else 0.0
 
 
-def transfer_matrix(S, b, transport, d=None, *, where=None, dispersion=None, method=None,
+def transfer_matrix(S, b, transport, d=None, *, where=None, dispersion=None, discharge=None, method=None,
                     tol: float = 1e-8, on_inaccuracy: str = "raise") -> np.ndarray:
     """Transfer matrix P (N, N) of a linear mill: product = P @ feed.
 
@@ -202,7 +214,7 @@ def transfer_matrix(S, b, transport, d=None, *, where=None, dispersion=None, met
     b : (N, N) fractional breakage distribution.
     transport : rtd model, tau in s.
     d : (N,) normalised discharge rates d_i* > 0, or None (no classification).
-    where, dispersion, method, tol, on_inaccuracy : as :func:`steady_mill` (each column is
+    where, dispersion, discharge, method, tol, on_inaccuracy : as :func:`steady_mill` (each column is
         the product of a unit feed: its sum's distance from 1 is its mass-balance error).
 
     Examples
@@ -212,7 +224,7 @@ def transfer_matrix(S, b, transport, d=None, *, where=None, dispersion=None, met
     >>> P.round(6).tolist()
     [[0.333333, 0.0], [0.666667, 1.0]]
     """
-    sc = _scene(S, b, transport, d, where, dispersion, method)
+    sc = _scene(S, b, transport, d, where, dispersion, method, discharge)
     solved = _solve(sc, np.eye(sc.S.size), tol=tol, holdup=False)
     P = solved["product"]
     check_accuracy("transfer_matrix", solved["method"], float(np.max(np.abs(P.sum(axis=0) - 1.0))),
@@ -250,10 +262,10 @@ def _profile(sc: _Scene, feed, solved, positions):
         rates = sc.S if sc.d is None else sc.S / sc.d
         flux = batch_grind(rates, sc.b, feed, tau * pos)
         return pos, tau * flux / (1.0 if sc.d is None else sc.d)
-    if sc.kind == "axial":
+    if sc.kind in AXIAL_KINDS:
         sol = solved.get("axial")
         if sol is None:  # segregated product; the profile needs the PDE
-            sol = solve_axial(sc.S, sc.b, feed, sc.transport.tau, sc.transport.pe, tol=1e-7)
+            sol = _axial_solution(sc, feed, 1e-7)
         dens = np.stack([np.interp(pos, sol.z, sol.density[:, i]) for i in range(sc.S.size)], axis=1)
         return pos, dens
     raise InputError(f"positions are given but transport {sc.transport!r} has no axis; expected "
@@ -293,7 +305,7 @@ def _samples(ds: xr.Dataset, locations) -> xr.DataArray:
                         attrs={"units": "1", "long_name": "mass fraction at the sampling location"})
 
 
-def steady_mill(S, b, feed, transport, d=None, *, where=None, dispersion=None, method=None,
+def steady_mill(S, b, feed, transport, d=None, *, where=None, dispersion=None, discharge=None, method=None,
                 x=None, positions=None, locations=None, tol: float = 1e-8,
                 on_inaccuracy: str = "raise") -> xr.Dataset:
     """Steady state of a continuous mill (eqs. 1-3 with any rtd transport).
@@ -311,7 +323,12 @@ def steady_mill(S, b, feed, transport, d=None, *, where=None, dispersion=None, m
         "cells" (every cell outlet), a sequence of 1-based cell numbers (the outlets of
         those cells), "axis" (plug flow and axial dispersion: axial velocity of class i
         is d_i* u).
-    dispersion : (N,) relative axial dispersion of each class (AxialDispersion only).
+    dispersion : (N,) relative axial dispersion of each class (AxialDispersion only; default 1
+        for the closed vessel, d for the open one).
+    discharge : open-vessel axial dispersion only: "sampled" (default; v c at z = 1, what
+        the open density measures; needs one Peclet number Pe d_i*/dispersion_i for all
+        classes) or "flux" (net flux through the discharge plane; any d, dispersion); see
+        :mod:`millflow.mill.axial_open`.
     method : one of :data:`METHODS` to force a method (e.g. for cross-checks); None
         picks the cheapest exact one.
     x : (N,) upper class sizes [m] or a SizeGrid, for the ``x`` coordinate.
@@ -341,7 +358,7 @@ def steady_mill(S, b, feed, transport, d=None, *, where=None, dispersion=None, m
     ('well_mixed', 0.333333)
     """
     start = time.perf_counter()
-    sc = _scene(S, b, transport, d, where, dispersion, method)
+    sc = _scene(S, b, transport, d, where, dispersion, method, discharge)
     feed = _check_feed(feed, sc.S.size)
     if feed.ndim != 1:
         raise InputError(f"feed has shape {feed.shape}; expected ({sc.S.size},) (use transfer_matrix for many feeds)")

@@ -197,10 +197,12 @@ def transient_mill(S, b, transport, t, *, feed=None, initial_feed=None, pulse=No
             holdup[k] = scale * (new_part[:, 0] + full - new_part[:, 1])
         info, name = {}, "plug_flow_delay"
     else:
-        if np.any(feed > 0) or start_feed is not None or sc.d is not None:
+        if (np.any(feed > 0) or start_feed is not None or sc.d is not None or sc.dispersion is not None
+                or sc.discharge == "flux"):
             raise InputError(f"transport {transport!r}: only a tracer pulse (no feed, no "
                              "classification) is solved for a general rtd model; expected "
-                             "cells, rtd.PlugFlow or rtd.AxialDispersion for start-up and steps")
+                             "cells, rtd.PlugFlow or rtd.AxialDispersion(bc='closed') for start-up and "
+                             "steps (the open vessel's transient is not built: its steady state is)")
         ages = batch_grind(sc.S, sc.b, pulse_m, t)
         product = np.asarray(transport.pdf(t), dtype=float)[:, np.newaxis] * ages
         survival = 1.0 - np.asarray(transport.cdf(t), dtype=float)

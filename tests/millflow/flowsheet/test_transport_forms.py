@@ -70,3 +70,29 @@ def test_series_fractions_must_sum_to_one():
 def test_where_the_transport_does_not_allow_is_named():
     with pytest.raises(InputError, match="where"):
         run('transport = {model = "plug_flow"}', 'classification = {curve = "screen", d50_um = 1500, where = "cells"}')
+
+
+@pytest.mark.parametrize("discharge", [None, "flux"])
+def test_open_vessel_classified_along_the_axis(discharge):
+    """The open-vessel axial-dispersion mill carries classification along the axis (issue 14 §2):
+    the flowsheet runs the library's open-vessel finite volumes, and the unit closes its mass
+    balance to rounding (1e-12: the sampled discharge keeps sum v c = feed exactly when the
+    Peclet numbers are equal, the flux discharge by construction)."""
+    key = "" if discharge is None else f', discharge = "{discharge}"'
+    sol, feed, S, b, grid = run(f'transport = {{model = "axial_dispersion_open", pe = 4{key}}}',
+                                'classification = {curve = "screen", d50_um = 1500, m = 4, where = "axis"}')
+    d = mill_discharge_rates(screen_efficiency(grid.x, 1.5e-3, 4.0))
+    ref = transfer_matrix(S, b, rtd.AxialDispersion(300.0, 4.0, bc="open"), d, discharge=discharge) @ feed
+    np.testing.assert_allclose(sol.flow("s2"), ref, rtol=1e-12, atol=1e-14 * feed.sum())
+    assert max(r["mass_balance_error"] for r in sol.units.values()) < 1e-12
+    assert "discharge" in sol.units["mill"]["method"] or discharge is None
+
+
+def test_open_vessel_discharge_is_checked():
+    with pytest.raises(InputError, match=r"transport.discharge = 'exit'.*'sampled', 'flux'"):
+        run('transport = {model = "axial_dispersion_open", pe = 4, discharge = "exit"}')
+    with pytest.raises(InputError, match="discharge"):
+        run('transport = {model = "axial_dispersion", pe = 4, discharge = "flux"}')
+    with pytest.raises(InputError, match="a flux discharge needs the open vessel as the whole mill"):
+        run('transport = {model = "series", parts = [{model = "plug_flow", tau_fraction = 0.5}, '
+            '{model = "axial_dispersion_open", pe = 4, discharge = "flux", tau_fraction = 0.5}]}')

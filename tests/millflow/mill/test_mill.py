@@ -124,9 +124,17 @@ def test_cancelling_eigenbasis_falls_back_or_says_so():
     S, b, f = _slow_rates(0.1, n=100)
     ds = steady_mill(S, b, f, rtd.AxialDispersion(TAU, 5.0))
     assert ds.attrs["method"] == "axial_fv" and "fallback" in ds.attrs
+    # the open vessel falls back to its own finite volumes (on the whole line), and agrees
+    # with the time quadrature of its density to the FV error estimate
+    open_vessel = rtd.AxialDispersion(TAU, 5.0, bc="open")
+    ds_open = steady_mill(S, b, f, open_vessel)
+    assert ds_open.attrs["method"] == "axial_fv" and "fallback" in ds_open.attrs
+    quad = steady_mill(S, b, f, open_vessel, method="quadrature")
+    assert float(np.abs(ds_open["product"] - quad["product"]).max()) <= 3 * ds_open.attrs["error_estimate"] + 1e-12
     with pytest.raises(SolverError, match="method='quadrature'"):  # the error says what to do
-        steady_mill(S, b, f, rtd.AxialDispersion(TAU, 5.0, bc="open"))
-    assert "advice" in steady_mill(S, b, f, rtd.AxialDispersion(TAU, 5.0, bc="open"), on_inaccuracy="warn").attrs
+        steady_mill(S, b, f, rtd.TanksInSeries(TAU, 2.5))
+    with pytest.warns(AccuracyWarning, match="quadrature"):
+        assert "advice" in steady_mill(S, b, f, rtd.TanksInSeries(TAU, 2.5), on_inaccuracy="warn").attrs
     with pytest.raises(SolverError, match=r"segregated: .*above the tolerance 1e-08"):
         steady_mill(S, b, f, rtd.TanksInSeries(TAU, 3), method="segregated")  # never silently
     with pytest.warns(AccuracyWarning, match="error estimate"):
@@ -338,8 +346,13 @@ def test_mill_object():
     (lambda S, b, f: steady_mill(S, b, -f, rtd.PerfectMixing(TAU)), "feed: class 1"),
     (lambda S, b, f: steady_mill(S, b, f, rtd.Series(rtd.PlugFlow(1.0), rtd.PerfectMixing(2.0)),
                                  np.ones(S.size)), "cannot carry classification"),
-    (lambda S, b, f: steady_mill(S, b, f, rtd.AxialDispersion(TAU, 3.0, bc="open"), np.ones(S.size)),
-     "cannot carry classification"),
+    (lambda S, b, f: steady_mill(S, b, f, rtd.AxialDispersion(TAU, 3.0, bc="open"), np.linspace(0.5, 1, S.size),
+                                 dispersion=np.ones(S.size)), "same Peclet number"),
+    (lambda S, b, f: steady_mill(S, b, f, rtd.AxialDispersion(TAU, 3.0, bc="open"), discharge="mixed"),
+     "expected one of 'sampled', 'flux'"),
+    (lambda S, b, f: steady_mill(S, b, f, rtd.AxialDispersion(TAU, 3.0), discharge="flux"), "not the open vessel"),
+    (lambda S, b, f: steady_mill(S, b, f, rtd.TanksInSeries(TAU, 2), dispersion=np.ones(S.size)),
+     "no axial dispersion"),
     (lambda S, b, f: steady_mill(S, b, f, rtd.PlugFlow(TAU), np.ones(S.size), where="discharge"), "where"),
     (lambda S, b, f: steady_mill(S, b, f, rtd.PerfectMixing(TAU), method="magic"), "expected one of"),
     (lambda S, b, f: steady_mill(S, b, f, rtd.PerfectMixing(TAU), np.ones(S.size), method="segregated"),
