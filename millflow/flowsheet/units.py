@@ -277,7 +277,9 @@ class MillUnit:
         err = float(np.max(np.abs(P.sum(axis=0) - 1.0)))
         if self.transport_note:
             how += f" [{self.transport_note}]"
-        info = {"method": how + ("" if d is None else ", discharge classification d*"), "error_estimate": err,
+        placed = "" if d is None else (", classification d* along the axis" if where == "axis"
+                                       else ", discharge classification d*")
+        info = {"method": how + placed, "error_estimate": err,
                 "runtime_s": time.perf_counter() - t0, "tau_s": tau}
         if d is not None and retained.size:  # said, not silent: the floor is far below any rate that matters
             info["note"] = (f"{retained.size} classes retained completely by the discharge (c = 1): their "
