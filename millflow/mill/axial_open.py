@@ -88,11 +88,22 @@ def open_nodes(tail_length: float, m_cells: int) -> tuple[np.ndarray, int, int]:
     return z, tail.size, tail.size + M
 
 
+#: Longest tail [mill lengths]: the stretching's exp(beta) stays finite up to ~1e301.
+MAX_TAIL = 1e250
+
+
 def tail_length(S, tau: float, pe: float, v, w) -> float:
-    """L_t = 40 / min_i r_i (module docstring)."""
+    """L_t = 40 / min_i r_i (module docstring); InputError beyond :data:`MAX_TAIL`."""
     pe_i = pe * np.asarray(v, float) / np.asarray(w, float)
-    r = 0.5 * pe_i * (1.0 + np.sqrt(1.0 + 4.0 * tau * np.asarray(S, float) / (pe_i * np.asarray(v, float))))
-    return TAIL_DECAY_LENGTHS / float(r.min())
+    with np.errstate(over="ignore", divide="ignore"):
+        r = 0.5 * pe_i * (1.0 + np.sqrt(1.0 + 4.0 * tau * np.asarray(S, float) / (pe_i * np.asarray(v, float))))
+        length = TAIL_DECAY_LENGTHS / float(r.min())
+    if not length <= MAX_TAIL:
+        raise InputError(
+            f"open-vessel axial dispersion: Pe d*/dispersion = {float(pe_i.min()):.3g} is too small to solve "
+            f"(the open vessel's mean residence time tau (1 + 2/Pe) is {2 / pe:.3g} tau); expected Pe d*/dispersion "
+            f">= {TAIL_DECAY_LENGTHS / MAX_TAIL:.0e}")
+    return length
 
 
 def _solve_class(alpha_i, beta_i, piv_i, rhs):

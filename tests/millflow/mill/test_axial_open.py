@@ -200,6 +200,16 @@ def test_sampled_discharge_with_unequal_peclet_numbers_is_refused():
     assert ds.attrs["mass_balance_error"] < 1e-12
 
 
+def test_a_vanishing_peclet_number_is_refused_in_one_line():
+    """Pe -> 0: the tails would reach 1e301 mill lengths (the mean residence time tau (1 + 2/Pe));
+    a named input error, not an overflow inside the grid construction."""
+    S, b, f = kernel(n=8)
+    with pytest.raises(InputError, match="too small to solve"):
+        steady_mill(S, b, f, rtd.AxialDispersion(TAU, 1e-300, bc="open"), np.linspace(0.5, 1, 8))
+    ds = steady_mill(S, b, f, rtd.AxialDispersion(TAU, 1e-30, bc="open"), np.linspace(0.5, 1, 8))
+    assert ds.attrs["mass_balance_error"] < 1e-12
+
+
 @settings(max_examples=25, deadline=None)
 @given(pe=st.floats(0.3, 300.0), lo=st.floats(0.05, 1.0), spread=st.floats(0.1, 3.0),
        a=st.floats(1e-4, 0.05))
