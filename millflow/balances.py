@@ -1,0 +1,106 @@
+"""Survey balances around one separator: the two- and three-product formulas.
+
+A separator splits a feed F into products whose "assays" (grade of a metal, % passing a
+size, or the dilution W/S of water per solids) are measured; the solids balance and one
+component balance give the fraction of the feed in each product without weighing any
+stream (Wills & Finch, Mineral Processing Technology, 8th ed., ch. 3).
+
+Two products (feed f, product p, other product o of one component)::
+
+    F = P + O,  F f = P p + O o   =>   P/F = (f - o) / (p - o)
+
+Around a classifying cyclone with dilutions (f, u, o of feed, underflow and overflow,
+W/S = (1 - C_w)/C_w for C_w the solids mass fraction) the same formula gives the
+circulating load, underflow solids over overflow solids (the recycle per unit of new feed
+when the overflow is the circuit product)::
+
+    U/O = (o - f) / (f - u)
+
+Three products (two concentrates C1, C2 and a tailing T), with the assays (a, b) of two
+components in each stream, from F = C1 + C2 + T and the two component balances::
+
+    (c1_a - t_a) C1/F + (c2_a - t_a) C2/F = f_a - t_a
+    (c1_b - t_b) C1/F + (c2_b - t_b) C2/F = f_b - t_b
+
+These are identities of measured data, not predictions; a result outside [0, 1] means the
+assays are inconsistent (or the products are too alike to tell apart) and is an InputError.
+"""
+from __future__ import annotations
+
+import math
+
+from millflow.errors import InputError
+
+__all__ = ["dilution", "two_product", "circulating_load", "three_product"]
+
+
+def _number(value, name: str, where: str) -> float:
+    try:
+        v = float(value)
+    except (TypeError, ValueError):
+        raise InputError(f"{where}: {name} = {value!r}; expected a finite number") from None
+    if not math.isfinite(v):
+        raise InputError(f"{where}: {name} = {value!r}; expected a finite number")
+    return v
+
+
+def _share(r: float, name: str, where: str) -> float:
+    # exact arithmetic on consistent assays can land a rounding step outside [0, 1]
+    if not (-1e-12 <= r <= 1.0 + 1e-12):
+        raise InputError(f"{where}: {name} = {r:.6g} lies outside [0, 1]: the assays are inconsistent "
+                         "(the feed must lie between the products)")
+    return min(max(r, 0.0), 1.0)
+
+
+def dilution(solids_fraction: float) -> float:
+    """Dilution W/S = (1 - C_w)/C_w [t water / t solids] of a slurry with the solids mass
+    fraction C_w in (0, 1]."""
+    c = _number(solids_fraction, "solids_fraction", "dilution")
+    if not (0.0 < c <= 1.0):
+        raise InputError(f"dilution: solids_fraction = {solids_fraction!r}; expected a mass fraction in (0, 1]")
+    return (1.0 - c) / c
+
+
+def two_product(feed: float, product: float, other: float) -> float:
+    """Fraction P/F = (f - o)/(p - o) of the feed mass that reports to ``product``, from the
+    assays of one component in the feed, that product and the other product (any unit, the
+    same for all three)."""
+    where = "two_product"
+    f, p, o = (_number(v, n, where) for v, n in ((feed, "feed"), (product, "product"), (other, "other")))
+    if p == o:
+        raise InputError(f"{where}: product = other = {p!r}: two products of equal assay cannot be told apart")
+    return _share((f - o) / (p - o), "P/F", where)
+
+
+def circulating_load(feed: float, underflow: float, overflow: float) -> float:
+    """Circulating load U/O = (o - f)/(f - u) [-] around a classifier from the assays of one
+    component in its feed, underflow and overflow: dilutions W/S (:func:`dilution`) or
+    the fraction passing one sieve size."""
+    r = two_product(feed, underflow, overflow)
+    if r >= 1.0:
+        raise InputError("circulating_load: the feed assay equals the underflow's; the overflow carries no solids")
+    return r / (1.0 - r)
+
+
+def three_product(feed, concentrate_1, concentrate_2, tailing) -> tuple[float, float, float]:
+    """Fractions (C1/F, C2/F, T/F) of the feed in two concentrates and a tailing, from the
+    assays (a, b) of two components in each of the four streams (see the module)."""
+    where = "three_product"
+    streams = {"feed": feed, "concentrate_1": concentrate_1, "concentrate_2": concentrate_2, "tailing": tailing}
+    v = {}
+    for name, pair in streams.items():
+        try:
+            a, b = pair
+        except (TypeError, ValueError):
+            raise InputError(f"{where}: {name} = {pair!r}; expected the assays (a, b) of two components") from None
+        v[name] = (_number(a, f"{name}[0]", where), _number(b, f"{name}[1]", where))
+    (fa, fb), (c1a, c1b), (c2a, c2b), (ta, tb) = v.values()
+    det = (c1a - ta) * (c2b - tb) - (c2a - ta) * (c1b - tb)
+    scale = max(abs(c1a - ta) * abs(c2b - tb), abs(c2a - ta) * abs(c1b - tb), 1e-300)
+    if abs(det) <= 1e-12 * scale:
+        raise InputError(f"{where}: the two concentrates have proportional assays relative to the tailing; "
+                         "they cannot be told apart (each concentrate must be rich in a different component)")
+    r1 = ((fa - ta) * (c2b - tb) - (c2a - ta) * (fb - tb)) / det
+    r2 = ((c1a - ta) * (fb - tb) - (fa - ta) * (c1b - tb)) / det
+    r1, r2 = _share(r1, "C1/F", where), _share(r2, "C2/F", where)
+    return r1, r2, _share(1.0 - r1 - r2, "T/F", where)
