@@ -49,6 +49,7 @@ Zero flux at the upstream end, outflow (Danckwerts) at the downstream end.
 from __future__ import annotations
 
 import math
+from dataclasses import dataclass
 
 import numpy as np
 from scipy import optimize
@@ -57,7 +58,8 @@ from scipy.linalg import lapack
 from millflow.errors import InputError, SolverError
 from millflow.mill.axial import AxialSolution, _bernoulli, _gth_factors, refine_grids
 
-__all__ = ["DISCHARGES", "solve_axial_open", "solve_axial_open_grid", "open_nodes"]
+__all__ = ["DISCHARGES", "OpenGrid", "solve_axial_open", "solve_axial_open_grid", "open_nodes", "open_grid",
+           "back_layer_matrix", "tail_length"]
 
 #: Discharges of the open vessel (module docstring).
 DISCHARGES = ("sampled", "flux")
@@ -116,6 +118,52 @@ def _solve_class(alpha_i, beta_i, piv_i, rhs):
     return c
 
 
+@dataclass(frozen=True)
+class OpenGrid:
+    """The whole-line grid and each class's exponentially fitted flux coefficients.
+
+    z (n,) nodes, k0 / k1 the nodes of z = 0 (feed) and z = 1 (discharge), h (n - 1,)
+    volume widths, weights (n,) control volumes, upstream (n,) the weights of (-inf, 1]
+    (the discharge node keeps the half volume on its left), alpha / beta (N, n - 1): the
+    flux across the face between nodes k and k + 1 is alpha_k c_k - beta_k c_(k+1).
+    """
+
+    z: np.ndarray
+    k0: int
+    k1: int
+    h: np.ndarray
+    weights: np.ndarray
+    upstream: np.ndarray
+    alpha: np.ndarray
+    beta: np.ndarray
+
+
+def open_grid(pe: float, m_cells: int, v, w, tail: float) -> OpenGrid:
+    """:class:`OpenGrid` of ``m_cells`` volumes in the mill and tails of length ``tail``."""
+    z, k0, k1 = open_nodes(tail, m_cells)
+    n = z.size
+    h = np.diff(z)
+    weights = np.zeros(n)
+    weights[:-1] += 0.5 * h
+    weights[1:] += 0.5 * h
+    upstream = weights.copy()
+    upstream[k1] = 0.5 * h[k1 - 1]
+    upstream[k1 + 1:] = 0.0
+    D = (np.asarray(w, float) / pe)[:, None]
+    P = np.asarray(v, float)[:, None] * h[None, :] / D
+    return OpenGrid(z, k0, k1, h, weights, upstream, D / h * _bernoulli(-P), D / h * _bernoulli(P))
+
+
+def back_layer_matrix(S, b, tau: float, grid: OpenGrid, v) -> np.ndarray:
+    """(N, N) map from c(1) to int_(-inf)^1 c^ dz (the sampled discharge's back-dispersion
+    layer, module docstring): lower triangular, linear in c(1)."""
+    S = np.asarray(S, dtype=float)
+    loss = tau * S[:, None] * grid.weights[None, :]
+    loss[:, -1] += np.asarray(v, float)
+    gain = tau * np.asarray(b, float) * S[None, :]
+    return _back_layer(grid.alpha, grid.beta, loss, gain, grid.weights, grid.h, grid.k1, np.eye(S.size))
+
+
 def solve_axial_open_grid(S, b, feed, tau: float, pe: float, m_cells: int, d=None, w=None,
                           discharge: str = "sampled", tail: float | None = None):
     """Concentrations c (nodes, N[, m]), product and hold-up on one grid (module docstring).
@@ -131,16 +179,9 @@ def solve_axial_open_grid(S, b, feed, tau: float, pe: float, m_cells: int, d=Non
     v = np.ones(n_cls) if d is None else np.asarray(d, dtype=float)
     w = v.copy() if w is None else np.asarray(w, dtype=float)
     L_t = tail_length(S, tau, pe, v, w) if tail is None else float(tail)
-    z, k0, k1 = open_nodes(L_t, m_cells)
+    g = open_grid(pe, m_cells, v, w, L_t)
+    z, k0, k1, alpha, beta, weights = g.z, g.k0, g.k1, g.alpha, g.beta, g.weights
     n = z.size
-    h = np.diff(z)
-    weights = np.zeros(n)
-    weights[:-1] += 0.5 * h
-    weights[1:] += 0.5 * h
-    D = (w / pe)[:, None]
-    P = v[:, None] * h[None, :] / D
-    alpha = D / h * _bernoulli(-P)  # (N, n - 1): coefficient of c_k in the flux F_(k+1/2)
-    beta = D / h * _bernoulli(P)  # minus the coefficient of c_(k+1)
     loss = tau * S[:, None] * weights[None, :]
     loss[:, -1] += v  # outflow at the downstream end
     piv = _gth_factors(alpha, beta, loss)
@@ -155,11 +196,7 @@ def solve_axial_open_grid(S, b, feed, tau: float, pe: float, m_cells: int, d=Non
         c_i = _solve_class(alpha[i], beta[i], piv[i], rhs if cols else rhs[:, None])
         c[i] = c_i if cols else c_i[:, 0]
         wc[i] = (wk * c[i]).ravel()
-    # weights of (-inf, 1]: the discharge node keeps the half volume on its left
-    left = weights.copy()
-    left[k1] = 0.5 * h[k1 - 1]
-    left[k1 + 1:] = 0.0
-    lk = left.reshape((n,) + (1,) * len(cols))
+    lk = g.upstream.reshape((n,) + (1,) * len(cols))
     upstream = (lk[None] * c).sum(axis=1)  # int_(-inf)^1 c dz, (N[, m])
     vk = v.reshape((n_cls,) + (1,) * len(cols))
     if discharge == "flux":
@@ -168,7 +205,7 @@ def solve_axial_open_grid(S, b, feed, tau: float, pe: float, m_cells: int, d=Non
         holdup = tau * upstream
     else:
         product = vk * c[:, k1]
-        holdup = tau * (upstream + _back_layer(alpha, beta, loss, gain, weights, h, k1, c[:, k1]))
+        holdup = tau * (upstream + _back_layer(alpha, beta, loss, gain, weights, g.h, k1, c[:, k1]))
     return z, np.moveaxis(c, 1, 0), product, holdup
 
 

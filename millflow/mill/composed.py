@@ -86,4 +86,4 @@ class Mill:
     def transient(self, t, **kwargs) -> xr.Dataset:
         """:func:`millflow.mill.transient.transient_mill` for this mill."""
         return transient_mill(self.S, self.b, self.transport, t, d=self.d, where=self.where,
-                              x=self.x, **kwargs)
+                              dispersion=self.dispersion, discharge=self.discharge, x=self.x, **kwargs)

@@ -8,10 +8,12 @@ network): the hold-up m_ik of class i in cell k obeys the linear system
 T^i the transport matrix of class i with classification (:mod:`millflow.mill.cells`),
 product p_i = h_i sum_k (o_k / V_k) m_ik + beta f_i. Axial dispersion: the same
 system from the finite-volume discretisation of :mod:`millflow.mill.axial` (method of
-lines on a fixed grid). Both are integrated by scipy's implicit ``solve_ivp`` (BDF by
-default) with the constant sparse Jacobian, so stiff rates (tau S up to 1e8) cost
-little. A pulse is an initial hold-up distributed like the inlet (for axial
-dispersion: in the inlet control volume, an O(h) approximation of the inlet delta).
+lines on a fixed grid); the open vessel from :mod:`millflow.mill.axial_open` on the
+whole line, with its sampled or flux discharge and the steady state's hold-up. All are
+integrated by scipy's implicit ``solve_ivp`` (BDF by default) with the constant sparse
+Jacobian, so stiff rates (tau S up to 1e8) cost little. A pulse is an initial hold-up
+distributed like the inlet (for axial dispersion: in the inlet control volume, an O(h)
+approximation of the inlet delta).
 
 Plug flow is exact: the product is the feed delayed by tau and ground for tau.
 Any other rtd model, without classification, passes a pulse exactly by segregated
@@ -33,6 +35,7 @@ from millflow.linalg import breakage_matrix
 from millflow.mill.scene import _check_feed, _scene, _tau
 from millflow.mill.steady import _size_coords
 from millflow.mill.axial import _bernoulli, solve_axial_grid
+from millflow.mill.axial_open import back_layer_matrix, open_grid, solve_axial_open_grid, tail_length
 from millflow.mill.cells import cell_operators, solve_cells
 from millflow.mill.segregated import plug_flow
 
@@ -87,6 +90,51 @@ def _axial_system(sc, n_cls, m_cells):
     return J, B_in, C, hold, M
 
 
+def _axial_open_system(sc, n_cls, m_cells):
+    """Method of lines for the open vessel's FV scheme on the whole line
+    (:mod:`millflow.mill.axial_open`); state c (class-major, N n).
+
+    Returns (J, B_in, C, D, hold, M): product = C y + D f, hold-up = hold y. Sampled
+    discharge: p = v c(1), hold-up = what is upstream of z = 1 plus the back-dispersion
+    layer of c(1) (the steady definitions, so the start-up ends at the steady state's
+    hold-up). Flux discharge: p from the balance of (-inf, 1], f - d/dt(tau int c) +
+    tau int K c, with dc/dt = J y + B_in f.
+    """
+    T = sc.transport
+    tau, pe = T.tau, T.pe
+    v = np.ones(n_cls) if sc.d is None else sc.d
+    w = v.copy() if sc.dispersion is None else sc.dispersion
+    M = int(m_cells)
+    g = open_grid(pe, M, v, w, tail_length(sc.S, tau, pe, v, w))
+    n = g.z.size
+    blocks = []
+    for i in range(n_cls):
+        diag = np.zeros(n)
+        diag[:-1] += g.alpha[i]
+        diag[1:] += g.beta[i]
+        diag[-1] += v[i]  # outflow at the downstream end
+        L = sp.diags([-g.alpha[i], diag, -g.beta[i]], [-1, 0, 1])
+        blocks.append(sp.diags(1.0 / (tau * g.weights)) @ L)
+    K = breakage_matrix(sc.S, sc.b)
+    J = (-sp.block_diag(blocks) + sp.kron(sp.csr_matrix(K), sp.identity(n))).tocsc()
+    e0 = np.zeros(n)
+    e0[g.k0] = 1.0 / (tau * g.weights[g.k0])
+    B_in = sp.kron(sp.identity(n_cls), sp.csr_matrix(e0[:, np.newaxis])).tocsr()
+    e1 = np.zeros(n)
+    e1[g.k1] = 1.0
+    at_discharge = sp.kron(sp.identity(n_cls), sp.csr_matrix(e1[np.newaxis, :])).tocsr()
+    upstream = sp.kron(sp.identity(n_cls), sp.csr_matrix(tau * g.upstream[np.newaxis, :])).tocsr()
+    if (sc.discharge or "sampled") == "flux":
+        C = sp.csr_matrix(K) @ upstream - upstream @ J
+        D = np.eye(n_cls) - (upstream @ B_in).toarray()
+        hold = upstream
+    else:
+        C = sp.diags(v) @ at_discharge
+        D = np.zeros((n_cls, n_cls))
+        hold = upstream + sp.csr_matrix(tau * back_layer_matrix(sc.S, sc.b, tau, g, v)) @ at_discharge
+    return J, B_in, sp.csr_matrix(C), D, sp.csr_matrix(hold), M
+
+
 def _integrate(J, rhs_const, y0, t, method, rtol, atol):
     order = np.argsort(t)
     ts = t[order]
@@ -105,13 +153,13 @@ def _integrate(J, rhs_const, y0, t, method, rtol, atol):
 
 
 def transient_mill(S, b, transport, t, *, feed=None, initial_feed=None, pulse=None, d=None,
-                   where=None, dispersion=None, x=None, method: str = "BDF", rtol: float = 1e-8,
+                   where=None, dispersion=None, discharge=None, x=None, method: str = "BDF", rtol: float = 1e-8,
                    atol: float = 1e-12, m_cells: int = 200) -> xr.Dataset:
     """Solve eq. (1) in time: start-up, step change of feed or tracer pulse.
 
     Parameters
     ----------
-    S, b, transport, d, where, dispersion, x : as :func:`millflow.mill.steady_mill`.
+    S, b, transport, d, where, dispersion, discharge, x : as :func:`millflow.mill.steady_mill`.
     t : (T,) output times [s], >= 0.
     feed : (N,) feed flows from t = 0 on (default zero).
     initial_feed : (N,) the mill starts at the steady state for this feed (a step
@@ -128,7 +176,7 @@ def transient_mill(S, b, transport, t, *, feed=None, initial_feed=None, pulse=No
     cells. Attributes ``method``, ``error_estimate``, ``runtime_s``, evaluation counts.
     """
     start = time.perf_counter()
-    sc = _scene(S, b, transport, d, where, dispersion)
+    sc = _scene(S, b, transport, d, where, dispersion, discharge=discharge)
     n_cls = sc.S.size
     t = np.atleast_1d(np.asarray(t, dtype=float))
     if t.ndim != 1 or np.any(~np.isfinite(t)) or np.any(t < 0):
@@ -173,6 +221,26 @@ def transient_mill(S, b, transport, t, *, feed=None, initial_feed=None, pulse=No
             y02 = y02 + c2.T.ravel()
         Y2, _ = _integrate(J2, B2 @ feed, y02, t, method, rtol, atol)
         extra["spatial_error_estimate"] = float(np.abs(Y2 @ C2.T - product).max(initial=0.0))
+    elif sc.kind == "axial_open" and (np.any(feed > 0) or start_feed is not None or sc.d is not None
+                                      or sc.dispersion is not None or sc.discharge == "flux"):
+        # (a pulse through the unclassified, sampled open vessel is exact by segregated flow, below)
+        # start-up, steps and pulses on the whole line; the spatial error as for the
+        # closed vessel, from the same solve on half the volumes
+        runs = []
+        for M in (m_cells, max(m_cells // 2, 2)):
+            J, B_in, C, D, hold, M = _axial_open_system(sc, n_cls, M)
+            y0 = B_in @ pulse_m
+            if start_feed is not None:
+                _, c, _, _ = solve_axial_open_grid(sc.S, sc.b, start_feed, transport.tau, transport.pe, M, sc.d,
+                                                   sc.dispersion, sc.discharge or "sampled")
+                y0 = y0 + c.T.ravel()
+            Y, info_m = _integrate(J, B_in @ feed, y0, t, method, rtol, atol)
+            runs.append((Y @ C.T + D @ feed, Y @ hold.T, info_m, M))
+        (product, holdup, info, M), (product2, _, _, _) = runs
+        name = f"axial_open_fv_{method}"
+        extra["control_volumes"] = M
+        extra["discharge"] = sc.discharge or "sampled"
+        extra["spatial_error_estimate"] = float(np.abs(product2 - product).max(initial=0.0))
     elif sc.kind == "plug":
         tau = _tau(transport)
         if pulse is not None and np.any(pulse_m > 0):
@@ -197,12 +265,10 @@ def transient_mill(S, b, transport, t, *, feed=None, initial_feed=None, pulse=No
             holdup[k] = scale * (new_part[:, 0] + full - new_part[:, 1])
         info, name = {}, "plug_flow_delay"
     else:
-        if (np.any(feed > 0) or start_feed is not None or sc.d is not None or sc.dispersion is not None
-                or sc.discharge == "flux"):
+        if np.any(feed > 0) or start_feed is not None or sc.d is not None:
             raise InputError(f"transport {transport!r}: only a tracer pulse (no feed, no "
                              "classification) is solved for a general rtd model; expected "
-                             "cells, rtd.PlugFlow or rtd.AxialDispersion(bc='closed') for start-up and "
-                             "steps (the open vessel's transient is not built: its steady state is)")
+                             "cells, rtd.PlugFlow or rtd.AxialDispersion for start-up and steps")
         ages = batch_grind(sc.S, sc.b, pulse_m, t)
         product = np.asarray(transport.pdf(t), dtype=float)[:, np.newaxis] * ages
         survival = 1.0 - np.asarray(transport.cdf(t), dtype=float)
