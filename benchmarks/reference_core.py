@@ -97,7 +97,7 @@ def expo_poly_solution(S, b, feed, t, dps: int) -> list[list]:
                 for rate, coeffs in Mi.items():
                     if rate not in ex:
                         ex[rate] = mpmath.exp(-mpmath.mpf(rate) * tm)
-                    total += ex[rate] * mpmath.polyval(coeffs[::-1], tm)
+                    total += ex[rate] * _horner(coeffs, tm)
                 row.append(total)
             out.append(row)
         return out
@@ -172,3 +172,13 @@ def main(argv=None) -> int:
 
 if __name__ == "__main__":
     sys.exit(main())
+
+
+def _horner(coeffs, x):
+    """sum_k coeffs[k] x^k (coefficients in ascending powers), in the working precision.
+    Written out: mpmath.polyval's coefficient order is being changed (a DeprecationWarning
+    in mpmath 1.4)."""
+    total = mpmath.mpf(0)
+    for c in reversed(coeffs):
+        total = total * x + c
+    return total
