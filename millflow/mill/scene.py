@@ -103,15 +103,12 @@ def _scene(S, b, transport, d=None, where=None, dispersion=None, method=None, di
             raise InputError(f"dispersion is given but transport {transport!r} has no axial "
                              "dispersion; expected rtd.AxialDispersion")
         dispersion = checks.class_vector(dispersion, n, "dispersion", "relative dispersion", positive=True)
-    if discharge is not None:
-        if kind != "axial_open":
-            raise InputError(f"discharge = {discharge!r} is given but transport {transport!r} is not the open "
-                             "vessel; expected rtd.AxialDispersion(bc='open') or discharge=None")
+    if discharge is not None and kind != "axial_open":
+        raise InputError(f"discharge = {discharge!r} is given but transport {transport!r} is not the open "
+                         "vessel; expected rtd.AxialDispersion(bc='open') or discharge=None")
+    if kind == "axial_open":  # the open vessel's default dispersion is d (one Peclet number)
         v = np.ones(n) if d is None else d
         check_discharge(discharge, v, v if dispersion is None else dispersion)
-    elif kind == "axial_open" and (d is not None or dispersion is not None):
-        v = np.ones(n) if d is None else d
-        check_discharge("sampled", v, v if dispersion is None else dispersion)
     if d is not None:
         allowed = _WHERE_OK[kind]
         if not allowed:
