@@ -82,12 +82,12 @@ def _tail(length: float, m: int) -> np.ndarray:
     return length * np.expm1(beta * j / m) / math.expm1(beta)
 
 
-def open_nodes(tail_length: float, m_cells: int) -> tuple[np.ndarray, int, int]:
+def open_nodes(tail: float, m_cells: int) -> tuple[np.ndarray, int, int]:
     """Nodes of the whole line and the indices of z = 0 (feed) and z = 1 (discharge)."""
     M = int(m_cells)
-    tail = _tail(tail_length, M)
-    z = np.concatenate([-tail[::-1], np.linspace(0.0, 1.0, M + 1), 1.0 + tail])
-    return z, tail.size, tail.size + M
+    side = _tail(tail, M)
+    z = np.concatenate([-side[::-1], np.linspace(0.0, 1.0, M + 1), 1.0 + side])
+    return z, side.size, side.size + M
 
 
 #: Longest tail [mill lengths]: the stretching's exp(beta) stays finite up to ~1e301.
