@@ -17,7 +17,10 @@ classes; tau = 600 s). Tables:
   control volumes, single grids and the Richardson-adaptive solver at several
   tolerances. The classification scales velocity and dispersion by d* (coarse classes
   at 0.3), which has an exact reference: segregated flow with rates S/d*.
-  Also velocity-only classification against its own converged solution.
+  Also velocity-only classification against its own converged solution, and the open
+  vessel on the whole line (:mod:`millflow.mill.axial_open`): sampled discharge with
+  v = w = d* against segregated flow with the open density and rates S/d*, flux
+  discharge with velocity-only classification against its own converged solution.
 - ``targets``: the issue's goals (0.5 ms linear mills, 100 ms axial at 1e-6, 20 ms for
   a tanks-in-series transfer matrix used in a circuit).
 """
@@ -35,6 +38,7 @@ from millflow.grid import SizeGrid
 from millflow.linalg import breakage_matrix
 from millflow.mill import Mill, steady_mill, transfer_matrix
 from millflow.mill.axial import solve_axial, solve_axial_grid
+from millflow.mill.axial_open import solve_axial_open
 from millflow.mill.segregated import segregated
 
 __all__ = ["DESCRIPTION", "run", "format_table", "kernel"]
@@ -162,6 +166,24 @@ def _axial(quick: bool) -> list[dict]:
                      "error_estimate": ds.attrs["error_estimate"], "observed_order": ds.attrs["order"],
                      "runtime_s": _time(lambda: steady_mill(S, b, f, rtd.AxialDispersion(TAU, pe), d, tol=tol), reps),
                      "mass_balance_error": ds.attrs["mass_balance_error"]})
+    # the open vessel on the whole line: v = w = d* against segregated flow with the open
+    # density and rates S/d*; the flux discharge with velocity-only classification against
+    # its own converged answer
+    open_vessel = rtd.AxialDispersion(TAU, pe, bc="open")
+    exact_open = segregated(S / d, b, f, open_vessel, holdup=False)[0]
+    cases = [("open v=w=d*, Pe 10", "sampled", None, exact_open)]
+    ref_flux = solve_axial_open(S, b, f, TAU, pe, d, np.ones(S.size), discharge="flux", tol=1e-10).product
+    cases.append(("open v=d*, Pe 10", "flux", np.ones(S.size), ref_flux))
+    for case, discharge, w, ref in cases:
+        for tol in (1e-6, 1e-8):
+            sol = solve_axial_open(S, b, f, TAU, pe, d, w, discharge=discharge, tol=tol)
+            rows.append({"table": "axial", "case": case, "method": f"open fv {discharge} tol {tol:g}",
+                         "n_classes": S.size, "control_volumes": int(sol.z.size - 1),
+                         "max_abs_error": float(np.abs(sol.product - ref).max()),
+                         "error_estimate": sol.error_estimate, "observed_order": sol.order,
+                         "runtime_s": _time(lambda: solve_axial_open(S, b, f, TAU, pe, d, w, discharge=discharge,
+                                                                     tol=tol), reps),
+                         "mass_balance_error": float(abs(sol.product.sum() - f.sum()))})
     return rows
 
 
@@ -216,11 +238,11 @@ def format_table(rows: list[dict]) -> str:
                        f"{_f(r['max_abs_error'], '.1e', 10)}{_f(r['mass_balance_error'], '.1e', 10)}"
                        f"{_f(r['ratio_vs_baseline'], '.3f', 8)}  {r['reference']}")
     out += ["", "Axial dispersion with classification, N = 100 (control volumes vs error)"]
-    head = f"{'case':<14}{'method':<32}{'cells':>7}{'max_err':>10}{'estimate':>10}{'order':>7}{'ms':>9}{'mass_err':>10}"
+    head = f"{'case':<20}{'method':<32}{'cells':>7}{'max_err':>10}{'estimate':>10}{'order':>7}{'ms':>9}{'mass_err':>10}"
     out += [head, "-" * len(head)]
     for r in rows:
         if r.get("table") == "axial":
-            out.append(f"{r['case']:<14}{r['method']:<32}{r['control_volumes']:>7}{_f(r['max_abs_error'], '.1e', 10)}"
+            out.append(f"{r['case']:<20}{r['method']:<32}{r['control_volumes']:>7}{_f(r['max_abs_error'], '.1e', 10)}"
                        f"{_f(r.get('error_estimate'), '.1e', 10)}{_f(r.get('observed_order'), '.2f', 7)}"
                        f"{_f(r['runtime_s'] * 1e3, '.2f', 9)}{_f(r['mass_balance_error'], '.1e', 10)}")
     out += ["", "Targets"]
