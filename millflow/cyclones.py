@@ -57,7 +57,7 @@ Simulation of Mineral Processing Systems (2001) ch. 5.
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
+from dataclasses import dataclass, fields
 
 import numpy as np
 
@@ -83,6 +83,12 @@ def _positive(value, name: str, where: str) -> float:
     if not (math.isfinite(v) and v > 0):
         raise InputError(f"{where}: {name} = {value!r}; expected a finite number > 0")
     return v
+
+
+def _positive_fields(obj) -> None:
+    """Every field of a frozen dataclass of constants checked finite and > 0 (stored as float)."""
+    for f in fields(obj):
+        object.__setattr__(obj, f.name, _positive(getattr(obj, f.name), f.name, type(obj).__name__))
 
 
 def _open_fraction(value, name: str, where: str) -> float:
@@ -249,8 +255,7 @@ class PlittCalibration:
     density_exponent: float = 0.5
 
     def __post_init__(self):
-        for name in ("F1", "F2", "F3", "F4", "density_exponent"):
-            object.__setattr__(self, name, _positive(getattr(self, name), name, "PlittCalibration"))
+        _positive_fields(self)
 
 
 def _cm(geometry: CycloneGeometry) -> tuple[float, float, float, float, float]:
@@ -425,8 +430,7 @@ class NageswararaoConstants:
     alpha: float = 3.0
 
     def __post_init__(self):
-        for name in ("K_D0", "K_Q0", "K_V1", "K_W1", "alpha"):
-            object.__setattr__(self, name, _positive(getattr(self, name), name, "NageswararaoConstants"))
+        _positive_fields(self)
 
 
 def hindered_settling_factor(solids_volume_fraction: float) -> float:

@@ -118,6 +118,23 @@ def _solve_class(alpha_i, beta_i, piv_i, rhs):
     return c
 
 
+def _sweep_classes(alpha, beta, piv, gain, weights, source) -> np.ndarray:
+    """c (N, n[, m]) class by class, coarse to fine: class i's tridiagonal M-matrix (GTH
+    pivots ``piv``) with right-hand side sum_(j<i) gain_ij w_k c_jk + source(i) (n[, m])."""
+    n_cls, n = piv.shape
+    first = source(0)
+    cols = first.shape[1:]
+    wk = weights.reshape((n,) + (1,) * len(cols))
+    c = np.empty((n_cls, n) + cols)
+    wc = np.empty((n_cls, n * int(np.prod(cols, dtype=int))))  # weights * c, flattened
+    for i in range(n_cls):
+        rhs = first if i == 0 else (gain[i, :i] @ wc[:i]).reshape((n,) + cols) + source(i)
+        c_i = _solve_class(alpha[i], beta[i], piv[i], rhs if cols else rhs[:, None])
+        c[i] = c_i if cols else c_i[:, 0]
+        wc[i] = (wk * c[i]).ravel()
+    return c
+
+
 @dataclass(frozen=True)
 class OpenGrid:
     """The whole-line grid and each class's exponentially fitted flux coefficients.
@@ -186,16 +203,13 @@ def solve_axial_open_grid(S, b, feed, tau: float, pe: float, m_cells: int, d=Non
     loss[:, -1] += v  # outflow at the downstream end
     piv = _gth_factors(alpha, beta, loss)
     gain = tau * b * S[None, :]
-    flat = int(np.prod(cols, dtype=int))
-    wk = weights.reshape((n,) + (1,) * len(cols))
-    c = np.empty((n_cls, n) + cols)
-    wc = np.empty((n_cls, n * flat))
-    for i in range(n_cls):
-        rhs = (gain[i, :i] @ wc[:i]).reshape((n,) + cols) if i else np.zeros((n,) + cols)
-        rhs[k0] += feed[i]
-        c_i = _solve_class(alpha[i], beta[i], piv[i], rhs if cols else rhs[:, None])
-        c[i] = c_i if cols else c_i[:, 0]
-        wc[i] = (wk * c[i]).ravel()
+
+    def fed(i):  # the feed enters at the node of z = 0
+        r = np.zeros((n,) + cols)
+        r[k0] = feed[i]
+        return r
+
+    c = _sweep_classes(alpha, beta, piv, gain, weights, fed)
     lk = g.upstream.reshape((n,) + (1,) * len(cols))
     upstream = (lk[None] * c).sum(axis=1)  # int_(-inf)^1 c dz, (N[, m])
     vk = v.reshape((n_cls,) + (1,) * len(cols))
@@ -211,7 +225,6 @@ def solve_axial_open_grid(S, b, feed, tau: float, pe: float, m_cells: int, d=Non
 
 def _back_layer(alpha, beta, loss, gain, weights, h, k1, c_end):
     """int_(-inf)^1 c^ dz: the source-free equations on nodes 0..k1 with c^(k1) = c(k1)."""
-    n_cls = loss.shape[0]
     cols = c_end.shape[1:]
     n = k1  # unknown nodes 0..k1-1
     if n == 0:
@@ -221,19 +234,15 @@ def _back_layer(alpha, beta, loss, gain, weights, h, k1, c_end):
     loss_b[:, n - 1] += alpha[:, n - 1]
     faces = slice(0, max(n - 1, 1))  # faces between the unknown nodes (one unused when n = 1)
     piv = _gth_factors(alpha[:, faces], beta[:, faces], loss_b)
-    wk = weights[:n].reshape((n,) + (1,) * len(cols))
-    ch = np.empty((n_cls, n) + cols)
-    wc = np.empty((n_cls, n * int(np.prod(cols, dtype=int))))
-    out = np.empty_like(c_end)
-    for i in range(n_cls):
-        rhs = (gain[i, :i] @ wc[:i]).reshape((n,) + cols) if i else np.zeros((n,) + cols)
-        rhs[n - 1] += beta[i, n - 1] * c_end[i]
-        # gains at the fixed node enter nowhere: c^(k1) is given
-        c_i = _solve_class(alpha[i], beta[i], piv[i], rhs if cols else rhs[:, None])
-        ch[i] = c_i if cols else c_i[:, 0]
-        wc[i] = (wk * ch[i]).ravel()
-        out[i] = (wk * ch[i]).sum(axis=0) + 0.5 * h[k1 - 1] * c_end[i]
-    return out
+
+    def from_fixed_node(i):  # c^(k1) = c(k1) enters node k1 - 1 through the face between them
+        r = np.zeros((n,) + cols)
+        r[n - 1] = beta[i, n - 1] * c_end[i]
+        return r
+
+    ch = _sweep_classes(alpha, beta, piv, gain, weights[:n], from_fixed_node)
+    wk = weights[:n].reshape((1, n) + (1,) * len(cols))
+    return (wk * ch).sum(axis=1) + 0.5 * h[k1 - 1] * c_end
 
 
 def check_discharge(discharge, v, w) -> str:

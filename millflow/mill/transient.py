@@ -57,6 +57,25 @@ def _cells_system(sc, n_cls):
     return J, B_in, C, float(net.bypass), n
 
 
+def _fv_jacobian(sc, alpha, beta, v, tau_weights, n_cls):
+    """J of the method of lines on a finite-volume grid: per class the tridiagonal transport
+    (face fluxes alpha_k c_k - beta_k c_(k+1), per class and face; outflow v_i at the last
+    node) divided by the volumes tau w_k, plus breakage K (x) I."""
+    n = tau_weights.size
+    scale = sp.diags(1.0 / tau_weights)
+    blocks = []
+    for i in range(n_cls):
+        a_i = np.broadcast_to(alpha[i], (n - 1,))
+        b_i = np.broadcast_to(beta[i], (n - 1,))
+        diag = np.zeros(n)
+        diag[:-1] += a_i
+        diag[1:] += b_i
+        diag[-1] += v[i]
+        blocks.append(scale @ sp.diags([-a_i, diag, -b_i], [-1, 0, 1]))
+    K = breakage_matrix(sc.S, sc.b)
+    return (-sp.block_diag(blocks) + sp.kron(sp.csr_matrix(K), sp.identity(n))).tocsc()
+
+
 def _axial_system(sc, n_cls, m_cells):
     """Method of lines for the axial FV scheme; state c (class-major, N (M + 1))."""
     T = sc.transport
@@ -70,16 +89,7 @@ def _axial_system(sc, n_cls, m_cells):
     D = w / pe
     P = v * h / D
     alpha, beta = D / h * _bernoulli(-P), D / h * _bernoulli(P)
-    blocks = []
-    for i in range(n_cls):
-        diag = np.zeros(M + 1)
-        diag[:-1] += alpha[i]
-        diag[1:] += beta[i]
-        diag[-1] += v[i]
-        L = sp.diags([np.full(M, -alpha[i]), diag, np.full(M, -beta[i])], [-1, 0, 1])
-        blocks.append(sp.diags(1.0 / (tau * weights)) @ L)
-    K = breakage_matrix(sc.S, sc.b)
-    J = (-sp.block_diag(blocks) + sp.kron(sp.csr_matrix(K), sp.identity(M + 1))).tocsc()
+    J = _fv_jacobian(sc, alpha, beta, v, tau * weights, n_cls)
     e0 = np.zeros(M + 1)
     e0[0] = 1.0 / (tau * weights[0])
     B_in = sp.kron(sp.identity(n_cls), sp.csr_matrix(e0[:, np.newaxis])).tocsr()
@@ -107,16 +117,8 @@ def _axial_open_system(sc, n_cls, m_cells):
     M = int(m_cells)
     g = open_grid(pe, M, v, w, tail_length(sc.S, tau, pe, v, w))
     n = g.z.size
-    blocks = []
-    for i in range(n_cls):
-        diag = np.zeros(n)
-        diag[:-1] += g.alpha[i]
-        diag[1:] += g.beta[i]
-        diag[-1] += v[i]  # outflow at the downstream end
-        L = sp.diags([-g.alpha[i], diag, -g.beta[i]], [-1, 0, 1])
-        blocks.append(sp.diags(1.0 / (tau * g.weights)) @ L)
     K = breakage_matrix(sc.S, sc.b)
-    J = (-sp.block_diag(blocks) + sp.kron(sp.csr_matrix(K), sp.identity(n))).tocsc()
+    J = _fv_jacobian(sc, g.alpha, g.beta, v, tau * g.weights, n_cls)
     e0 = np.zeros(n)
     e0[g.k0] = 1.0 / (tau * g.weights[g.k0])
     B_in = sp.kron(sp.identity(n_cls), sp.csr_matrix(e0[:, np.newaxis])).tocsr()
