@@ -370,13 +370,15 @@ def plitt_water_split(volume_split: float, solids_volume_fraction: float, *, sol
 
 def plitt_cyclone(geometry: CycloneGeometry, feed: CycloneFeed, *, flow_m3_s: float | None = None,
                   pressure_Pa: float | None = None, calibration: PlittCalibration = PlittCalibration(),
-                  solids_recovery: float | None = None, x_m=None, feed_fractions=None) -> CyclonePrediction:
+                  solids_recovery: float | None = None, x_m=None, feed_fractions=None,
+                  corrected_recovery: float | None = None) -> CyclonePrediction:
     """Plitt's model at one operating point: give the feed flow per cyclone ``flow_m3_s`` [m3/s]
     or the pressure drop ``pressure_Pa`` [Pa] (the other follows from the pressure equation).
 
-    The water split needs the solids to underflow: either ``solids_recovery`` R_s [-] or the
+    The water split needs the solids to underflow: either ``solids_recovery`` R_s [-], or the
     feed size distribution, sizes ``x_m`` [m] (decreasing) and mass fractions ``feed_fractions``
-    [-] (summing to 1), from which R_f follows in closed form (:func:`plitt_water_split`).
+    [-] (summing to 1), or directly C = sum_i w_i c_corr,i (``corrected_recovery`` [-], as a
+    flowsheet tears it), from which R_f follows in closed form (:func:`plitt_water_split`).
     """
     where = "plitt_cyclone"
     flow, pressure = _operating_point(flow_m3_s, pressure_Pa, where)
@@ -388,7 +390,11 @@ def plitt_cyclone(geometry: CycloneGeometry, feed: CycloneFeed, *, flow_m3_s: fl
     s = plitt_split(geometry, feed, pressure, calibration)
     m = plitt_sharpness(geometry, flow, s, calibration)
     phi = feed.solids_volume_fraction
-    if x_m is not None or feed_fractions is not None:
+    if corrected_recovery is not None:
+        if solids_recovery is not None or x_m is not None or feed_fractions is not None:
+            raise InputError(f"{where}: give one of solids_recovery, corrected_recovery or x_m with feed_fractions")
+        rf = plitt_water_split(s, phi, corrected_recovery=corrected_recovery)
+    elif x_m is not None or feed_fractions is not None:
         if solids_recovery is not None or x_m is None or feed_fractions is None:
             raise InputError(f"{where}: give either solids_recovery or both x_m and feed_fractions")
         c = float(np.dot(_fractions(feed_fractions, as_sizes(x_m), where), plitt(x_m, d50c, m)))

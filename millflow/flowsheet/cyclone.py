@@ -26,6 +26,8 @@ __all__ = ["PredictedCyclone", "CYCLONE_MODELS"]
 
 #: Cyclone models by the name used in flowsheet files.
 CYCLONE_MODELS = ("plitt", "nageswararao")
+#: Each model's corrected partition curve c_corr(x, d50c, sharpness).
+_CORRECTED = {"plitt": plitt, "nageswararao": whiten}
 
 
 @dataclass(frozen=True)
@@ -95,31 +97,21 @@ class PredictedCyclone:
         where = f"units.{self.name}"
         try:
             if self.model == "plitt":
-                cal = self.calibration or cy.PlittCalibration()
-                d50c = cy.plitt_d50c(self.geometry, feed, q, cal)
-                pressure = cy.plitt_pressure(self.geometry, feed, q, cal)
-                split = cy.plitt_split(self.geometry, feed, pressure, cal)
-                m = cy.plitt_sharpness(self.geometry, q, split, cal)
-                rf = cy.plitt_water_split(split, feed.solids_volume_fraction,
-                                          corrected_recovery=0.5 if recovery is None else float(recovery))
-
-                def corrected(x):
-                    return plitt(x, d50c, m)
+                pred = cy.plitt_cyclone(self.geometry, feed, flow_m3_s=q,
+                                        calibration=self.calibration or cy.PlittCalibration(),
+                                        corrected_recovery=0.5 if recovery is None else float(recovery))
             else:
-                cal = self.calibration or cy.NageswararaoConstants()
-                pred = cy.nageswararao_cyclone(self.geometry, feed, flow_m3_s=q, constants=cal)
-                d50c, m, pressure, split, rf = (pred.d50c_m, pred.sharpness, pred.pressure_Pa, pred.volume_split,
-                                                pred.water_split)
-
-                def corrected(x):
-                    return whiten(x, d50c, m)
+                pred = cy.nageswararao_cyclone(self.geometry, feed, flow_m3_s=q,
+                                               constants=self.calibration or cy.NageswararaoConstants())
         except (InputError, OverflowError, ZeroDivisionError, ValueError) as exc:
             why = str(exc) if isinstance(exc, InputError) else "the model's power laws overflow at this operating point"
             raise SolverError(f"{where}: at {Q * 3600:.6g} m3/h of slurry ({100 * feed.solids_volume_fraction:.3g} % "
                               f"solids by volume, {self.cyclones} cyclones): {why}") from None
-        return {"d50c_m": d50c, "sharpness": m, "pressure_Pa": pressure, "flow_per_cyclone_m3_s": q,
-                "volume_split": split, "water_split": rf, "solids_volume_fraction": feed.solids_volume_fraction}, \
-            corrected
+        d50c, m = pred.d50c_m, pred.sharpness
+        return {"d50c_m": d50c, "sharpness": m, "pressure_Pa": pred.pressure_Pa, "flow_per_cyclone_m3_s": q,
+                "volume_split": pred.volume_split, "water_split": pred.water_split,
+                "solids_volume_fraction": feed.solids_volume_fraction}, \
+            lambda x: _CORRECTED[self.model](x, d50c, m)
 
     def blocks(self, grid, throughput=None, water=None, recovery=None):
         t0 = time.perf_counter()
@@ -138,8 +130,5 @@ class PredictedCyclone:
         total = float(np.sum(inflow))
         if not total > 0:
             return 0.5
-        if self.model == "plitt":
-            cc = plitt(grid.x, info["d50c_m"], info["sharpness"])
-        else:
-            cc = whiten(grid.x, info["d50c_m"], info["sharpness"])
+        cc = _CORRECTED[self.model](grid.x, info["d50c_m"], info["sharpness"])
         return float(np.dot(np.asarray(inflow, float) / total, cc))

@@ -36,6 +36,7 @@ from millflow.cyclones import (
     plitt_water_split,
     slurry_flow,
 )
+from millflow.classifiers import plitt
 from millflow.errors import InputError
 from millflow.grid import SizeGrid
 
@@ -275,3 +276,16 @@ def test_bad_input_is_one_line_naming_the_argument(make, match):
     with pytest.raises(InputError, match=match) as info:
         make()
     assert "\n" not in str(info.value)
+
+
+def test_plitt_corrected_recovery_given_directly_equals_the_psd_route():
+    """The flowsheet tears C = sum w_i c_corr,i and passes it as ``corrected_recovery``: the
+    same water split as from the feed PSD that gives that C (one closed form, to rounding)."""
+    w = np.exp(-((np.log(X) - np.log(8e-5)) ** 2) / 2.0)
+    w /= w.sum()
+    by_psd = plitt_cyclone(SMALL, FEED, pressure_Pa=80e3, x_m=X, feed_fractions=w)
+    c = float(np.dot(w, plitt(X, by_psd.d50c_m, by_psd.sharpness)))
+    direct = plitt_cyclone(SMALL, FEED, pressure_Pa=80e3, corrected_recovery=c)
+    assert direct.water_split == pytest.approx(by_psd.water_split, rel=1e-12)
+    with pytest.raises(InputError, match="give one of"):
+        plitt_cyclone(SMALL, FEED, pressure_Pa=80e3, corrected_recovery=c, solids_recovery=0.5)
