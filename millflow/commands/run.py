@@ -92,20 +92,22 @@ def format_summary(s: dict, out_dir: str | None, written: list[str] | None = Non
 def run(args) -> int:
     from millflow.commands.output import check_target, relocate, staged_folder
     from millflow.flowsheet import load, save, solve, summary
+    from millflow.flowsheet.results import stream_properties
 
     path = Path(args.file)
     out = Path(args.out) if args.out else Path.cwd() / f"{path.stem}-results"
     check_target(out, overwrite=args.overwrite, input_path=path)  # before the work, not after
     fs = load(path)
     sol = solve(fs, method=args.method)
+    props = stream_properties(sol)  # once, for the grid check, the summary and the files
     check = None
     if not args.no_grid_check:
         from millflow.flowsheet.gridcheck import grid_check
 
-        check = grid_check(sol)
-    s = summary(sol, grid_check=check)
+        check = grid_check(sol, props)
+    s = summary(sol, props, grid_check=check)
     with staged_folder(out, overwrite=args.overwrite, input_path=path, command="run") as tmp:
-        files = relocate(save(sol, tmp, plots=not args.no_plots, grid_check=check).values(), tmp, out)
+        files = relocate(save(sol, tmp, plots=not args.no_plots, grid_check=check, props=props).values(), tmp, out)
     s["output_dir"] = str(out)
     s["files_written"] = [Path(f).name for f in files]
     if args.json:

@@ -362,14 +362,15 @@ def psd_table(sol, props=None):
 CSV_FLOAT_FORMAT = "%.10g"
 
 
-def save(sol, out_dir, *, plots: bool = True, grid_check=None) -> dict:
+def save(sol, out_dir, *, plots: bool = True, grid_check=None, props=None) -> dict:
     """Write results.nc, streams.csv, units.csv, psd.csv, summary.json (and PNG plots) to ``out_dir``.
 
+    ``props``: :func:`stream_properties` of ``sol`` if the caller has them already.
     Returns a dict name -> path of the files written.
     """
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
-    props = stream_properties(sol)
+    props = props or stream_properties(sol)
     files = {}
     ds = to_dataset(sol, props, grid_check)
     files["netcdf"] = out / "results.nc"
