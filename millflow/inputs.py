@@ -179,6 +179,8 @@ UNITS = {
     "mass": {"t": 1000.0, "kg": 1.0},
     "power": {"W": 1.0, "kW": 1e3, "MW": 1e6},
     "rate": {"per_s": 1.0, "per_min": 1.0 / 60.0, "per_h": 1.0 / 3600.0},
+    # breakage per specific energy, S^E of S = S^E P / H (Herbst-Fuerstenau), SI kg/J
+    "energy_rate": {"t_per_kWh": 1000.0 / 3.6e6, "kg_per_kWh": 1.0 / 3.6e6, "kg_per_J": 1.0},
     "fraction": {"pct": 0.01, "frac": 1.0},
     "density": {"kg_m3": 1.0, "t_m3": 1000.0},
     "volume": {"m3": 1.0, "L": 1e-3},

@@ -24,6 +24,7 @@ from millflow.breakage.distributions import (
     validate_B,
     validate_b,
 )
+from millflow.breakage.energy import EnergySpecificRate
 from millflow.breakage.t10 import T10Breakage, T10Table, read_t10_table, t10_B
 from millflow.breakage.rates import (
     AustinRate,
@@ -67,4 +68,5 @@ __all__ = [
     "T10Table",
     "read_t10_table",
     "t10_B",
+    "EnergySpecificRate",
 ]

@@ -59,7 +59,12 @@ def format_summary(s: dict, out_dir: str | None, written: list[str] | None = Non
             f"{u} {_f(100 * v, '{:.1f}')} %" for u, v in cl.items()))
     for u, r in s["units"].items():
         if r.get("specific_energy_kWh_per_t") is not None:
-            lines.append(f"{u}: {r['power_kW']:.4g} kW, {r['specific_energy_kWh_per_t']:.3g} kWh/t of mill feed")
+            role = " (drives breakage)" if str(r.get("power_role", "")).startswith("drives") else ""
+            tau = f", tau {r['tau_s'] / 60:.4g} min ({r['tau_from'].split(' (')[0]})" if r.get("tau_from") else ""
+            lines.append(f"{u}: {r['power_kW']:.4g} kW{role}, {r['specific_energy_kWh_per_t']:.3g} kWh/t of mill "
+                         f"feed{tau}")
+    for note in s.get("notes") or []:
+        lines.append(f"note: {note}")
     if s["specific_energy_kWh_per_t"] is not None:
         lines.append(f"circuit specific energy: {s['specific_energy_kWh_per_t']:.3g} kWh/t of product")
     worst = max(s["unit_mass_balance_error"].values())

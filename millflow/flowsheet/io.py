@@ -17,6 +17,7 @@ from pathlib import Path
 import numpy as np
 
 from millflow.breakage import AustinRate, NonNormalizedBreakage, NormalizedBreakage, PowerLawRate
+from millflow.breakage.energy import EnergySpecificRate, from_lab
 from millflow.classifiers import CURVES
 from millflow.errors import GridError, InputError, MillflowError
 from millflow.flowsheet import graph
@@ -273,6 +274,8 @@ def _feed_psd(t: _Table, grid: SizeGrid, base: Path | None = None) -> np.ndarray
 
 # ------------------------------------------------------------------ breakage
 def _rate(t: _Table):
+    if any(k.startswith("A_E_") for k in t.data):
+        return _energy_rate(t)
     form = t.plain("form", kind=str)
     if form == "power":
         A = t.quantity("A", "rate", allow_zero=True)
@@ -294,6 +297,33 @@ def _rate(t: _Table):
                  "(reference ball), xi, eta")
         return _wrap(t.where, AustinRate, A, alpha, mu, Lam, xi=xi, x_b=xb, x_b0=xb0, eta=eta, x0=x0)
     raise InputError(f"{t.where}.form = {form!r}: unknown rate form; valid: austin, power")
+
+
+def _energy_rate(t: _Table) -> EnergySpecificRate:
+    """A rate table given per energy (``A_E_t_per_kWh``): S^E of S = S^E P / H (Herbst-Fuerstenau)."""
+    A = t.quantity("A_E", "energy_rate", allow_zero=True)
+    key = next(k for k in t.data if k.startswith("A_E_"))
+    rest = {k: v for k, v in t.data.items() if k != key}
+    if any(k.startswith("A_") for k in rest):
+        raise InputError(f"{t.where}: {key} and {next(k for k in rest if k.startswith('A_'))} both give A; "
+                         "keep one (A_E_<unit> per energy, or A_<unit> per time)")
+    rest["A_per_s"] = A  # S^E [kg/J] carried through the same rate form
+    inner = _rate(_Table(rest, t.where))
+    t.used.update(t.data)
+    return EnergySpecificRate(inner, source=f"{t.where}.{key}")
+
+
+def _per_energy(t: _Table, rate):
+    """``per_energy = {lab_power_kW, lab_holdup_kg}``: a time rate measured in a lab mill carried
+    per energy, S^E = S_lab H_lab / P_lab."""
+    P = t.quantity("lab_power", "power")
+    H = t.quantity("lab_holdup", "mass")
+    t.finish("lab_power_kW, lab_holdup_kg")
+    if rate is None:
+        raise InputError(f"{t.where}: the material has no rate to carry per energy")
+    if getattr(rate, "basis", "time") == "energy":
+        raise InputError(f"{t.where}: the rate is already per energy (A_E_...); remove per_energy")
+    return from_lab(rate, P, H)
 
 
 def _breakage_table(t: _Table, base: Path | None, grid: SizeGrid | None):
@@ -427,7 +457,7 @@ def _fitted_material(m: _Table, base: Path | None) -> dict:
     process = m.plain("process", {})
     if not isinstance(process, dict):
         raise InputError(f"{m.where}.process = {process!r}: expected a table of the fit's process values")
-    m.finish("fit, process")
+    m.finish("fit, process, per_energy")
     p = _named_file(name, base, folder_file="fit.json")
     if not p.is_file():
         raise InputError(f"{m.where}.fit: {p} not found")
@@ -578,6 +608,9 @@ def _mill(name: str, t: _Table, materials: dict, slurry=None, base: Path | None 
         design = design_from_table(f"units.{name}", t.data)
         t.used.update(design["keys"])
         if design["rate_factor"] != 1.0:
+            if getattr(rate, "basis", "time") == "energy":
+                raise InputError(f"units.{name}.lab: the rate is per energy (S = S^E P/H in every mill); "
+                                 "a lab table scales rates per time only: remove one")
             rate = ScaledRate(rate, design["rate_factor"])
     tau = t.quantity("tau", "time", None)
     holdup = t.quantity("holdup", "mass", None)
@@ -771,15 +804,20 @@ def from_dict(data: dict, *, source: str = "<dict>", base_dir=None) -> Flowsheet
     if mt is not None:
         for mname in mt.data:
             m = mt.sub(mname)
+            per_energy = m.sub("per_energy", None)
             if "fit" in m.data:
                 materials[mname] = _fitted_material(m, base)
+                if per_energy is not None:
+                    materials[mname]["rate"] = _per_energy(per_energy, materials[mname]["rate"])
                 continue
             materials[mname] = {}
             if "rate" in m.data:
                 materials[mname]["rate"] = _rate(m.sub("rate"))
             if "breakage" in m.data:
                 materials[mname]["breakage"] = _breakage(m.sub("breakage"), base, grid)
-            m.finish("rate, breakage (or fit = \"fit.json\" with process = {...})")
+            if per_energy is not None:
+                materials[mname]["rate"] = _per_energy(per_energy, materials[mname].get("rate"))
+            m.finish("rate, breakage, per_energy (or fit = \"fit.json\" with process = {...})")
     units, water_added = {}, {}
     ut = top.sub("units")
     for uname in ut.data:

@@ -207,6 +207,12 @@ def to_dataset(sol, props=None, grid_check=None):
         vals = [sol.units[u].get(key) for u in units]
         if any(v is not None for v in vals):
             ds[name] = var("unit", [np.nan if v is None else v for v in vals], unit_of, long_name)
+    for key, name, long_name in (("breakage_basis", "unit_breakage_basis", "mill breakage per time or per energy"),
+                                 ("tau_from", "unit_tau_from", "how the mill's residence time is set"),
+                                 ("power_role", "unit_power_role", "whether the mill power enters its kinetics")):
+        vals = [sol.units[u].get(key) for u in units]
+        if any(v is not None for v in vals):
+            ds[name] = var("unit", ["" if v is None else v for v in vals], "", long_name)
     if sol.water is not None and is_wet(sol):
         ds["unit_water_in"] = var("unit", [sol.water.units[u]["water_in_kg_s"] for u in units], "kg/s",
                                   "water entering the unit (with its addition)")
@@ -302,12 +308,24 @@ def summary(sol, props=None, grid_check=None) -> dict:
         "water_balance_error": mb.get("water", 0.0),
         "specific_energy_kWh_per_t": _specific_energy(sol),
         "units": units,
+        "notes": notes(sol),
         "solver": {k: v for k, v in sol.solver.items()},
         "kernel": _kernel_status(),
         **_provenance(fs),
         "grid_check": grid_check,
         "runtime_s": sol.runtime_s,
     })
+
+
+def notes(sol) -> list[str]:
+    """What a reader of the results must know once: mills whose power is information only."""
+    out = []
+    for u, unit in sol.flowsheet.units.items():
+        if unit.type == "mill" and getattr(unit, "power_role", None) and unit.breakage_basis != "energy":
+            out.append(f"{u}: power {unit.power / 1e3:.4g} kW is information only: the mill's rates are per time "
+                       "(1/s), so power does not enter its breakage and its kWh/t is not causal; give the rates per "
+                       "energy (rate A_E_t_per_kWh, or the material's per_energy) for power to drive the product")
+    return out
 
 
 def stream_table(sol, props=None):
@@ -342,7 +360,9 @@ def unit_table(sol):
                      "mass_balance_error": r["mass_balance_error"], "error_estimate": r["error_estimate"],
                      "runtime_s": r["runtime_s"], "tau_min": r["tau_s"] / 60 if r.get("tau_s") else None,
                      "holdup_t": r["holdup_kg"] / 1e3 if r.get("holdup_kg") else None, "power_kW": r.get("power_kW"),
-                     "specific_energy_kWh_per_t": r.get("specific_energy_kWh_per_t")})
+                     "specific_energy_kWh_per_t": r.get("specific_energy_kWh_per_t"),
+                     "breakage_basis": r.get("breakage_basis"), "tau_from": r.get("tau_from"),
+                     "power_role": r.get("power_role")})
     return pd.DataFrame(rows).set_index("unit")
 
 

@@ -105,7 +105,10 @@ class MillUnit:
     Parameters
     ----------
     rate : callable
-        x [m] -> S [1/s] (e.g. :class:`millflow.breakage.PowerLawRate`).
+        x [m] -> S [1/s] (e.g. :class:`millflow.breakage.PowerLawRate`): breakage per time; or an
+        :class:`millflow.breakage.EnergySpecificRate`, x -> S^E [kg/J]: breakage per energy, the
+        mill's rates S_i = S_i^E P / H (Herbst-Fuerstenau) with its ``power`` P [W] and its solids
+        hold-up H = tau F [kg] at the solved throughput F, so that S_i tau = S_i^E P / F.
     breakage : object with ``.b(x)`` or callable x -> b.
     transport : str
         Key of :data:`TRANSPORTS`; ``transport_params`` its parameters (e.g. ``{"n": 10}``).
@@ -122,7 +125,8 @@ class MillUnit:
         efficiency c_i becomes d_i* = (1 - c_i)/(1 - c_N)
         (:func:`millflow.classifiers.mill_discharge_rates`).
     power : float or None
-        Mill power draw [W], for the specific energy.
+        Mill power draw [W]: drives the breakage when the rates are per energy; otherwise
+        information only (the specific energy it gives is not causal, see ``power_role``).
     kinetics : dict or None
         Non-linear kinetics (issue 12): ``aggregation_kernel`` (constant, sum, product,
         shear) with ``aggregation_beta0`` [1/s] and ``x_ref_m`` [m]; ``cushion_lambda``
@@ -160,20 +164,46 @@ class MillUnit:
         if self.kinetics is not None and self.transport not in _KINETIC_TRANSPORTS:
             raise InputError(f"units.{self.name}: non-linear kinetics run with transport "
                              f"{', '.join(_KINETIC_TRANSPORTS)}; got {self.transport!r}")
+        if self.breakage_basis == "energy" and not (self.power is not None and self.power > 0):
+            raise InputError(f"units.{self.name}: the rates are per energy (S = S^E P / H, A_E_<unit> or "
+                             "per_energy); give the mill's power (power_kW) or its dimensions")
         if self.kinetics is not None and self.classification is not None:
             raise InputError(f"units.{self.name}: non-linear kinetics with discharge classification is not "
                              "supported; give one of kinetics, classification")
+
+    @property
+    def breakage_basis(self) -> str:
+        """``"energy"`` when the rates are per energy (S = S^E P / H), ``"time"`` when they are in 1/s."""
+        return getattr(self.rate, "basis", "time")
+
+    @property
+    def residence_time_from(self) -> str:
+        """How tau is set: a fixed tau, the solids hold-up over the solids flow, or the slurry volume over the slurry flow."""
+        if self.tau is not None:
+            return "fixed tau (given; does not follow the feed rate)"
+        if self.slurry_volume is not None:
+            return "slurry hold-up / slurry flow (follows the feed rate)"
+        return "solids hold-up / solids flow (follows the feed rate)"
+
+    @property
+    def power_role(self) -> str | None:
+        """What the power does: drives breakage (per-energy rates) or information only (per-time rates)."""
+        if self.power is None:
+            return None
+        return ("drives breakage: S = S^E P / H" if self.breakage_basis == "energy"
+                else "information only: the rates are per time (1/s), power does not enter the kinetics")
 
     @property
     def kinetic_nonlinear(self) -> bool:
         """True when the mill declares non-linear kinetics (its product is not P @ feed)."""
         return self.kinetics is not None
 
-    def nonlinear_kinetics(self, grid):
-        """:class:`millflow.nonlinear.Kinetics` of this mill on ``grid``."""
+    def nonlinear_kinetics(self, grid, tau=None, throughput=None):
+        """:class:`millflow.nonlinear.Kinetics` of this mill on ``grid`` (``tau`` [s] and ``throughput``
+        [kg/s] set the hold-up of a mill whose rates are per energy)."""
         from millflow.nonlinear import KERNELS, Aggregation, kinetics
 
-        S, b = self.breakage_functions(grid)
+        S, b = self.breakage_functions(grid, tau, throughput)
         k = self.kinetics
         agg = None
         if "aggregation_kernel" in k:
@@ -195,7 +225,7 @@ class MillUnit:
         if not total > 0:
             raise SolverError(f"units.{self.name}: the mill receives no solids (inflow {total!r} kg/s)")
         tau = self.residence_time(total)
-        kin = self.nonlinear_kinetics(grid)
+        kin = self.nonlinear_kinetics(grid, tau, total)
         feed = np.asarray(inflow, float) / total
         unit = f"units.{self.name}"
         if self.transport == "perfect_mixing":
@@ -210,8 +240,16 @@ class MillUnit:
         p[0] += r.overflow_mass
         info = {"method": f"non-linear kinetics ({kin.describe()}): {r.method}", "error_estimate": r.error_estimate,
                 "residual": r.residual, "runtime_s": time.perf_counter() - t0, "tau_s": tau,
-                "overflow_kg_s": total * r.overflow_mass}
+                "overflow_kg_s": total * r.overflow_mass, **self._basis_info()}
         return total * p, info
+
+    def _basis_info(self) -> dict:
+        out = {"breakage_basis": ("per energy: S = S^E P / H" if self.breakage_basis == "energy"
+                                  else "per time: S in 1/s"),
+               "tau_from": self.residence_time_from}
+        if self.power_role is not None:
+            out["power_role"] = self.power_role
+        return out
 
     @property
     def ports(self) -> tuple[str, ...]:
@@ -219,7 +257,9 @@ class MillUnit:
 
     @property
     def nonlinear(self) -> bool:
-        return self.holdup is not None or self.slurry_volume is not None
+        """True when the block depends on the mill's throughput: tau from a hold-up, or rates per energy
+        (S = S^E P / H with H = tau F)."""
+        return self.holdup is not None or self.slurry_volume is not None or self.breakage_basis == "energy"
 
     @property
     def needs_water(self) -> bool:
@@ -247,8 +287,15 @@ class MillUnit:
                               "the mill receives no solids")
         return float(self.holdup) / float(throughput)
 
-    def breakage_functions(self, grid):
-        S = np.asarray(self.rate(grid.x), dtype=float)
+    def breakage_functions(self, grid, tau=None, throughput=None):
+        """(S [1/s], b) on ``grid``; rates per energy become S = S^E P / H with H = tau F [kg]."""
+        if self.breakage_basis == "energy":
+            if tau is None or throughput is None or not throughput > 0:
+                raise SolverError(f"units.{self.name}: rates per energy need the mill's hold-up, H = tau F; "
+                                  f"throughput {throughput!r} kg/s")
+            S = self.rate.time_rates(grid.x, float(self.power), float(tau) * float(throughput))
+        else:
+            S = np.asarray(self.rate(grid.x), dtype=float)
         fun = getattr(self.breakage, "b", self.breakage)
         b = np.asarray(fun(grid.x), dtype=float)
         return S, b
@@ -256,7 +303,7 @@ class MillUnit:
     def blocks(self, grid, throughput=None, water=None):
         t0 = time.perf_counter()
         tau = self.residence_time(throughput, water)
-        S, b = self.breakage_functions(grid)
+        S, b = self.breakage_functions(grid, tau, throughput)
         c = self.discharge_efficiency(grid)
         d = None
         if c is not None:
@@ -280,7 +327,7 @@ class MillUnit:
         placed = "" if d is None else (", classification d* along the axis" if where == "axis"
                                        else ", discharge classification d*")
         info = {"method": how + placed, "error_estimate": err,
-                "runtime_s": time.perf_counter() - t0, "tau_s": tau}
+                "runtime_s": time.perf_counter() - t0, "tau_s": tau, **self._basis_info()}
         if d is not None and retained.size:  # said, not silent: the floor is far below any rate that matters
             info["note"] = (f"{retained.size} classes retained completely by the discharge (c = 1): their "
                             "discharge rate d* is set to 1e-12; they leave as breakage products")

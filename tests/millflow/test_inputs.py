@@ -10,6 +10,7 @@ from millflow.errors import GridError, InputError
 from millflow.flowsheet import load
 from millflow.inputs import read_csv, read_text, read_toml
 from tests import paths
+from tests.closed_circuit import per_time_text
 
 CLOSED = paths.FLOWSHEETS / "closed_circuit_ball_mill.toml"
 
@@ -48,7 +49,7 @@ def test_flowsheet_with_bom_equals_plain(tmp_path):
     ("top_um = 8000", "top_um = 1e300", r"grid: top_m = 1e\+294 m: expected a particle size of at most 10 m"),
 ])
 def test_lists_and_absurd_sizes_are_named(tmp_path, capsys, old, new, match):
-    text = CLOSED.read_text(encoding="utf-8")
+    text = per_time_text()
     assert old in text
     p = tmp_path / "bad.toml"
     p.write_text(text.replace(old, new), encoding="utf-8")

@@ -3,6 +3,7 @@ import tomllib
 
 from millflow.bench import flowsheet as bench
 from tests import paths
+from tests.closed_circuit import per_time_text
 
 FLOWSHEETS = paths.FLOWSHEETS
 
@@ -10,7 +11,7 @@ FLOWSHEETS = paths.FLOWSHEETS
 def test_bench_case_matches_example_file():
     # the embedded benchmark circuit is the example file with another grid and 10 cells
     a = tomllib.loads(bench.CLOSED_CIRCUIT_TOML)
-    b = tomllib.loads((FLOWSHEETS / "closed_circuit_ball_mill.toml").read_text())
+    b = tomllib.loads(per_time_text())  # the example in its per-time form
     b["units"]["ball_mill"]["transport"]["n"] = 10
     assert a["units"] == b["units"] and a["streams"] == b["streams"] and a["materials"] == b["materials"]
 

@@ -12,6 +12,7 @@ from millflow.flowsheet import circulating_loads, load, loads, save, solve, summ
 from millflow.flowsheet.results import mass_balance, stream_properties
 from millflow.psd import cum_passing
 from tests import paths
+from tests.closed_circuit import per_time_text
 
 FLOWSHEETS = paths.FLOWSHEETS
 EXAMPLES = sorted(FLOWSHEETS.glob("*.toml"))
@@ -61,7 +62,7 @@ def test_circulating_load_two_product_formula(path, stream, feed, coarse, fine):
 
 
 def test_closed_circuit_holdup_is_torn_and_matches_linear():
-    text = CLOSED.read_text().replace("tau_min = 3.5", "holdup_t = 45")
+    text = per_time_text().replace("tau_min = 3.5", "holdup_t = 45")
     fs = loads(text)
     results = {}
     for method in ("wegstein", "newton", "substitution"):
@@ -70,7 +71,7 @@ def test_closed_circuit_holdup_is_torn_and_matches_linear():
         results[method] = sol
     sol = results["wegstein"]
     tau_min = float(45.0 / (sol.flow("mill_feed").sum() * 3.6) * 60)
-    lin = solve(loads(CLOSED.read_text().replace("tau_min = 3.5", f"tau_min = {tau_min!r}")))
+    lin = solve(loads(per_time_text().replace("tau_min = 3.5", f"tau_min = {tau_min!r}")))
     assert lin.solver["tear"] is None
     np.testing.assert_allclose(sol.flows, lin.flows, rtol=0, atol=1e-9 * lin.flows.max())
     np.testing.assert_allclose(results["newton"].flows, sol.flows, rtol=0, atol=1e-9 * lin.flows.max())
@@ -79,7 +80,7 @@ def test_closed_circuit_holdup_is_torn_and_matches_linear():
 
 def test_no_exit_loop_names_the_loop():
     # the mill does not break (A = 0) and the screen returns all coarse material exactly
-    text = CLOSED.read_text().replace("A_per_min = 0.9", "A_per_min = 0").replace(
+    text = per_time_text().replace("A_per_min = 0.9", "A_per_min = 0").replace(
         'curve = "whiten"\nd50c_um = 140\nalpha = 3.0\nbeta = 0.0                  # > 0 gives a fish-hook\n'
         'bypass = 0.30               # water split to underflow, R_f', 'curve = "screen"\nd50_um = 300\nm = 8')
     assert 'curve = "screen"' in text

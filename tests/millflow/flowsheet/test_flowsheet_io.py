@@ -6,8 +6,9 @@ import pytest
 from millflow.errors import GridError, InputError
 from millflow.flowsheet import loads, solve
 from tests import paths
+from tests.closed_circuit import per_time_text
 
-CLOSED = (paths.FLOWSHEETS / "closed_circuit_ball_mill.toml").read_text()
+CLOSED = per_time_text()  # the example in its per-time form (rates in 1/s, tau_min = 3.5)
 
 
 def edit(old, new, text=CLOSED):

@@ -7,6 +7,7 @@ import pytest
 from millflow.flowsheet import load, loads, solve
 from millflow.flowsheet.gridcheck import grid_check, refine_document
 from tests.paths import FLOWSHEETS
+from tests.closed_circuit import per_time_text
 
 CIRCUIT = FLOWSHEETS / "closed_circuit_ball_mill.toml"
 
@@ -19,7 +20,7 @@ def test_refine_document_halves_every_class():
 
 
 def test_coarse_grid_is_said_too_coarse_and_fine_grid_passes():
-    coarse = loads(re.sub(r"(?m)^ratio = .*$", "ratio = 1.189207115", CIRCUIT.read_text()))
+    coarse = loads(re.sub(r"(?m)^ratio = .*$", "ratio = 1.189207115", per_time_text()))
     g = grid_check(solve(coarse))
     # first order in the class width: 7.5 % at 2^(1/4) (measured), far above the 2 % threshold
     assert g["status"] == "grid too coarse" and 0.05 < g["worst"] < 0.10

@@ -6,6 +6,7 @@ import pytest
 from millflow.errors import InputError
 from millflow.flowsheet import load, loads, solve
 from tests.paths import FLOWSHEETS
+from tests.closed_circuit import per_time_text
 
 FILE = FLOWSHEETS / "closed_circuit_aggregating_mill.toml"
 LINEAR = FLOWSHEETS / "closed_circuit_ball_mill.toml"
@@ -15,7 +16,7 @@ def linear_circuit():
     """The linear example on the aggregating example's grid (ratio 2^(1/4))."""
     import re
 
-    text = re.sub(r"(?m)^ratio = .*$", "ratio = 1.189207115", LINEAR.read_text())
+    text = re.sub(r"(?m)^ratio = .*$", "ratio = 1.189207115", per_time_text())
     return loads(text)
 
 

@@ -8,8 +8,9 @@ from millflow.flowsheet import loads, solve
 from millflow.flowsheet.results import summary
 from millflow.scaleup import MillDesign
 from tests import paths
+from tests.closed_circuit import per_time_text
 
-CLOSED = (paths.FLOWSHEETS / "closed_circuit_ball_mill.toml").read_text()
+CLOSED = per_time_text()  # rates per time: a lab table scales them
 OLD = 'tau_min = 3.5\ntransport = {model = "tanks_in_series", n = 3}\npower_kW = 3800'
 DIMS = ('diameter_m = 4.0\nlength_m = 6.0\nball_filling = 0.35\ncritical_speed_fraction = 0.75\n'
         'ball_size_mm = 50\nsolid_density_kg_m3 = 2700\npower_model = "austin"\n'

@@ -6,8 +6,13 @@ from millflow.cli import main
 from millflow.errors import InputError
 from millflow.sweep import parse_vary, run_sweep
 from tests import paths
+import tempfile
+from pathlib import Path
 
-CLOSED = paths.FLOWSHEETS / "closed_circuit_ball_mill.toml"
+from tests.closed_circuit import per_time_file
+
+# the example in its per-time form (tau_min = 3.5 fixed), the linear circuit these sweeps vary
+CLOSED = per_time_file(Path(tempfile.mkdtemp()))
 VARY = ["units.ball_mill.tau_min=0:6:4", "units.fresh_feed.solids_tph=150:300:3"]
 
 
