@@ -6,8 +6,9 @@ mill (the transfer matrix P of eq. 3 or of any residence time distribution), a v
 (a diagonal block) for classifiers (diag(c), diag(1 - c)), mixers (ones) and splitters
 (fraction * ones), and s_p a constant source for feeds. All flows are solids mass flows
 per size class [kg/s], coarse -> fine. A mill whose hold-up is given instead of its
-residence time (tau = holdup / throughput) is the one nonlinear unit: its block depends
-on its own throughput, which the solver tears (see :mod:`millflow.flowsheet.solve`).
+residence time (tau = holdup / throughput), or whose rates are per energy (S = S^E P / H,
+H = tau F), is nonlinear: its block depends on its own throughput, which the solver tears
+(see :mod:`millflow.flowsheet.solve`).
 
 ``unit.blocks(grid, throughput=None)`` returns ``(blocks, info)``: ``blocks`` maps each
 outlet port to its block, ``info`` holds ``method``, ``error_estimate`` and
@@ -178,7 +179,7 @@ class MillUnit:
 
     @property
     def residence_time_from(self) -> str:
-        """How tau is set: a fixed tau, the solids hold-up over the solids flow, or the slurry volume over the slurry flow."""
+        """How tau is set: fixed, solids hold-up / solids flow, or slurry volume / slurry flow."""
         if self.tau is not None:
             return "fixed tau (given; does not follow the feed rate)"
         if self.slurry_volume is not None:

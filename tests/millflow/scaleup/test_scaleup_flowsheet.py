@@ -7,7 +7,6 @@ from millflow.errors import InputError
 from millflow.flowsheet import loads, solve
 from millflow.flowsheet.results import summary
 from millflow.scaleup import MillDesign
-from tests import paths
 from tests.closed_circuit import per_time_text
 
 CLOSED = per_time_text()  # rates per time: a lab table scales them
