@@ -70,7 +70,8 @@ __all__ = ["CycloneGeometry", "CycloneFeed", "PlittCalibration", "NageswararaoCo
            "plitt_d50c", "plitt_pressure", "plitt_flow", "plitt_split", "plitt_sharpness",
            "plitt_water_split", "plitt_cyclone",
            "nageswararao_d50c", "nageswararao_flow", "nageswararao_pressure", "nageswararao_volume_recovery",
-           "nageswararao_water_recovery", "nageswararao_cyclone"]
+           "nageswararao_water_recovery", "nageswararao_cyclone", "ValidityRange", "VALIDITY", "out_of_range",
+           "describe_out_of_range", "illustrative_constants"]
 
 G = 9.81  # [m/s2], as in the sources (Napier-Munn et al. 1996; Plitt's head H)
 
@@ -556,3 +557,83 @@ def nageswararao_cyclone(geometry: CycloneGeometry, feed: CycloneFeed, *, flow_m
     rf = nageswararao_water_recovery(geometry, feed, pressure, constants)
     return CyclonePrediction("nageswararao", nageswararao_d50c(geometry, feed, pressure, constants), constants.alpha,
                              "whiten", pressure, flow, rf, rv / (1.0 - rv), constants)
+
+
+# ------------------------------------------------------------------------------ range of use
+
+@dataclass(frozen=True)
+class ValidityRange:
+    """Where a cyclone model is used with confidence: closed intervals (low, high).
+
+    ``pressure_kPa`` inlet pressure drop; ``feed_solids_pct_v`` feed solids [% by volume];
+    ``underflow_solids_pct_v`` the roping limit of the underflow: above about 50-55 % solids by
+    volume the underflow no longer sprays but ropes, the air core collapses and coarse solids
+    report to the overflow, which neither model describes (Plitt, Conil and Broussaud, Miner.
+    Eng. 3 (1990), put the roping onset near 56 % v/v; 50 % keeps a margin). Geometry ratios to the cyclone diameter D_c: ``inlet_ratio`` D_i/D_c,
+    ``vortex_finder_ratio`` D_o/D_c, ``apex_ratio`` D_u/D_c; ``apex_to_vortex`` D_u/D_o.
+
+    The defaults are the envelope of conventional mineral-processing cyclones (Napier-Munn et al.
+    1996 ch. 10; King 2001 ch. 5), which both models were fitted within; they are a judgment, not
+    the fitted data's exact envelope. A plant survey of the cyclones themselves is the better
+    guide: pass a tighter or wider range where it is known.
+    """
+
+    pressure_kPa: tuple = (40.0, 200.0)
+    feed_solids_pct_v: tuple = (1.0, 35.0)
+    underflow_solids_pct_v: tuple = (0.0, 50.0)
+    inlet_ratio: tuple = (0.1, 0.4)
+    vortex_finder_ratio: tuple = (0.2, 0.45)
+    apex_ratio: tuple = (0.05, 0.35)
+    apex_to_vortex: tuple = (0.2, 0.9)
+
+
+#: Range of use of each model (same envelope: both are fitted to conventional cyclones).
+VALIDITY = {"plitt": ValidityRange(), "nageswararao": ValidityRange()}
+
+_RANGE_NAMES = {"pressure_kPa": ("pressure", "kPa"), "feed_solids_pct_v": ("feed solids", "% v/v"),
+                "underflow_solids_pct_v": ("underflow solids (roping limit)", "% v/v"),
+                "inlet_ratio": ("inlet diameter ratio D_i/D_c", ""),
+                "vortex_finder_ratio": ("vortex finder ratio D_o/D_c", ""),
+                "apex_ratio": ("apex ratio D_u/D_c", ""), "apex_to_vortex": ("apex to vortex finder D_u/D_o", "")}
+
+
+def out_of_range(model: str, geometry: CycloneGeometry, *, pressure_Pa: float, feed_solids_volume_fraction: float,
+                 underflow_solids_volume_fraction: float | None = None,
+                 validity: ValidityRange | None = None) -> list[tuple[str, float, tuple]]:
+    """The quantities of one operating point outside the model's range of use.
+
+    Returns ``[(quantity, value, (low, high)), ...]`` in the units of :class:`ValidityRange`
+    (empty when all are in range). ``validity`` defaults to ``VALIDITY[model]``.
+
+    >>> g = CycloneGeometry(0.66, 0.19, 0.25, 0.15, 2.0)
+    >>> [q for q, _, _ in out_of_range("plitt", g, pressure_Pa=14e3, feed_solids_volume_fraction=0.28)]
+    ['pressure_kPa']
+    """
+    rng = validity or VALIDITY[model]
+    dc = geometry.diameter_m
+    values = {"pressure_kPa": pressure_Pa / 1e3, "feed_solids_pct_v": 100.0 * feed_solids_volume_fraction,
+              "inlet_ratio": geometry.inlet_diameter_m / dc, "vortex_finder_ratio": geometry.vortex_finder_m / dc,
+              "apex_ratio": geometry.apex_m / dc, "apex_to_vortex": geometry.apex_m / geometry.vortex_finder_m}
+    if underflow_solids_volume_fraction is not None:
+        values["underflow_solids_pct_v"] = 100.0 * underflow_solids_volume_fraction
+    out = []
+    for key, v in values.items():
+        lo, hi = getattr(rng, key)
+        if not (lo <= v <= hi):
+            out.append((key, float(v), (lo, hi)))
+    return out
+
+
+def describe_out_of_range(found) -> list[str]:
+    """One phrase per quantity of :func:`out_of_range`: "pressure 13.9 kPa outside 40-200 kPa"."""
+    out = []
+    for key, v, (lo, hi) in found:
+        name, unit = _RANGE_NAMES[key]
+        u = f" {unit}" if unit else ""
+        out.append(f"{name} {v:.3g}{u} outside {lo:g}-{hi:g}{u}")
+    return out
+
+
+def illustrative_constants(model: str, calibration) -> bool:
+    """True when Nageswararao's model runs on the default (illustrative) constants."""
+    return model == "nageswararao" and (calibration is None or calibration == NageswararaoConstants())

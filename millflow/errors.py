@@ -33,3 +33,8 @@ class OutputError(MillflowError, OSError):
 class AccuracyWarning(UserWarning):
     """A result missed its requested tolerance (mass balance or error estimate) and the
     caller asked for a warning (``on_inaccuracy="warn"``) instead of a SolverError."""
+
+
+class ModelRangeWarning(UserWarning):
+    """A model was used outside its stated range of validity (or with illustrative constants);
+    the warning names the unit and the quantity."""

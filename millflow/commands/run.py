@@ -107,9 +107,14 @@ def run(args) -> int:
     props = stream_properties(sol)  # once, for the grid check, the summary and the files
     check = None
     if not args.no_grid_check:
+        import warnings
+
+        from millflow.errors import ModelRangeWarning
         from millflow.flowsheet.gridcheck import grid_check
 
-        check = grid_check(sol, props)
+        with warnings.catch_warnings():  # the refined solve repeats the range warnings the run has given
+            warnings.simplefilter("ignore", ModelRangeWarning)
+            check = grid_check(sol, props)
     s = summary(sol, props, grid_check=check)
     with staged_folder(out, overwrite=args.overwrite, input_path=path, command="run") as tmp:
         files = relocate(save(sol, tmp, plots=not args.no_plots, grid_check=check, props=props).values(), tmp, out)

@@ -22,7 +22,7 @@ import numpy as np
 from millflow.classifiers import plitt, whiten
 from millflow.errors import InputError, SolverError
 
-__all__ = ["PredictedCyclone", "CYCLONE_MODELS"]
+__all__ = ["PredictedCyclone", "CYCLONE_MODELS", "report_operation"]
 
 #: Cyclone models by the name used in flowsheet files.
 CYCLONE_MODELS = ("plitt", "nageswararao")
@@ -132,3 +132,50 @@ class PredictedCyclone:
             return 0.5
         cc = _CORRECTED[self.model](grid.x, info["d50c_m"], info["sharpness"])
         return float(np.dot(np.asarray(inflow, float) / total, cc))
+
+
+def report_operation(fs, flows, water, reports) -> None:
+    """Per hydrocyclone unit, its operation as numbers in its report, and a warning per quantity
+    outside its model's range of use (:func:`millflow.cyclones.out_of_range`), once per solve.
+
+    Adds to ``reports[unit]``: ``cyclones`` (count), ``d50c_m``, ``pressure_Pa`` and
+    ``flow_per_cyclone_m3_s`` (predicted cyclones; a fixed curve gives only its d50c), and in a
+    wet circuit ``underflow_solids_content`` (mass fraction) and, with densities,
+    ``underflow_solids_volume_fraction``; ``out_of_range`` lists the phrases warned.
+    """
+    import warnings
+
+    from millflow.cyclones import describe_out_of_range, illustrative_constants, out_of_range
+    from millflow.errors import ModelRangeWarning
+
+    names = fs.stream_names
+    for uname, unit in fs.units.items():
+        if getattr(unit, "kind", None) != "hydrocyclone":
+            continue
+        rep = reports[uname]
+        if not isinstance(unit, PredictedCyclone) and "d50c" in getattr(unit, "params", {}):
+            rep["d50c_m"] = float(unit.params["d50c"])
+        under = next((n for n in fs.outlets(uname) if fs.streams[n].port == "underflow"), None)
+        if under is not None and water is not None and float(np.sum(water.flows)) > 0:
+            s = float(np.sum(flows[names.index(under)]))
+            w = float(water.flows[names.index(under)])
+            if s + w > 0:
+                rep["underflow_solids_content"] = s / (s + w)
+            if fs.slurry is not None and s + w > 0:
+                vs = s / fs.slurry.solids_density
+                rep["underflow_solids_volume_fraction"] = vs / (vs + w / fs.slurry.water_density)
+        if not isinstance(unit, PredictedCyclone):
+            continue
+        rep["cyclones"] = unit.cyclones
+        found = out_of_range(unit.model, unit.geometry, pressure_Pa=rep["pressure_Pa"],
+                             feed_solids_volume_fraction=rep["solids_volume_fraction"],
+                             underflow_solids_volume_fraction=rep.get("underflow_solids_volume_fraction"))
+        said = [f"units.{uname}: {phrase} (range of use of {unit.model}'s model, {unit.cyclones} cyclones)"
+                for phrase in describe_out_of_range(found)]
+        if illustrative_constants(unit.model, unit.calibration):
+            said.append(f"units.{uname}: Nageswararao's model runs on its default constants (K_D0, K_Q0, K_V1, "
+                        "K_W1), which are illustrative magnitudes, not fitted values; give the plant's own "
+                        "(calibration table) before trusting d50c, flow or splits")
+        rep["out_of_range"] = said
+        for msg in said:
+            warnings.warn(msg, ModelRangeWarning, stacklevel=3)

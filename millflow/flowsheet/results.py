@@ -203,7 +203,17 @@ def to_dataset(sol, props=None, grid_check=None):
                                           ("holdup_kg", "unit_holdup", "kg", "solids hold-up of the mill"),
                                           ("power_kW", "unit_power", "kW", "mill power draw"),
                                           ("specific_energy_kWh_per_t", "unit_specific_energy", "kWh/t",
-                                           "mill specific energy")):
+                                           "mill specific energy"),
+                                          ("cyclones", "unit_cyclones", "1", "number of cyclones in the cluster"),
+                                          ("d50c_m", "unit_d50c", "m", "corrected cut size of the classifier"),
+                                          ("pressure_Pa", "unit_pressure", "Pa", "cyclone inlet pressure drop"),
+                                          ("flow_per_cyclone_m3_s", "unit_flow_per_cyclone", "m3/s",
+                                           "slurry feed flow per cyclone"),
+                                          ("underflow_solids_content", "unit_underflow_solids_content", "1",
+                                           "solids mass fraction of the cyclone underflow"),
+                                          ("underflow_solids_volume_fraction", "unit_underflow_solids_volume",
+                                           "1", "solids volume fraction of the cyclone underflow (roping "
+                                                "above about 0.50-0.55)")):
         vals = [sol.units[u].get(key) for u in units]
         if any(v is not None for v in vals):
             ds[name] = var("unit", [np.nan if v is None else v for v in vals], unit_of, long_name)
@@ -309,6 +319,7 @@ def summary(sol, props=None, grid_check=None) -> dict:
         "specific_energy_kWh_per_t": _specific_energy(sol),
         "units": units,
         "notes": notes(sol),
+        "model_range": [m for r in sol.units.values() for m in (r.get("out_of_range") or [])],
         "solver": {k: v for k, v in sol.solver.items()},
         "kernel": _kernel_status(),
         **_provenance(fs),
@@ -317,8 +328,22 @@ def summary(sol, props=None, grid_check=None) -> dict:
     })
 
 
+def _cyclone_columns(r) -> dict:
+    """Cyclone operation as numbers (units.csv): count, d50c, pressure, flow per cyclone, underflow solids."""
+    def scaled(key, factor):
+        v = r.get(key)
+        return None if v is None else v * factor
+
+    return {"cyclones": r.get("cyclones"), "d50c_um": scaled("d50c_m", 1e6), "pressure_kPa": scaled("pressure_Pa", 1e-3),
+            "flow_per_cyclone_m3_h": scaled("flow_per_cyclone_m3_s", 3600.0),
+            "underflow_solids_pct_w": scaled("underflow_solids_content", 100.0),
+            "underflow_solids_pct_v": scaled("underflow_solids_volume_fraction", 100.0)}
+
+
 def notes(sol) -> list[str]:
-    """What a reader of the results must know once: mills whose power is information only."""
+    """What a reader of the results must know once: mills whose power is information only. (Models
+    used outside their range are warned, :class:`millflow.errors.ModelRangeWarning`, and listed in
+    the summary's ``model_range``.)"""
     out = []
     for u, unit in sol.flowsheet.units.items():
         if unit.type == "mill" and getattr(unit, "power_role", None) and unit.breakage_basis != "energy":
@@ -361,6 +386,7 @@ def unit_table(sol):
                      "runtime_s": r["runtime_s"], "tau_min": r["tau_s"] / 60 if r.get("tau_s") else None,
                      "holdup_t": r["holdup_kg"] / 1e3 if r.get("holdup_kg") else None, "power_kW": r.get("power_kW"),
                      "specific_energy_kWh_per_t": r.get("specific_energy_kWh_per_t"),
+                     **_cyclone_columns(r),
                      "breakage_basis": r.get("breakage_basis"), "tau_from": r.get("tau_from"),
                      "power_role": r.get("power_role")})
     return pd.DataFrame(rows).set_index("unit")

@@ -372,6 +372,8 @@ def solve(fs, *, method="wegstein", tol: float = 1e-13, maxiter: int = 200,
 
     water = solve_water(fs, flows, infos)
     reports = _unit_reports(fs, flows, infos, mass_tol, water)
+    from millflow.flowsheet.cyclone import report_operation
+    report_operation(fs, flows, water, reports)  # cyclone numbers, and a warning per quantity out of range
     solver = dict(lin)
     solver["structure"] = ("nonlinear: tear iterations on the inlet flows of " + ", ".join(torn) if torn
                            else "all linear: one linear solve")

@@ -8,8 +8,8 @@ from tests.paths import FLOWSHEETS
 BASE = (FLOWSHEETS / "closed_circuit_wet_cyclones.toml").read_text()
 
 CASES = [
-    (("cyclones = 6", 'cyclones = "six"'), 2, "expected a number"),
-    (("cyclones = 6", "cyclones = 0"), 2, "whole number >= 1"),
+    (("cyclones = 2 ", 'cyclones = "six" '), 2, "expected a number"),
+    (("cyclones = 2 ", "cyclones = 0 "), 2, "whole number >= 1"),
     (("apex_mm = 150", "apex_mm = 300"), 2, "apex"),
     (("apex_mm = 150", "apex_mm = 1e300"), 2, "apex"),
     (("add_water_tph = 250", "add_water_tph = -5"), 2, ">= 0"),
