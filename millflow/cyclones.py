@@ -569,7 +569,8 @@ class ValidityRange:
     ``underflow_solids_pct_v`` the roping limit of the underflow: above about 50-55 % solids by
     volume the underflow no longer sprays but ropes, the air core collapses and coarse solids
     report to the overflow, which neither model describes (Plitt, Conil and Broussaud, Miner.
-    Eng. 3 (1990), put the roping onset near 56 % v/v; 50 % keeps a margin). Geometry ratios to the cyclone diameter D_c: ``inlet_ratio`` D_i/D_c,
+    Eng. 3 (1990), put the roping onset near 56 % v/v; 50 % keeps a margin). Geometry ratios to
+    the cyclone diameter D_c: ``inlet_ratio`` D_i/D_c,
     ``vortex_finder_ratio`` D_o/D_c, ``apex_ratio`` D_u/D_c; ``apex_to_vortex`` D_u/D_o.
 
     The defaults are the envelope of conventional mineral-processing cyclones (Napier-Munn et al.

@@ -175,7 +175,7 @@ def report_operation(fs, flows, water, reports) -> None:
         if illustrative_constants(unit.model, unit.calibration):
             said.append(f"units.{uname}: Nageswararao's model runs on its default constants (K_D0, K_Q0, K_V1, "
                         "K_W1), which are illustrative magnitudes, not fitted values; give the plant's own "
-                        "(calibration table) before trusting d50c, flow or splits")
+                        "(K_D0 = ..., K_Q0 = ... in the unit table) before trusting d50c, flow or splits")
         rep["out_of_range"] = said
         for msg in said:
             warnings.warn(msg, ModelRangeWarning, stacklevel=3)

@@ -334,7 +334,8 @@ def _cyclone_columns(r) -> dict:
         v = r.get(key)
         return None if v is None else v * factor
 
-    return {"cyclones": r.get("cyclones"), "d50c_um": scaled("d50c_m", 1e6), "pressure_kPa": scaled("pressure_Pa", 1e-3),
+    return {"cyclones": r.get("cyclones"), "d50c_um": scaled("d50c_m", 1e6),
+            "pressure_kPa": scaled("pressure_Pa", 1e-3),
             "flow_per_cyclone_m3_h": scaled("flow_per_cyclone_m3_s", 3600.0),
             "underflow_solids_pct_w": scaled("underflow_solids_content", 100.0),
             "underflow_solids_pct_v": scaled("underflow_solids_volume_fraction", 100.0)}

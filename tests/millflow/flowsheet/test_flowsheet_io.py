@@ -5,7 +5,6 @@ import pytest
 
 from millflow.errors import GridError, InputError
 from millflow.flowsheet import loads, solve
-from tests import paths
 from tests.closed_circuit import per_time_text
 
 CLOSED = per_time_text()  # the example in its per-time form (rates in 1/s, tau_min = 3.5)
