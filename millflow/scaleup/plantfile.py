@@ -173,8 +173,25 @@ def _feed(table, grid_x, src):
     return f, float(table["feed_tph"])
 
 
-def load_plant(path, fit: FittedBreakage) -> tuple[ScaleUp, dict]:
-    """ScaleUp for the plant file at ``path`` and the fit; second value: notes (transport source)."""
+def _power_models(d: dict) -> dict:
+    """Lab and plant use the same power-model family unless both state theirs: one given, the
+    other takes it. Returns {"lab", "plant", "mixed"} (mixed: a stated choice, flagged)."""
+    lab, plant = d.get("lab"), d.get("mill")
+    if not (isinstance(lab, dict) and isinstance(plant, dict)):
+        return {}
+    if "power_model" in plant and "power_model" not in lab:
+        lab["power_model"] = plant["power_model"]
+    elif "power_model" in lab and "power_model" not in plant:
+        plant["power_model"] = lab["power_model"]
+    ml = "given" if "power_kW" in lab else lab.get("power_model", "austin")
+    mp = "given" if "power_kW" in plant else plant.get("power_model", "austin")
+    return {"lab": ml, "plant": mp, "mixed": ml != mp and "given" not in (ml, mp)}
+
+
+def load_plant(path, fit: FittedBreakage, refine: int = 0) -> tuple[ScaleUp, dict]:
+    """ScaleUp for the plant file at ``path`` and the fit; second value: notes (transport source,
+    power models). ``refine``: halve the prediction grid's class width (in log size) this many
+    times (the grid contribution to the band)."""
     path = Path(path)
     src = str(path)
     try:
@@ -184,6 +201,7 @@ def load_plant(path, fit: FittedBreakage) -> tuple[ScaleUp, dict]:
     unknown = sorted(set(d) - _TOP)
     if unknown:
         raise InputError(f"{src}: unknown tables/keys {unknown}; expected {sorted(_TOP)}")
+    models = _power_models(d)
     lab = _mill(d.get("lab"), "lab", src)
     plant = _mill(d.get("mill"), "mill", src)
     name, tparams, tsrc = _transport(d.get("transport"), src, path.parent, plant)
@@ -193,7 +211,9 @@ def load_plant(path, fit: FittedBreakage) -> tuple[ScaleUp, dict]:
     if g is not None:
         _check_keys(g, {"top_um", "bottom_um", "ratio"}, "grid", src)
         x = SizeGrid.between(float(g["top_um"]) * 1e-6, float(g.get("bottom_um", fit.x[-1] * 1e6)) * 1e-6,
-                             float(g.get("ratio", fit.x[0] / fit.x[1]))).x
+                             float(g.get("ratio", fit.x[0] / fit.x[1])) ** (0.5 ** refine)).x
+    elif refine:
+        x = SizeGrid.between(fit.x[0], fit.x[-1], (fit.x[0] / fit.x[1]) ** (0.5 ** refine)).x
     feed, tph = _feed(d.get("feed"), x, src)
     search = d.get("search", {})
     _check_keys(search, {"throughput_range_tph"}, "search", src)
@@ -205,4 +225,4 @@ def load_plant(path, fit: FittedBreakage) -> tuple[ScaleUp, dict]:
                  scaling=d.get("scaling", "herbst_fuerstenau"), austin_overrides=austin, x=x,
                  throughput_range_tph=tuple(rng))
     return su, {"title": d.get("title", path.stem), "transport_source": tsrc, "transport": name,
-                "transport_params": tparams}
+                "transport_params": tparams, "power_models": models}

@@ -14,7 +14,10 @@
   after Austin, Klimpel & Luckie (1984), Process Engineering of Size Reduction: Ball
   Milling, ch. 10 (and L. G. Austin, P. T. Luckie, K. Shoji, Powder Technol. 14 (1976) 71
   for the ball-size terms). Every exponent is an argument; the defaults are the values
-  AKL quote as typical, to be replaced by tested values where they exist.
+  AKL quote as typical, to be replaced by tested values where they exist. The ball-size
+  exponent of the size at maximum rate, mu ~ d^N2, is N2 = 2: Austin, Shoji and Luckie
+  (1976, abstract) find the size of maximum breakage rate proportional to the square of the
+  ball diameter (earlier versions of this module used N2 = 1, i.e. mu ~ d).
 """
 from __future__ import annotations
 
@@ -42,7 +45,7 @@ def herbst_fuerstenau_rates(S_E, power_W, holdup_kg):
 AUSTIN_DEFAULTS = {
     "N0": 1.0,     # A ~ (d_ref/d)^N0, ball diameter (xi of eq. 7)
     "N1": 0.5,     # A ~ D^N1 for D up to D_large
-    "N2": 1.0,     # mu ~ (d/d_ref)^N2 (eta of eq. 7)
+    "N2": 2.0,     # mu ~ (d/d_ref)^N2 (eta of eq. 7): the size of maximum rate ~ d^2 (Austin, Shoji & Luckie 1976)
     "N3": 0.2,     # mu ~ D^N3
     "Delta": 0.2,  # above D_large, A ~ D^(N1 - Delta)
     "D_large_m": 3.81,

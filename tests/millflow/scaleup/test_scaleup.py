@@ -135,7 +135,8 @@ def test_austin_factors_identity_and_diameter_break():
     assert austin_factors(m, {**m, "diameter_m": 5.0}, N1=0.4, Delta=0.0)["terms"]["diameter"] == \
         pytest.approx((5.0 / 3.0) ** 0.4, rel=1e-14)
     half = austin_factors(m, {**m, "ball_size_mm": 20})
-    assert half["terms"]["ball_size"] == pytest.approx(2.0, rel=1e-14) and half["mu"] == pytest.approx(0.5, rel=1e-14)
+    # mu ~ d^2 (Austin, Shoji & Luckie 1976): half the ball size, a quarter of mu
+    assert half["terms"]["ball_size"] == pytest.approx(2.0, rel=1e-14) and half["mu"] == pytest.approx(0.25, rel=1e-14)
     with pytest.raises(InputError, match="unknown overrides"):
         austin_factors(m, m, N9=1)
 
