@@ -18,7 +18,8 @@ P80, or the P80 at the plant feed rate):
 
 Each contribution is also stated as a log factor l: the largest |ln(q / q0)| over its
 alternatives (parameters: the band's ends; the size grid, whose sign is not known from one
-refinement: ln(q0 / (q0 - h)), the larger side). A shift of -50 % is a factor 2. The **total band** adds these log factors linearly, L = sum l, and is [q0 e^-L, q0 e^L]:
+refinement: ln(q0 / (q0 - h)), the larger side). A shift of -50 % is a factor 2. The
+**total band** adds these log factors linearly, L = sum l, and is [q0 e^-L, q0 e^L]:
 a conservative bound that stays positive (the model-form spreads are ranges of plausible
 models, not probabilities, so they are not combined in quadrature with the parameter band).
 """
@@ -89,7 +90,8 @@ def contributions(su, target_p80_m, parameter_band: dict | None, refined=None) -
                            "how": "lab and plant under each power family; largest shift from the base"}
     other = "austin" if su.scaling == "herbst_fuerstenau" else "herbst_fuerstenau"
     q_other = _safe(lambda: quantity(dataclasses.replace(su, scaling=other), target_p80_m))
-    rows["scaling_rule"] = {"half_width": abs(q_other - q0), "log_factor": _log(q_other, q0), "alternatives": {su.scaling: q0, other: q_other},
+    rows["scaling_rule"] = {"half_width": abs(q_other - q0), "log_factor": _log(q_other, q0),
+                            "alternatives": {su.scaling: q0, other: q_other},
                             "how": "Herbst-Fuerstenau against Austin's factors; the shift"}
     if refined is not None:
         q_fine = _safe(lambda: quantity(refined, target_p80_m))
