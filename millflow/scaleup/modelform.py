@@ -33,9 +33,9 @@ from millflow.scaleup.power import POWER_MODELS
 
 __all__ = ["quantity", "contributions", "TOTAL_RULE"]
 
-TOTAL_RULE = ("total = [q0 / F, q0 F], F = exp(sum of each contribution's log factor): parameter 95 % band, power model, "
-              "scaling rule and size grid added linearly in log (a conservative bound; model-form spreads are "
-              "ranges, not probabilities)")
+TOTAL_RULE = ("total = [q0 / F, q0 F], F = exp(sum of each contribution's log factor): parameter 95 % band, "
+              "power model, scaling rule and size grid added linearly in log (a conservative bound; model-form "
+              "spreads are ranges, not probabilities)")
 
 
 def quantity(su, target_p80_m=None) -> float:

@@ -38,7 +38,9 @@ def specific_rates(S, power_W, holdup_kg):
 
 def herbst_fuerstenau_rates(S_E, power_W, holdup_kg):
     """S [1/s] = S^E [kg/J] P [W] / H [kg] (Herbst & Fuerstenau 1980, eq. 5 of their paper)."""
-    return np.asarray(S_E, float) * _positive(power_W, "power_W") / _positive(holdup_kg, "holdup_kg")
+    from millflow.breakage.energy import time_rates  # the one implementation of S = S^E P / H
+
+    return time_rates(S_E, _positive(power_W, "power_W"), _positive(holdup_kg, "holdup_kg"))
 
 
 #: Austin's scale-up exponents and constants (AKL 1984 ch. 10, typical values).
