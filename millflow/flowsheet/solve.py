@@ -450,6 +450,8 @@ def _solve_kinetic(fs, kin, method, tol, maxiter, t0, mass_tol=MASS_TOL):
     flows, lin = state["flows"], state["info"]
     water = solve_water(fs, flows, infos)
     reports = _unit_reports(fs, flows, infos, mass_tol, water)
+    from millflow.flowsheet.cyclone import report_operation
+    report_operation(fs, flows, water, reports)
     solver = dict(lin)
     solver["structure"] = "non-linear kinetics: tear iterations on the inlet flow vectors of " + ", ".join(kin)
     solver["tear"] = {"method": method, "torn_units": kin, "torn": "inlet flow vector", "iterations": int(its),
