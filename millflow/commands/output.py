@@ -152,3 +152,20 @@ def add_output_flags(p, *, out: str, json: str, plots: str, quiet: str) -> None:
     p.add_argument("--overwrite", action="store_true",
                    help="replace an output folder that holds files millflow did not write")
 
+
+
+def write_extras(sol, summary: dict, folder, *, input_path=None, command: str = "millflow run") -> dict:
+    """``report.html`` (always) and ``results.xlsx`` (when openpyxl is installed) of a
+    solved flowsheet into ``folder``; returns name -> path."""
+    from millflow.report import partition_curves, write_report
+
+    folder = Path(folder)
+    files = {"report_html": write_report(folder / "report.html", summary, input_path=input_path,
+                                         partition=partition_curves(sol), command=command)}
+    from millflow.report.excel import excel_available, write_workbook
+
+    if excel_available():
+        from millflow.report.excel import class_flows_tph
+
+        files["results_xlsx"] = write_workbook(folder / "results.xlsx", summary, class_flows_tph(sol))
+    return files

@@ -90,7 +90,7 @@ def format_summary(s: dict, out_dir: str | None, written: list[str] | None = Non
 
 
 def run(args) -> int:
-    from millflow.commands.output import check_target, relocate, staged_folder
+    from millflow.commands.output import check_target, relocate, staged_folder, write_extras
     from millflow.flowsheet import load, save, solve, summary
     from millflow.flowsheet.results import stream_properties
 
@@ -107,7 +107,9 @@ def run(args) -> int:
         check = grid_check(sol, props)
     s = summary(sol, props, grid_check=check)
     with staged_folder(out, overwrite=args.overwrite, input_path=path, command="run") as tmp:
-        files = relocate(save(sol, tmp, plots=not args.no_plots, grid_check=check, props=props).values(), tmp, out)
+        written = save(sol, tmp, plots=not args.no_plots, grid_check=check, props=props)
+        written.update(write_extras(sol, s, tmp, input_path=path, command="millflow run"))
+        files = relocate(written.values(), tmp, out)
     s["output_dir"] = str(out)
     s["files_written"] = [Path(f).name for f in files]
     if args.json:
