@@ -1,4 +1,5 @@
-"""`millflow run FILE.toml [--out DIR] [--json] [--no-plots] [--overwrite] [--quiet]`: solve a flowsheet.
+"""`millflow run FILE.toml [--out DIR] [--json] [--no-plots] [--overwrite] [--quiet]
+[--tear-method M]`: solve a flowsheet.
 
 Prints a compact table (stream, t/h, P80, P50, % passing the named sizes), the
 circulating loads, mass balance, specific energy and run time, and writes results.nc,
@@ -12,7 +13,7 @@ import json
 import math
 from pathlib import Path
 
-from millflow.commands.output import add_output_flags
+from millflow.commands.output import add_output_flags, deprecated_alias
 
 
 def add_parser(subparsers) -> None:
@@ -21,11 +22,12 @@ def add_parser(subparsers) -> None:
     p.add_argument("file", help="flowsheet file (TOML), e.g. flowsheets/closed_circuit_ball_mill.toml")
     add_output_flags(p, out="output folder (default: <file stem>-results)",
                      json="print one JSON object instead of the table",
-                     plots="do not write the PNG plots", quiet="print nothing but errors (and --json output)")
+                     plots="do not write the PNG plots")
     p.add_argument("--no-grid-check", action="store_true",
                    help="skip the second solve on a refined size grid (Principle IV)")
-    p.add_argument("--method", default="wegstein", help="tear method for nonlinear units (wegstein, newton, "
-                                                        "substitution)")
+    p.add_argument("--tear-method", default="wegstein", dest="tear_method",
+                   help="tear method for nonlinear units (wegstein, newton, substitution)")
+    deprecated_alias(p, "--method", "--tear-method", "tear_method")
     p.set_defaults(func=run)
 
 
@@ -98,7 +100,7 @@ def run(args) -> int:
     out = Path(args.out) if args.out else Path.cwd() / f"{path.stem}-results"
     check_target(out, overwrite=args.overwrite, input_path=path)  # before the work, not after
     fs = load(path)
-    sol = solve(fs, method=args.method)
+    sol = solve(fs, method=args.tear_method)
     props = stream_properties(sol)  # once, for the grid check, the summary and the files
     check = None
     if not args.no_grid_check:
@@ -114,7 +116,7 @@ def run(args) -> int:
     s["files_written"] = [Path(f).name for f in files]
     if args.json:
         print(json.dumps(s))
-    elif not args.quiet:
+    else:
         try:
             shown = str(out.relative_to(Path.cwd()))
         except ValueError:

@@ -13,7 +13,7 @@ from __future__ import annotations
 import json
 from pathlib import Path
 
-from millflow.commands.output import add_output_flags
+from millflow.commands.output import add_output_flags, deprecated_alias
 
 
 def add_parser(subparsers) -> None:
@@ -26,9 +26,11 @@ def add_parser(subparsers) -> None:
     p.add_argument("--target-p80-um", type=float, default=None, help="target product P80 [um]: solve for throughput")
     add_output_flags(p, out="output folder (default: <plant stem>-scaleup)",
                      json="print one JSON object instead of the text summary",
-                     plots="do not write scaleup.png", quiet="print nothing but errors (and --json output)")
+                     plots="do not write scaleup.png")
     p.add_argument("--draws", type=int, default=1000, help="Monte Carlo draws (default 1000)")
-    p.add_argument("--method", choices=["both", "delta", "mc"], default="both", help="band method(s)")
+    p.add_argument("--band-method", choices=["both", "delta", "mc"], default="both", dest="band_method",
+                   help="method(s) of the 95 %% bands: delta method, Monte Carlo or both (default both)")
+    deprecated_alias(p, "--method", "--band-method", "band_method")
     p.set_defaults(func=run)
 
 
@@ -73,7 +75,7 @@ def run(args) -> int:
     if args.draws < 10:
         from millflow.errors import InputError
         raise InputError(f"--draws {args.draws}: expected >= 10")
-    methods = {"both": ("delta", "mc"), "delta": ("delta",), "mc": ("mc",)}[args.method]
+    methods = {"both": ("delta", "mc"), "delta": ("delta",), "mc": ("mc",)}[args.band_method]
     res = predict_plant(su, target, methods=methods, n_draws=args.draws)  # SolverError: exit 1 (cli.main)
     s = dict(res.summary)
     sc = res.scale
@@ -86,7 +88,7 @@ def run(args) -> int:
     s["files_written"] = [f.name for f in files]
     if args.json:
         print(json.dumps(s, default=float))
-    elif not args.quiet:
+    else:
         print(format_summary(s))
         print(f"wrote {out}/ ({', '.join(s['files_written'])})")
     return 0
@@ -98,11 +100,22 @@ def _write(res, s, out: Path, plots: bool):
     files = [out / "scaleup.nc", out / "scaleup_psd.csv", out / "scaleup.json"]
     ds = res.dataset
     ds.to_netcdf(files[0])
-    cols = {"size_um": ds.x.values * 1e6, "passing": ds.passing.values, "feed_passing": ds.feed_passing.values}
+    # passing in % (every CSV: docs/cli.md) at 6 significant digits; a band edge beyond
+    # [0, 100] % is a linearisation artefact of the delta method: shown at the bound and
+    # counted in scaleup.json (band_edges_at_physical_bounds)
+    import numpy as np
+
+    cols = {"size_um": ds.x.values * 1e6, "passing_pct": 100 * ds.passing.values,
+            "feed_passing_pct": 100 * ds.feed_passing.values}
+    clipped = 0
     for m in ds.estimator.values:
-        cols[f"passing_lo_{m}"] = ds.passing_lo.sel(estimator=m).values
-        cols[f"passing_hi_{m}"] = ds.passing_hi.sel(estimator=m).values
-    pd.DataFrame(cols).to_csv(files[1], index=False)
+        for side in ("lo", "hi"):
+            v = 100 * ds[f"passing_{side}"].sel(estimator=m).values
+            clipped += int(np.count_nonzero((v < 0) | (v > 100)))
+            cols[f"passing_{side}_{m}_pct"] = np.clip(v, 0.0, 100.0)
+    cols["passing_pct"] = np.clip(cols["passing_pct"], 0.0, 100.0)  # rounding above 100 % only
+    s["band_edges_at_physical_bounds"] = clipped
+    pd.DataFrame(cols).to_csv(files[1], index=False, float_format="%.6g")
     files[2].write_text(json.dumps(s, indent=1, default=float))
     if plots:
         from millflow.plotting import figure

@@ -33,7 +33,7 @@ def add_parser(subparsers) -> None:
     p.add_argument("--workers", type=int, default=None, help="LocalCluster workers (default: all cores)")
     add_output_flags(p, out="output folder (default: <file stem>-sweep)",
                      json="print a JSON summary instead of the text one",
-                     plots="do not write the plots", quiet="no progress bar")
+                     plots="do not write the plots")
     p.set_defaults(func=run)
 
 
@@ -60,7 +60,7 @@ def run(args) -> int:
             _plots(ds, axes, tmp / "sweep.png")
     if args.json:
         print(json.dumps(summary))
-    elif not args.quiet:
+    else:  # --quiet hides progress only
         print(f"{path}: {summary['cases']} cases ({summary['design']}; {summary['varied']}), "
               f"{summary['failed']} failed; written to {out}/")
     if summary["failed"]:
