@@ -28,3 +28,31 @@ def test_strict_build_has_no_warnings(site):
     proc, _ = site
     assert proc.returncode == 0, proc.stderr[-3000:]
     assert "WARNING" not in proc.stderr, proc.stderr[-3000:]
+
+
+def test_nothing_is_loaded_from_the_network(site):
+    import re
+
+    _, out = site
+    assert (out / "assets" / "mathjax" / "tex-svg.js").stat().st_size > 1_000_000  # MathJax served locally
+    loaded = re.compile(r'(?:<script[^>]*\bsrc|<link[^>]*rel="stylesheet"[^>]*\bhref|<img[^>]*\bsrc)="(https?:)?//')
+    for page in out.rglob("*.html"):
+        assert not loaded.search(page.read_text(encoding="utf-8")), page
+
+
+def test_equations_render_in_headless_chromium(site):
+    import shutil
+
+    browser = next((shutil.which(b) for b in ("chromium", "chromium-browser", "google-chrome") if shutil.which(b)),
+                   None)
+    if browser is None:
+        pytest.skip("no Chromium or Chrome on this machine (.ci/run installs chromium with apt-get)")
+    _, out = site
+    page = out / "equations" / "index.html"
+    proc = subprocess.run([browser, "--headless", "--no-sandbox", "--disable-gpu", "--enable-logging=stderr", "--v=0",
+                           "--virtual-time-budget=10000", "--dump-dom", page.as_uri()],
+                          capture_output=True, text=True, timeout=120)
+    assert proc.returncode == 0
+    assert not [line for line in proc.stderr.splitlines() if ":CONSOLE" in line and "rror" in line]
+    # every display equation (eqs. 1-10) and the inline ones typeset by MathJax
+    assert proc.stdout.count("<mjx-container") >= 30
