@@ -40,7 +40,13 @@ def run(args) -> int:
     pa, pb = Path(args.a), Path(args.b)
     out = Path(args.out) if args.out else Path.cwd() / f"{pa.stem}-vs-{pb.stem}"
     check_target(out, overwrite=args.overwrite, input_path=pa)
-    sa, sb = summary(solve(load(pa))), summary(solve(load(pb)))
+    from millflow.progress import stages
+
+    with stages("millflow compare", ["solve A", "solve B"], enabled=not args.quiet) as stage:
+        stage("solve A")
+        sa = summary(solve(load(pa)))
+        stage("solve B")
+        sb = summary(solve(load(pb)))
     shared = [n for n in sa["streams"] if n in sb["streams"]]
     if not shared:
         raise InputError(f"{pa} and {pb} share no stream name; compare needs streams of the same name")

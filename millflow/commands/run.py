@@ -99,19 +99,26 @@ def run(args) -> int:
     path = Path(args.file)
     out = Path(args.out) if args.out else Path.cwd() / f"{path.stem}-results"
     check_target(out, overwrite=args.overwrite, input_path=path)  # before the work, not after
-    fs = load(path)
-    sol = solve(fs, method=args.tear_method)
-    props = stream_properties(sol)  # once, for the grid check, the summary and the files
-    check = None
-    if not args.no_grid_check:
-        from millflow.flowsheet.gridcheck import grid_check
+    from millflow.progress import stages
 
-        check = grid_check(sol, props)
-    s = summary(sol, props, grid_check=check)
-    with staged_folder(out, overwrite=args.overwrite, input_path=path, command="run") as tmp:
-        written = save(sol, tmp, plots=not args.no_plots, grid_check=check, props=props)
-        written.update(write_extras(sol, s, tmp, input_path=path, command="millflow run"))
-        files = relocate(written.values(), tmp, out)
+    names = ["solve"] + ([] if args.no_grid_check else ["grid check"]) + ["write"]
+    with stages("millflow run", names, enabled=not args.quiet) as stage:
+        stage("solve")
+        fs = load(path)
+        sol = solve(fs, method=args.tear_method)
+        props = stream_properties(sol)  # once, for the grid check, the summary and the files
+        check = None
+        if not args.no_grid_check:
+            from millflow.flowsheet.gridcheck import grid_check
+
+            stage("grid check")
+            check = grid_check(sol, props)
+        s = summary(sol, props, grid_check=check)
+        stage("write")
+        with staged_folder(out, overwrite=args.overwrite, input_path=path, command="run") as tmp:
+            written = save(sol, tmp, plots=not args.no_plots, grid_check=check, props=props)
+            written.update(write_extras(sol, s, tmp, input_path=path, command="millflow run"))
+            files = relocate(written.values(), tmp, out)
     s["output_dir"] = str(out)
     s["files_written"] = [Path(f).name for f in files]
     if args.json:

@@ -76,7 +76,12 @@ def run(args) -> int:
         from millflow.errors import InputError
         raise InputError(f"--draws {args.draws}: expected >= 10")
     methods = {"both": ("delta", "mc"), "delta": ("delta",), "mc": ("mc",)}[args.band_method]
-    res = predict_plant(su, target, methods=methods, n_draws=args.draws)  # SolverError: exit 1 (cli.main)
+    from millflow.progress import stages
+
+    what = " and ".join({"delta": "delta-method", "mc": f"{args.draws}-draw Monte Carlo"}[m] for m in methods)
+    with stages("millflow scaleup", [f"prediction with {what} bands"], enabled=not args.quiet) as stage:
+        stage(f"prediction with {what} bands")
+        res = predict_plant(su, target, methods=methods, n_draws=args.draws)  # SolverError: exit 1 (cli.main)
     s = dict(res.summary)
     sc = res.scale
     s.update(title=notes["title"], fit=Path(args.fit).name, scaling=su.scaling, power_model=sc["power_model"],

@@ -119,3 +119,35 @@ def test_fit_ranking_table_aligns_long_names_and_says_why_not_best():
     assert "note: the estimates above are of the config's [model] 'base' (dAIC 5.00)" in text
     assert repr(long) in text
     assert "note" not in ranking_table(rows, long)
+
+
+class _Terminal:
+    """A stderr that says it is a terminal (progress is shown only on one)."""
+
+    def __init__(self):
+        import io
+
+        self.buf = io.StringIO()
+
+    def write(self, s):
+        return self.buf.write(s)
+
+    def flush(self):
+        pass
+
+    def isatty(self):
+        return True
+
+
+@pytest.mark.parametrize("quiet", [False, True])
+def test_progress_on_a_terminal_and_quiet_hides_it(tmp_path, monkeypatch, capsys, quiet):
+    term = _Terminal()
+    monkeypatch.setattr("sys.stderr", term)
+    argv = ["run", str(OPEN), "--no-plots", "--out", str(tmp_path / "r")] + (["--quiet"] if quiet else [])
+    assert main(argv) == 0
+    err = term.buf.getvalue()
+    assert "P80 um" in capsys.readouterr().out  # the results print either way
+    if quiet:
+        assert err == ""
+    else:
+        assert "millflow run" in err and "grid check" in err and "write" in err
