@@ -92,6 +92,13 @@ def run(args) -> int:
                   f"over {len(prediction['rmse'])} held-out conditions")
         sys.stdout.flush()
     with staged_folder(out_dir, overwrite=args.overwrite, input_path=args.config, command="fit") as tmp:
-        files = relocate(write_report(result, tmp, prediction, plots=cfg.plots and not args.no_plots), tmp, out_dir)
+        written = write_report(result, tmp, prediction, plots=cfg.plots and not args.no_plots)
+        from millflow.report.studies import fit_report, write_page
+
+        pngs = [f for f in written if str(f).endswith(".png")]
+        written.append(str(write_page(Path(tmp) / "report.html",
+                                      fit_report(json.loads(json.dumps(out, default=float)), input_path=args.config,
+                                                 images=pngs))))
+        files = relocate(written, tmp, out_dir)
     print("wrote " + ", ".join(files), file=sys.stderr if args.json else sys.stdout)
     return 0

@@ -88,6 +88,7 @@ def run(args) -> int:
              power_gross_kW=sc["plant_gross_kW"], holdup_kg=sc["plant_holdup_kg"], A_factor=sc["A"],
              mu_factor=sc["mu"], transport=notes["transport"], transport_params=notes["transport_params"],
              transport_source=notes["transport_source"])
+    s["plant_file"] = str(args.plant)
     with staged_folder(out, overwrite=args.overwrite, input_path=args.plant, command="scaleup") as tmp:
         files = _write(res, s, tmp, plots=not args.no_plots)
     s["files_written"] = [f.name for f in files]
@@ -122,6 +123,10 @@ def _write(res, s, out: Path, plots: bool):
     s["band_edges_at_physical_bounds"] = clipped
     pd.DataFrame(cols).to_csv(files[1], index=False, float_format="%.6g")
     files[2].write_text(json.dumps(s, indent=1, default=float))
+    from millflow.report.studies import scaleup_report, write_page
+
+    files.append(write_page(out / "report.html", scaleup_report(json.loads(json.dumps(s, default=float)), ds,
+                                                                input_path=s.get("plant_file"))))
     if plots:
         from millflow.plotting import figure
 
