@@ -65,6 +65,9 @@ def run(args) -> int:
 
         pd.DataFrame(rows).to_csv(tmp / "compare.csv", index=False, float_format="%.6g")
         (tmp / "compare.json").write_text(json.dumps(result, indent=1) + "\n", encoding="utf-8")
+        from millflow.report.studies import compare_report, write_page
+
+        write_page(tmp / "report.html", compare_report(result, sa, sb))
         if not args.no_plots:
             _plot(sa, sb, shared, pa.stem, pb.stem, tmp / "compare.png")
     if args.json:

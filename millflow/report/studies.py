@@ -13,7 +13,7 @@ from pathlib import Path
 
 from millflow.report.html import esc, line_plot, page, table
 
-__all__ = ["fit_report", "scaleup_report", "write_page"]
+__all__ = ["fit_report", "scaleup_report", "compare_report", "write_page"]
 
 
 def _meta(command: str, input_path, extra: list) -> tuple[list, str | None]:
@@ -129,3 +129,42 @@ def write_page(path, html: str) -> Path:
     path = Path(path)
     path.write_text(html, encoding="utf-8")
     return path
+
+
+def compare_report(result: dict, sa: dict, sb: dict) -> str:
+    """The page of ``millflow compare``: ``result`` is the JSON it prints, ``sa`` and ``sb``
+    the two flowsheets' summaries (each drawn with its stream labels)."""
+    from millflow.report.flowsheet import flowsheet_layout_of, stream_label
+    from millflow.report.html import flowsheet_svg
+
+    meta, _ = _meta("millflow compare", None, [["A", result["a"]], ["B", result["b"]]])
+    sections = [("", table(["", ""], meta[2:], cls="meta"))]
+    rows = []
+    for k, r in enumerate(result["streams"]):
+        rows.append([r["stream"]] + [(r[c], f"streams.{k}.{c}") for c in
+                                     ("tph_a", "tph_b", "p80_um_a", "p80_um_b", "d_p80_um", "p50_um_a", "p50_um_b",
+                                      "d_p50_um")])
+    sections.append(("Streams of the same name", table(
+        ["stream", "t/h A", "t/h B", "P80 um A", "P80 um B", "P80 B - A", "P50 um A", "P50 um B", "P50 B - A"], rows)))
+    other = []
+    for side in ("a", "b"):
+        for n in result["circulating_load"][side] or {}:
+            other.append([f"circulating load of {n} % ({side.upper()})",
+                          (result["circulating_load"][side][n], f"circulating_load.{side}.{n}", 4, 100.0)])
+        other.append([f"specific energy kWh/t ({side.upper()})",
+                      (result["specific_energy_kWh_per_t"][side], f"specific_energy_kWh_per_t.{side}")])
+    sections.append(("Circuit", table(["quantity", "value"], other)))
+    for side, s in (("A", sa), ("B", sb)):
+        lay = flowsheet_layout_of(s)
+        svg = flowsheet_svg(lay, {u: [esc(u), esc(r.get("type", ""))] for u, r in s["units"].items()},
+                            {n: stream_label(n, st) for n, st in s["streams"].items()})
+        sections.append((f"Flowsheet {side}: {s.get('title') or s.get('source_file')}", svg))
+    series = []
+    for r in result["streams"]:
+        for side, s in (("A", sa), ("B", sb)):
+            st = s["streams"][r["stream"]]
+            series.append((f"{r['stream']} ({side})", st["size_um"], [None if v is None else 100 * v
+                                                                        for v in st["cum_passing"]]))
+    sections.append(("Size distributions", line_plot(series, xlabel="size [um]", ylabel="cumulative passing [%]",
+                                                      ylim=(0, 100), height=420)))
+    return page(f"Compare: {Path(result['a']).name} and {Path(result['b']).name}", sections, data=_finite(result))

@@ -40,3 +40,14 @@ def test_scaleup_report_numbers_and_bands():
     p.feed(text)
     shown = {k: v for k, _, v in p.cells}
     assert shown["circulating_load"] == "134.2" and shown["bands.p80_um.delta.hi"] == "156.4"
+
+
+def test_compare_report_shows_compare_json(tmp_path, capsys):
+    out = tmp_path / "cmp"
+    assert main(["compare", str(paths.FLOWSHEETS / "open_circuit_ball_mill.toml"),
+                 str(paths.FLOWSHEETS / "closed_circuit_ball_mill.toml"), "--json", "--no-plots",
+                 "--out", str(out)]) == 0
+    js = json.loads(capsys.readouterr().out)
+    text = (out / "report.html").read_text()
+    assert check_numbers(text, js) >= 8 * len(js["streams"])
+    assert text.count('class="flowsheet"') == 2
