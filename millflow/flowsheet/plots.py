@@ -59,28 +59,40 @@ def plot_classifiers(sol, ax):
         ax.legend(fontsize=8)
 
 
-def _flowsheet_labels(sol, ds):
-    """Stream label lines (solids t/h; water t/h and % solids when wet; P80 um), as report.html shows them."""
+def _flowsheet_labels(sol, ds=None):
+    """Stream label lines (solids t/h; water t/h and % solids when wet; P80 um), as
+    report.html shows them; from ``ds`` (:func:`~millflow.flowsheet.results.to_dataset`)
+    when given, else from the solution's flows."""
+    from millflow.errors import GridError
+    from millflow.psd import percentile_size
     from millflow.report.flowsheet import stream_label
 
-    wet = "water" in ds
+    fs = sol.flowsheet
+    wet = sol.water is not None and bool(np.any(sol.water.flows > 0))
     out = {}
-    for n in sol.flowsheet.stream_names:
-        s = {"solids_tph": float(ds["solids"].sel(stream=n)) * 3.6, "p80_um": float(ds["p80"].sel(stream=n)) * 1e6}
+    for k, n in enumerate(fs.stream_names):
+        if ds is not None:
+            s = {"solids_tph": float(ds["solids"].sel(stream=n)) * 3.6, "p80_um": float(ds["p80"].sel(stream=n)) * 1e6}
+        else:
+            f = np.maximum(np.asarray(sol.flows[k], float), 0.0)
+            try:
+                p80 = percentile_size(fs.grid, f / f.sum(), 80) * 1e6 if f.sum() > 0 else float("nan")
+            except GridError:
+                p80 = float("nan")
+            s = {"solids_tph": float(sol.flows[k].sum()) * 3.6, "p80_um": p80}
         if wet:
-            s.update(water_tph=float(ds["water"].sel(stream=n)) * 3.6,
-                     solids_pct=float(ds["solids_content"].sel(stream=n)) * 100)
+            water = float(sol.water_flow(n)) * 3.6
+            total = s["solids_tph"] + water
+            s.update(water_tph=water, solids_pct=100 * s["solids_tph"] / total if total > 0 else float("nan"))
         out[n] = stream_label(n, s)
     return out
 
 
 def flowsheet_drawing(sol, ds=None):
     """The layout (:mod:`millflow.report.layout`) and label lines of the flowsheet drawing."""
-    from millflow.flowsheet.results import to_dataset
     from millflow.report.layout import layout
 
     fs = sol.flowsheet
-    ds = ds if ds is not None else to_dataset(sol)
     labels = _flowsheet_labels(sol, ds)
     lay = layout({u: x.type for u, x in fs.units.items()}, {n: (s.source, s.target) for n, s in fs.streams.items()},
                  max(len(v) for v in labels.values()))

@@ -182,3 +182,12 @@ def test_layout_of_summary_matches_units(result):
     _, summary = result
     lay = flowsheet_layout_of(summary)
     assert set(lay.units) == set(summary["units"]) and set(lay.labels) == set(summary["streams"])
+
+
+def test_png_labels_equal_report_labels():
+    """flowsheet.png's labels (from the flows) are the report's (from the Dataset/summary)."""
+    from millflow.flowsheet import load, solve, to_dataset
+    from millflow.flowsheet.plots import _flowsheet_labels
+
+    sol = solve(load(paths.FLOWSHEETS / "closed_circuit_wet_cyclones.toml"))
+    assert _flowsheet_labels(sol) == _flowsheet_labels(sol, to_dataset(sol))
