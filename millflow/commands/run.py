@@ -3,8 +3,10 @@
 
 Prints a compact table (stream, t/h, P80, P50, % passing the named sizes), the
 circulating loads, mass balance, specific energy and run time, and writes results.nc,
-CSV tables, summary.json and PNG plots to the output folder (default
-``<file stem>-results/`` in the current directory). With ``--json`` one JSON object
+CSV tables, summary.json, PNG plots, report.html (one self-contained page: flowsheet,
+tables, plots, input file) and, whenever openpyxl is installed (extra ``report``),
+results.xlsx to the output folder (default ``<file stem>-results/`` in the current
+directory). With ``--json`` one JSON object
 (the summary) is printed instead of the table.
 """
 from __future__ import annotations

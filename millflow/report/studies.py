@@ -13,7 +13,7 @@ from pathlib import Path
 
 from millflow.report.html import esc, line_plot, page, table
 
-__all__ = ["fit_report", "scaleup_report", "compare_report", "write_page"]
+__all__ = ["fit_report", "scaleup_report", "compare_report", "sweep_report", "write_page"]
 
 
 def _meta(command: str, input_path, extra: list) -> tuple[list, str | None]:
@@ -168,3 +168,31 @@ def compare_report(result: dict, sa: dict, sb: dict) -> str:
     sections.append(("Size distributions", line_plot(series, xlabel="size [um]", ylabel="cumulative passing [%]",
                                                       ylim=(0, 100), height=420)))
     return page(f"Compare: {Path(result['a']).name} and {Path(result['b']).name}", sections, data=_finite(result))
+
+
+#: Cases shown in a sweep's report table (all of them are in sweep.csv and sweep.nc).
+SWEEP_ROWS = 500
+
+
+def sweep_report(summary: dict, table_df, *, input_path=None) -> str:
+    """The page of ``millflow sweep``: ``summary`` its JSON and ``table_df`` the case table
+    (the rows of sweep.csv). The page embeds ``{"summary", "columns", "cases"}`` (the
+    first :data:`SWEEP_ROWS` cases as rows) and every shown number points into it."""
+    meta, src = _meta("millflow sweep", input_path, [["design", summary.get("design", "")],
+                                                     ["varied", summary.get("varied", "")]])
+    cols = list(table_df.columns)
+    # rows as lists (column names hold dots: units.ball_mill.tau_min), keys cases.<row>.<column index>
+    cases = _finite(table_df.head(SWEEP_ROWS).values.tolist())
+    data = {"summary": summary, "columns": cols, "cases": cases}
+    head = [["cases", (summary.get("cases"), "summary.cases")], ["failed", (summary.get("failed"), "summary.failed")]]
+    sections = [("", table(["", ""], meta, cls="meta")), ("Sweep", table(["quantity", "value"], head))]
+    rows = []
+    for k, r in enumerate(cases):
+        rows.append([(v, f"cases.{k}.{j}") if isinstance(v, (int, float)) or v is None else str(v)
+                     for j, v in enumerate(r)])
+    note = ("" if len(table_df) <= SWEEP_ROWS
+            else f"<p>The first {SWEEP_ROWS} of {len(table_df)} cases; all are in sweep.csv.</p>")
+    sections.append(("Cases", note + table(cols, rows)))
+    if src:
+        sections.append(("Flowsheet file", src))
+    return page(f"Sweep: {Path(summary.get('file', '')).name}", sections, data=_finite(data))
