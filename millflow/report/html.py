@@ -196,10 +196,10 @@ window.addEventListener('error',function(ev){rec('error: '+ev.message);});
 window.addEventListener('load',function(){
  var ok=true;document.querySelectorAll('svg').forEach(function(s){var r=s.getBoundingClientRect();
   if(!(r.width>0&&r.height>0)){ok=false;rec('empty svg');}});
- var bs=[];document.querySelectorAll('.flowsheet .unit rect, .flowsheet .stream-label rect').forEach(
-  function(r){bs.push(r.getBBox());});
- var n=0;for(var i=0;i<bs.length;i++){for(var j=i+1;j<bs.length;j++){var a=bs[i],b=bs[j];
-  if(a.x<b.x+b.width&&b.x<a.x+a.width&&a.y<b.y+b.height&&b.y<a.y+a.height){n++;}}}
+ var n=0;document.querySelectorAll('svg.flowsheet').forEach(function(svg){var bs=[];
+  svg.querySelectorAll('.unit rect, .stream-label rect').forEach(function(r){bs.push(r.getBBox());});
+  for(var i=0;i<bs.length;i++){for(var j=i+1;j<bs.length;j++){var a=bs[i],b=bs[j];
+   if(a.x<b.x+b.width&&b.x<a.x+a.width&&a.y<b.y+b.height&&b.y<a.y+a.height){n++;}}}});
  document.body.setAttribute('data-overlaps',String(n));
  document.body.setAttribute('data-rendered',ok&&errs.length===0?'ok':'failed');
 });})();

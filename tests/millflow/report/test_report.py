@@ -94,14 +94,14 @@ def _browser():
     return next((shutil.which(b) for b in BROWSERS if shutil.which(b)), None)
 
 
-def test_page_renders_in_headless_chromium(result):
+def render(page) -> str:
+    """The DOM of ``page`` after headless Chromium loaded it; fails on any console message
+    and unless the page's script marked it rendered with no overlapping boxes."""
     browser = _browser()
     if browser is None:
         pytest.skip("no Chromium or Chrome on this machine (.ci/run installs chromium with apt-get)")
-    out, summary = result
     proc = subprocess.run([browser, "--headless", "--no-sandbox", "--disable-gpu", "--enable-logging=stderr",
-                           "--v=0", "--virtual-time-budget=5000", "--dump-dom",
-                           (out / "report.html").resolve().as_uri()],
+                           "--v=0", "--virtual-time-budget=5000", "--dump-dom", page.resolve().as_uri()],
                           capture_output=True, text=True, timeout=120)
     assert proc.returncode == 0, proc.stderr[-2000:]
     console = [line for line in proc.stderr.splitlines() if ":CONSOLE" in line]
@@ -110,7 +110,13 @@ def test_page_renders_in_headless_chromium(result):
     p.feed(proc.stdout)
     assert p.body.get("data-rendered") == "ok", proc.stdout[:2000]
     assert p.body.get("data-overlaps") == "0"  # boxes as the browser laid them out
-    assert check_numbers(proc.stdout, summary) > 0  # the numbers the browser shows
+    return proc.stdout
+
+
+def test_page_renders_in_headless_chromium(result):
+    out, summary = result
+    dom = render(out / "report.html")
+    assert check_numbers(dom, summary) > 0  # the numbers the browser shows
 
 
 @pytest.mark.skipif(not excel_available(), reason="openpyxl not installed (pip install 'millflow[report]')")

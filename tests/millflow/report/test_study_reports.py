@@ -9,7 +9,7 @@ import xarray as xr
 from millflow.cli import main
 from millflow.report.studies import scaleup_report
 from tests import paths
-from tests.millflow.report.test_report import Cells, check_numbers
+from tests.millflow.report.test_report import Cells, check_numbers, render
 
 
 def test_fit_report_shows_the_fit_json(tmp_path, capsys):
@@ -21,6 +21,7 @@ def test_fit_report_shows_the_fit_json(tmp_path, capsys):
     assert n >= 5 * len(js["params"])  # value, SE, p (or -), both interval ends per parameter
     assert text.count("data:image/png;base64,") == 2  # fit_psd.png and parity.png inside the page
     assert "https://" not in text
+    assert check_numbers(render(out / "report.html"), js) > 0
 
 
 def test_scaleup_report_numbers_and_bands():
@@ -52,6 +53,7 @@ def test_compare_report_shows_compare_json(tmp_path, capsys):
     text = (out / "report.html").read_text()
     assert check_numbers(text, js) >= 8 * len(js["streams"])
     assert text.count('class="flowsheet"') == 2
+    assert check_numbers(render(out / "report.html"), js) > 0  # as the browser shows it
 
 
 def test_sweep_report_shows_every_case(tmp_path, capsys):
