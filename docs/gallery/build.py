@@ -103,6 +103,7 @@ def solve_examples(tmp: Path) -> list:
         sol = solve(load(toml))
         props = stream_properties(sol)
         s = summary(sol, props)
+        s["source_file"] = f"flowsheets/{toml.name}"  # not this machine's path in the published page
         save(sol, out, plots=True, props=props)
         write_extras(sol, s, out, input_path=toml)
         for kind in ("psd", "flowsheet"):
