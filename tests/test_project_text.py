@@ -31,3 +31,14 @@ def test_cli_help_has_no_issue_numbers():
         with contextlib.redirect_stdout(buf):
             p.print_help()
         assert not ISSUE.search(buf.getvalue()), (name, ISSUE.search(buf.getvalue()).group(0))
+
+
+def test_gallery_shows_every_example_with_its_input_and_report():
+    page = (paths.DOCS / "gallery.md").read_text(encoding="utf-8")
+    for toml in sorted(paths.FLOWSHEETS.glob("*.toml")):
+        assert f"(downloads/{toml.name})" in page, toml.name  # the input, downloadable
+        assert f"(gallery/reports/{toml.stem}.html)" in page, toml.name
+        assert (paths.DOCS / "gallery" / "reports" / f"{toml.stem}.html").is_file()
+        assert (paths.DOCS / "gallery" / "img" / f"{toml.stem}-flowsheet.png").is_file()
+    for job in ("run", "tracer", "fit", "scaleup", "sweep"):  # one run per daily job, its output shown
+        assert (paths.DOCS / "gallery" / "out" / f"{job}.txt").read_text().startswith("$ millflow ")
