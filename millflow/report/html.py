@@ -171,6 +171,23 @@ def _lines(b, lines) -> str:
     return "".join(out)
 
 
+def finite(d):
+    """A JSON-ready copy: non-finite floats as None (the page embeds strict JSON), numpy
+    scalars as Python numbers."""
+    if isinstance(d, dict):
+        return {str(k): finite(v) for k, v in d.items()}
+    if isinstance(d, (list, tuple)):
+        return [finite(v) for v in d]
+    if isinstance(d, float):
+        return d if math.isfinite(d) else None
+    if hasattr(d, "item") and not isinstance(d, (str, bytes)):
+        try:
+            return finite(d.item())
+        except (ValueError, TypeError):
+            return str(d)
+    return d
+
+
 CSS = """
 body{font-family:system-ui,-apple-system,"Segoe UI",Roboto,sans-serif;margin:1.5em auto;max-width:1500px;
 padding:0 1em;color:#222}
@@ -214,7 +231,7 @@ def page(title: str, sections: list, *, data: dict | None = None) -> str:
         body.append(f"<h2>{esc(heading)}</h2>{content}" if heading else content)
     blob = ""
     if data is not None:
-        text = json.dumps(data, allow_nan=False).replace("</", "<\\/")
+        text = json.dumps(finite(data), allow_nan=False).replace("</", "<\\/")
         blob = f'<script type="application/json" id="summary">{text}</script>'
     return ("<!DOCTYPE html>\n<html lang=\"en\"><head><meta charset=\"utf-8\">"
             f"<meta name=\"viewport\" content=\"width=device-width, initial-scale=1\"><title>{esc(title)}</title>"

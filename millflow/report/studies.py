@@ -12,6 +12,7 @@ import hashlib
 from pathlib import Path
 
 from millflow.report.html import esc, line_plot, page, table
+from millflow.report.html import finite as _finite
 
 __all__ = ["fit_report", "scaleup_report", "compare_report", "sweep_report", "write_page"]
 
@@ -104,24 +105,6 @@ def scaleup_report(s: dict, ds, *, input_path=None) -> str:
     if src:
         sections.append(("Plant file", src))
     return page(f"Scale-up: {s.get('title', '')}", sections, data=_finite(s))
-
-
-def _finite(d):
-    """JSON-ready copy: non-finite floats as None (the page embeds strict JSON)."""
-    import math
-
-    if isinstance(d, dict):
-        return {str(k): _finite(v) for k, v in d.items()}
-    if isinstance(d, (list, tuple)):
-        return [_finite(v) for v in d]
-    if isinstance(d, float):
-        return d if math.isfinite(d) else None
-    if hasattr(d, "item") and not isinstance(d, (str, bytes)):
-        try:
-            return _finite(d.item())
-        except (ValueError, TypeError):
-            return str(d)
-    return d
 
 
 def write_page(path, html: str) -> Path:
