@@ -17,7 +17,7 @@ from __future__ import annotations
 from collections import deque
 from dataclasses import dataclass
 
-__all__ = ["Box", "FlowsheetLayout", "layout", "overlaps", "LAYERS_PER_ROW"]
+__all__ = ["Box", "FlowsheetLayout", "layout", "overlaps", "crossings", "LAYERS_PER_ROW"]
 
 #: Layers per row of the drawing: longer circuits wrap onto further rows.
 LAYERS_PER_ROW = 5
@@ -153,8 +153,10 @@ def layout(units: dict, streams: dict, label_lines: int = 4) -> FlowsheetLayout:
         else:
             dx = 10.0 * (1 if b.x > a.x else -1)
             routes[n] = [(a.x + dx, a.y + a.h / 2), (a.x + dx, y), (b.x - dx, y), (b.x - dx, b.y + b.h / 2)]
+    _detour(boxes, routes, streams, back)
     labels = _place_labels(boxes, routes, back, LABEL_W, label_h)
-    right = max(max(b.x + b.w / 2 for b in boxes.values()), max(b.x + b.w / 2 for b in labels.values()))
+    right = max(max(b.x + b.w / 2 for b in boxes.values()), max(b.x + b.w / 2 for b in labels.values()),
+                max(p[0] for r in routes.values() for p in r))
     lowest = max(max(b.y + b.h / 2 for b in labels.values()), max(p[1] for r in routes.values() for p in r),
                  max(b.y + b.h / 2 for b in boxes.values()))
     left = min(min(b.x - b.w / 2 for b in labels.values()), MARGIN)
@@ -169,6 +171,72 @@ def layout(units: dict, streams: dict, label_lines: int = 4) -> FlowsheetLayout:
         routes={n: [(x + shift_x, y + shift_y) for x, y in r] for n, r in routes.items()},
         labels={n: mv(b) for n, b in labels.items()}, recycle=back,
         width=right + shift_x + MARGIN, height=lowest + shift_y + MARGIN)
+
+
+def crossings(boxes: dict, routes: dict, streams: dict) -> list[tuple[str, str]]:
+    """(stream, unit) pairs where a stream's route passes through a unit box other than its
+    own source and target (sampled every 4 px, boxes shrunk by 2 px)."""
+    out = []
+    for n, route in routes.items():
+        ends = set(streams[n])
+        for u, b in boxes.items():
+            if u not in ends and _route_hits(route, b):
+                out.append((n, u))
+    return out
+
+
+def _route_hits(route, b: Box) -> bool:
+    for (x0, y0), (x1, y1) in zip(route[:-1], route[1:]):
+        steps = max(1, int(((x1 - x0) ** 2 + (y1 - y0) ** 2) ** 0.5 / 4))
+        for k in range(steps + 1):
+            x, y = x0 + (x1 - x0) * k / steps, y0 + (y1 - y0) * k / steps
+            if abs(x - b.x) < b.w / 2 - 2 and abs(y - b.y) < b.h / 2 - 2:
+                return True
+    return False
+
+
+def _detour(boxes: dict, routes: dict, streams: dict, back: dict) -> None:
+    """Reroute a stream whose route crosses another unit's box through the free corridors
+    beside the columns (between layer columns no unit stands): out of the source's side,
+    along the corridor, into the target's side; a recycle keeps its lane below the row and
+    moves only the legs down to it and up from it. Each detour takes its own track."""
+    used: dict = {}
+
+    def corridor(box, sign):
+        base = box.x + sign * (box.w / 2 + 0.5 * (DX - UNIT_W) - 24)
+        return base - sign * 10.0 * used.get(round(base), 0), round(base)
+
+    for n, route in list(routes.items()):
+        s, t = streams[n]
+        others = [b for u, b in boxes.items() if u not in (s, t)]
+        if not any(_route_hits(route, b) for b in others):
+            continue
+        a, b = boxes[s], boxes[t]
+        cands = []
+        if back[n]:
+            lane = route[1][1]
+            downs = [(route[:2], None)]
+            ups = [(route[2:], None)]
+            for sign in (1, -1):
+                xc, key = corridor(a, sign)
+                ya = a.y + 8.0 * sign
+                downs.append(([(a.x + sign * a.w / 2, ya), (xc, ya), (xc, lane)], key))
+                xt, key_t = corridor(b, sign)
+                yb = b.y - 8.0 * sign
+                ups.append(([(xt, lane), (xt, yb), (b.x + sign * b.w / 2, yb)], key_t))
+            for down, k1 in downs:
+                for up, k2 in ups:
+                    cands.append((down + up, [k for k in (k1, k2) if k is not None]))
+        else:
+            for sign in (1, -1):
+                xc, key = corridor(a, sign)
+                ya = a.y + 8.0 * sign
+                end_x = b.x - b.w / 2 if b.x > xc else b.x + b.w / 2
+                cands.append(([(a.x + sign * a.w / 2, ya), (xc, ya), (xc, b.y), (end_x, b.y)], [key]))
+        best = next((c for c in cands if not any(_route_hits(c[0], o) for o in others)), cands[-1])
+        routes[n] = best[0]
+        for k in best[1]:
+            used[k] = used.get(k, 0) + 1
 
 
 def _place_labels(boxes: dict, routes: dict, back: dict, w: float, h: float) -> dict:

@@ -12,7 +12,7 @@ import pytest
 from millflow.cli import main
 from millflow.report.excel import excel_available
 from millflow.report.flowsheet import _get, flowsheet_layout_of
-from millflow.report.layout import layout, overlaps
+from millflow.report.layout import crossings, layout, overlaps
 from tests import paths
 
 BROWSERS = ("chromium", "chromium-browser", "google-chrome", "google-chrome-stable")
@@ -161,6 +161,7 @@ def test_no_label_collisions_in_shipped_flowsheets(path):
         lay = layout({u: x.type for u, x in fs.units.items()},
                      {n: (s.source, s.target) for n, s in fs.streams.items()}, lines)
         assert overlaps(lay) == []
+        assert crossings(lay.units, lay.routes, {n: (s.source, s.target) for n, s in fs.streams.items()}) == []
         # every box inside the drawing
         for b in list(lay.units.values()) + list(lay.labels.values()):
             assert 0 <= b.x - b.w / 2 and b.x + b.w / 2 <= lay.width
@@ -180,7 +181,7 @@ def test_twenty_unit_circuits_stay_legible(recycles):
     for k in range(3, 3 + 4 * recycles, 4):
         streams[f"r{k}"] = (f"m{k}", f"m{k - 2}")
     lay = layout(units, streams, 4)
-    assert len(lay.units) == 20 and overlaps(lay) == []
+    assert len(lay.units) == 20 and overlaps(lay) == [] and crossings(lay.units, lay.routes, streams) == []
     assert lay.width < 2000  # wrapped onto rows, not one 7000 px line
 
 
@@ -197,3 +198,22 @@ def test_png_labels_equal_report_labels():
 
     sol = solve(load(paths.FLOWSHEETS / "closed_circuit_wet_cyclones.toml"))
     assert _flowsheet_labels(sol) == _flowsheet_labels(sol, to_dataset(sol))
+
+
+def test_branched_circuit_routes_avoid_unit_boxes():
+    """Two feeds, a splitter into two cyclone lines, a regrind loop across rows, a screen
+    fed by both overflows: straight lines would cross cyclones_2, regrind_chute and screen."""
+    units = {"feed_a": "feed", "feed_b": "feed", "chute": "mixer", "primary_mill": "mill", "splitter": "splitter",
+             "cyclones_1": "hydrocyclone", "cyclones_2": "hydrocyclone", "regrind_chute": "mixer",
+             "regrind_mill": "mill", "screen": "screen", "final": "product", "oversize_bin": "product"}
+    streams = {"fa": ("feed_a", "chute"), "fb": ("feed_b", "chute"), "mill_feed": ("chute", "primary_mill"),
+               "discharge": ("primary_mill", "splitter"), "l1": ("splitter", "cyclones_1"),
+               "l2": ("splitter", "cyclones_2"), "u1": ("cyclones_1", "chute"), "u2": ("cyclones_2", "regrind_chute"),
+               "regrind_feed": ("regrind_chute", "regrind_mill"), "regrind_out": ("regrind_mill", "cyclones_2"),
+               "o1": ("cyclones_1", "screen"), "o2": ("cyclones_2", "screen"), "scr_over": ("screen", "oversize_bin"),
+               "scr_under": ("screen", "final")}
+    for lines in (3, 4):
+        lay = layout(units, streams, lines)
+        assert overlaps(lay) == [] and crossings(lay.units, lay.routes, streams) == []
+        xs = [x for r in lay.routes.values() for x, _ in r]
+        assert max(xs) <= lay.width and min(xs) >= 0
