@@ -10,8 +10,8 @@ import pytest
 
 from tests import paths
 
-pytestmark = pytest.mark.skipif(importlib.util.find_spec("mkdocs") is None
-                                or importlib.util.find_spec("mkdocstrings") is None,
+pytestmark = pytest.mark.skipif(any(importlib.util.find_spec(m) is None
+                                    for m in ("mkdocs", "mkdocstrings", "pymdownx", "mathjax")),
                                 reason="the docs extra is not installed (pip install -e '.[docs]')")
 
 
