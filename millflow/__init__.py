@@ -2,7 +2,7 @@
 
 Class 1 is the coarsest size class, class N the finest (the sink, S_N = 0); sizes are
 upper class edges in metres (Austin's convention), times in seconds, rates in 1/s.
-Equations are numbered as in EQUATIONS.md of the project.
+Equations are numbered as in docs/equations.md.
 """
 from millflow.batch import batch_grind, batch_solve, grind, plug_flow_profile
 from millflow.breakage import (

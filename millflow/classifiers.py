@@ -205,7 +205,7 @@ def mill_discharge_rates(c) -> np.ndarray:
     (1 - c_i) times as fast as freely discharging material, so
     d_i* = (1 - c_i) / (1 - c_N): the finest class (the sink) discharges freely
     (d* = 1 when c_N = 0) and ``tau`` is the mean residence time of freely
-    discharging material (eq. 1 and 3 of EQUATIONS.md).
+    discharging material (eq. 1 and 3 of docs/equations.md).
     """
     c = np.asarray(c, dtype=float)
     free = 1.0 - c[-1]

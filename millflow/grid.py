@@ -4,7 +4,7 @@ A :class:`SizeGrid` holds the upper edges ``upper_m`` [m] of N size classes, str
 decreasing: class 1 is the coarsest, class N the finest, which is the sink (it does
 not break, S_N = 0). Class i spans (x_{i+1}, x_i]; the sink spans (0, x_N].
 The representative size of a class is its upper edge, x_i = upper_m[i-1] (Austin's
-convention, EQUATIONS.md "Size classes"); every rate S_i and distribution B_ij in
+convention, docs/equations.md "Size classes"); every rate S_i and distribution B_ij in
 millflow is evaluated at these x_i. Grids are usually geometric (each edge a fixed
 ratio, 2^(1/2) for sieve series, 2^(1/4) or finer for numerical work, below the one
 above); :meth:`SizeGrid.refine` splits every class ratio r into r^(1/k) and keeps the
@@ -33,7 +33,7 @@ def class_label(i: int, x=None) -> str:
     Parameters
     ----------
     i : int
-        0-based array index (the label is 1-based, as in EQUATIONS.md).
+        0-based array index (the label is 1-based, as in docs/equations.md).
     x : array_like, optional
         Representative (upper) sizes [m]; the size is shown when given.
     """

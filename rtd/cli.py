@@ -25,10 +25,15 @@ from rtd.fit import MODELS, fit
 from rtd.tracer import TracerError, read_tracer_csv, subtract_baseline
 
 
-def add_arguments(p: argparse.ArgumentParser) -> None:
-    """The arguments of the tracer fit (shared with ``millflow fit-rtd``)."""
+def add_arguments(p: argparse.ArgumentParser, several_models: bool = False) -> None:
+    """The arguments of the tracer fit (shared with ``millflow fit-rtd``, which takes
+    ``--model`` repeatedly: ``several_models``)."""
     p.add_argument("csv", metavar="TRACER.csv", help="tracer data file")
-    p.add_argument("--model", choices=sorted(MODELS), default="tis", help="model to fit (default: tis)")
+    if several_models:  # repeated --model: each is fitted and the fits are compared
+        p.add_argument("--model", choices=sorted(MODELS), action="append", default=None,
+                       help="model to fit (default: tis); repeat to fit several and compare them")
+    else:
+        p.add_argument("--model", choices=sorted(MODELS), default="tis", help="model to fit (default: tis)")
     p.add_argument("--cells", type=int, default=3, metavar="N",
                    help="number of cells for --model cells (default 3)")
     p.add_argument("--kind", choices=["pulse", "step"], default=None,
@@ -37,7 +42,7 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
                    help="subtract a baseline: median of the first/last 5 points or a value")
     p.add_argument("--json", action="store_true", help="print one JSON object")
     p.add_argument("--no-plots", "--no-plot", dest="no_plots", action="store_true", help="do not write the plot")
-    p.add_argument("--quiet", action="store_true", help="print nothing but errors (and --json output)")
+    p.add_argument("--quiet", action="store_true", help="no progress messages (results still print)")
 
 
 def load_curve(csv, kind=None, baseline=None):
@@ -156,7 +161,7 @@ def main(argv=None) -> int:
             if js["lack_of_fit"]["flag"]:
                 print(f"python -m rtd fit: warning: lack of fit ({'; '.join(js['lack_of_fit']['reasons'])})",
                       file=sys.stderr)
-        elif not args.quiet:
+        else:  # --quiet hides progress only: the results still print
             print(text(path, result, args.model, curve.time_unit), flush=True)
         if out is not None:
             _write_folder(out, js, result, curve.time_unit, args.model, not args.no_plots, args.overwrite)

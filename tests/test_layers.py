@@ -16,7 +16,8 @@ PACKAGES = ("millflow", "rtd")
 # Layers, lowest first: a module may import from its own layer and the ones below.
 LAYERS = [
     ("base", ("millflow.errors", "millflow.grid", "millflow.compiled", "millflow.plotting", "millflow.inputs",
-              "millflow.balances")),
+              "millflow.balances",
+              "millflow.progress", "millflow.report")),  # report: pages from summaries, no physics
     ("kinetics", ("millflow.psd", "millflow.checks", "millflow.classifiers", "millflow.cyclones", "millflow.breakage",
                   "millflow.linalg",
                   "millflow.batch", "millflow.nonlinear")),  # nonlinear: where issue 12's kinetics land

@@ -1,11 +1,18 @@
-"""Build the gallery's figures: each example flowsheet solved and drawn.
+"""Build the gallery: each daily job run as a script, each example flowsheet solved and drawn.
 
     python docs/gallery/build.py
 
-Writes docs/gallery/img/<example>-psd.png and <example>-flowsheet.png, and the plots of
-the lab fit of examples/scaleup (lab_fit-fit_psd.png, lab_fit-parity.png): small PNGs,
-committed so the site builds without running the solver.
+Runs every job of :data:`JOBS` (the commands a user types, in a temporary folder, from
+the repository root's files), and solves every flowsheet of ``flowsheets/``; writes
+docs/gallery/img/<example>-flowsheet.png and -psd.png, docs/gallery/reports/<example>.html
+(the run's report.html), docs/gallery/out/<job>.txt (what the job printed) and
+docs/gallery.md itself, whose captions carry the numbers of these runs. The files are
+committed, so the site builds without running the solver; the inputs are downloads
+(docs/hooks/downloads.py).
 """
+import contextlib
+import io
+import json
 import shutil
 import sys
 import tempfile
@@ -14,29 +21,153 @@ from pathlib import Path
 HERE = Path(__file__).resolve().parent
 REPO = HERE.parents[1]
 
+#: (name, title, what it shows, [command lines], inputs to download). ``{tmp}`` is the job's folder.
+JOBS = [
+    ("run", "Run a wet closed circuit",
+     "A ball mill with six hydrocyclones predicted by Plitt's model, water tracked through every stream. "
+     "The run writes `report.html` ([this run's report](gallery/reports/closed_circuit_wet_cyclones.html)), "
+     "`results.xlsx`, CSV tables and `results.nc`.",
+     [["run", "flowsheets/closed_circuit_wet_cyclones.toml", "--out", "{tmp}/wet"]],
+     ["closed_circuit_wet_cyclones.toml"]),
+    ("tracer", "Fit a tracer curve, then use it in a mill",
+     "Moments and three RTD models compared on a tracer curve; the fit's folder is then the transport of "
+     "the open-circuit mill (`transport = {rtd_fit = \"tracer_tis-rtd\"}`).",
+     [["fit-rtd", "docs/examples/tracer_tis.csv", "--model", "tis", "--model", "cells", "--model", "cstr",
+       "--out", "{tmp}/tracer_tis-rtd"],
+      ["run", "{tmp}/tracer_mill.toml", "--no-grid-check", "--out", "{tmp}/tracer_mill"]],
+     ["tracer_tis.csv", "tracer_mill.toml"]),
+    ("fit", "Fit breakage parameters to batch tests",
+     "Eq. 5 rates and eq. 6 breakage fitted to synthetic lab batch tests (stated so), with standard errors.",
+     [["fit", "examples/scaleup/lab_fit.toml", "--out", "{tmp}/fit"]],
+     ["lab_fit.toml", "lab_psd.csv", "lab_process.csv"]),
+    ("scaleup", "Carry the lab fit to a plant circuit",
+     "The fit above drives a closed ball-mill circuit at plant scale; the throughput that meets a P80 "
+     "target, with delta-method bands.",
+     [["fit", "examples/scaleup/lab_fit.toml", "--json", "--quiet", "--out", "{tmp}/fit2", ">", "{tmp}/fit.json"],
+      ["scaleup", "{tmp}/fit.json", "--to", "examples/scaleup/plant.toml", "--target-p80-um", "150",
+       "--band-method", "delta", "--out", "{tmp}/plant"]],
+     ["lab_fit.toml", "plant.toml"]),
+    ("sweep", "Sweep a circuit over residence time and feed rate",
+     "20 cases of the closed ball-mill circuit (serial here; a Dask cluster with `--scheduler`).",
+     [["sweep", "flowsheets/closed_circuit_ball_mill.toml", "--vary", "units.ball_mill.tau_min=2:6:5",
+       "--vary", "units.fresh_feed.solids_tph=150:300:4", "--scheduler", "serial", "--out", "{tmp}/sweep"]],
+     ["closed_circuit_ball_mill.toml"]),
+]
+
+
+def _shown(cmd, tmp) -> str:
+    return "millflow " + " ".join(a.replace(str(tmp) + "/", "").replace(str(tmp), ".") for a in cmd)
+
+
+def run_jobs(tmp: Path) -> dict:
+    from millflow.cli import main as cli
+
+    shutil.copyfile(HERE / "inputs" / "tracer_mill.toml", tmp / "tracer_mill.toml")
+    printed = {}
+    (HERE / "out").mkdir(exist_ok=True)
+    for name, _, _, commands, _ in JOBS:
+        text = []
+        for cmd in commands:
+            cmd = [a.replace("{tmp}", str(tmp)) for a in cmd]
+            target = None
+            if ">" in cmd:
+                target = Path(cmd[cmd.index(">") + 1])
+                cmd = cmd[:cmd.index(">")]
+            buf = io.StringIO()
+            with contextlib.redirect_stdout(buf):
+                code = cli(cmd)
+            if code != 0:
+                raise SystemExit(f"gallery job {name}: {' '.join(cmd)} exited {code}")
+            if target is not None:
+                target.write_text(buf.getvalue())
+                text.append(f"$ {_shown(cmd, tmp)} > {target.name}")
+            else:
+                text.append(f"$ {_shown(cmd, tmp)}\n{buf.getvalue().replace(str(tmp) + '/', '')}")
+        printed[name] = "\n".join(text).rstrip() + "\n"
+        (HERE / "out" / f"{name}.txt").write_text(printed[name])
+    return printed
+
+
+def solve_examples(tmp: Path) -> list:
+    from millflow.commands.output import write_extras
+    from millflow.flowsheet import load, save, solve, summary
+    from millflow.flowsheet.results import stream_properties
+
+    img = HERE / "img"
+    reports = HERE / "reports"
+    img.mkdir(exist_ok=True)
+    reports.mkdir(exist_ok=True)
+    rows = []
+    for toml in sorted((REPO / "flowsheets").glob("*.toml")):
+        out = tmp / toml.stem
+        sol = solve(load(toml))
+        props = stream_properties(sol)
+        s = summary(sol, props)
+        s["source_file"] = f"flowsheets/{toml.name}"  # not this machine's path in the published page
+        save(sol, out, plots=True, props=props)
+        write_extras(sol, s, out, input_path=toml)
+        for kind in ("psd", "flowsheet"):
+            shutil.copyfile(out / f"{kind}.png", img / f"{toml.stem}-{kind}.png")
+        shutil.copyfile(out / "report.html", reports / f"{toml.stem}.html")
+        rows.append((toml, s))
+        print(toml.stem, file=sys.stderr)
+    return rows
+
+
+def _caption(s: dict) -> str:
+    fs_products = [n for n, st in s["streams"].items() if s["units"].get(st["to"], {}).get("type") == "product"]
+    parts = []
+    for n in fs_products:
+        st = s["streams"][n]
+        parts.append(f"{n} {st['solids_tph']:.4g} t/h at P80 {st['p80_um']:.4g} um")
+    for n, v in (s["circulating_load"] or {}).items():
+        parts.append(f"circulating load of {n} {100 * v:.1f} %")
+    if s.get("specific_energy_kWh_per_t") is not None:
+        parts.append(f"{s['specific_energy_kWh_per_t']:.3g} kWh/t of product")
+    parts.append(f"mass balance error {s['mass_balance_error']:.1e}")
+    return "; ".join(parts)
+
+
+def write_page(printed: dict, rows: list) -> None:
+    lines = ["# Gallery", "",
+             "<!-- written by docs/gallery/build.py: edit that script, not this page -->", "",
+             "The daily jobs as a user runs them (inputs to download, then the command and what it "
+             "printed), and every example flowsheet solved and drawn. Everything here is made by "
+             "`python docs/gallery/build.py` from the files linked.", "", "## Daily jobs", ""]
+    for name, title, text, _, inputs in JOBS:
+        links = ", ".join(f"[{f}](downloads/{f})" for f in inputs)
+        lines += [f"### {title}", "", text, "", f"Inputs: {links}.", "", "```text", printed[name].rstrip(), "```", ""]
+    lines += ["## Example flowsheets", "",
+              "Each runs from the repository root with `millflow run flowsheets/<name>.toml`; the numbers "
+              "below are from these runs. Each report is the run's `report.html`.", ""]
+    for toml, s in rows:
+        stem = toml.stem
+        title = s["title"] or stem.replace("_", " ")
+        lines += [f"### {title}", "",
+                  f"[{toml.name}](downloads/{toml.name}) ([report](gallery/reports/{stem}.html)): {_caption(s)}.", "",
+                  f"![{title}: circuit, each stream with its solids (and water) t/h and P80]"
+                  f"(gallery/img/{stem}-flowsheet.png)", "",
+                  f"![{title}: cumulative passing of every stream](gallery/img/{stem}-psd.png)", ""]
+    lines += ["## Model error: falsification studies", "",
+              "Bias and coverage of a linear, perfectly mixed fit against truths with model error "
+              "(see [model-error.md](model-error.md)).", ""]
+    for n in ("falsify_aggregation", "falsify_population", "falsify_slowing", "falsify_tanks", "micromixing"):
+        lines += [f"![{n.replace('_', ' ')}](images/{n}.png)", ""]
+    lines += ["## Work-precision", "", "![core](img/work_precision_core.png)", "",
+              "![mill](img/work_precision_mill.png)", ""]
+    (REPO / "docs" / "gallery.md").write_text("\n".join(lines), encoding="utf-8")
+
 
 def main() -> int:
     sys.path.insert(0, str(REPO))
-    from millflow.flowsheet import load, save, solve
+    import os
 
-    out = HERE / "img"
-    out.mkdir(exist_ok=True)
-    for toml in sorted((REPO / "flowsheets").glob("*.toml")):
-        with tempfile.TemporaryDirectory() as tmp:
-            files = save(solve(load(toml)), Path(tmp) / "r", plots=True)
-            for kind in ("psd", "flowsheet"):
-                png = Path(tmp) / "r" / f"{kind}.png"
-                if png.exists():
-                    shutil.copyfile(png, out / f"{toml.stem}-{kind}.png")
-        print(toml.stem, ", ".join(sorted(Path(f).name for f in files.values())))
-    # a fit with its plots: the scale-up example's lab batch data (synthetic, stated so)
-    from millflow.cli import main as cli
+    os.chdir(REPO)
     with tempfile.TemporaryDirectory() as tmp:
-        cfg = REPO / "examples" / "scaleup" / "lab_fit.toml"
-        if cli(["fit", str(cfg), "--quiet", "--out", str(Path(tmp) / "fit")]) != 0:
-            return 1
-        for name in ("fit_psd.png", "parity.png"):
-            shutil.copyfile(Path(tmp) / "fit" / name, out / f"lab_fit-{name}")
+        printed = run_jobs(Path(tmp))
+        rows = solve_examples(Path(tmp) / "examples")
+    write_page(printed, rows)
+    print(json.dumps({"jobs": list(printed), "examples": [t.stem for t, _ in rows]}))
     return 0
 
 

@@ -3,7 +3,10 @@
     python examples/knife_mill/run_example.py [DATA_DIR] [--config knife_mill.toml] [--quick]
 
 DATA_DIR defaults to ``../shared/data/sprite-knife-mill`` relative to the repository
-root. The data are read in place (millflow.fitting.data.read_sprite_folder builds the
+root. The data are not part of this repository: they are the measurements published with
+the open-source SPRITE suite (Idaho National Laboratory, MIT licence) and described in Lu,
+Xia, Bhattacharjee, Klinger and Li (2024), Powder Technology 441, 119830; put their folder
+there or give its path. The data are read in place (millflow.fitting.data.read_sprite_folder builds the
 long tables in memory); nothing is written into the repository except the output
 folder named in the config.
 

@@ -5,7 +5,9 @@ JSON beside this script), and the micromixing figure docs/images/micromixing.png
     python examples/model_error/make_studies.py [--quick] [aggregation] [population] [micromixing]
 
 With no names, all three. --quick runs 5 replicates per strength (a smoke run; the docs
-quote the full 50).
+quote the full 50) and writes into --out DIR (default ``make_studies-quick/`` in the
+current folder), never over the committed figures and summaries; --out DIR sends a full
+run elsewhere too.
 """
 from __future__ import annotations
 
@@ -23,18 +25,18 @@ from millflow.falsify.config import load_config  # noqa: E402
 from millflow.falsify.plots import plot_sweep  # noqa: E402
 
 
-def studies(quick: bool, names):
+def studies(quick: bool, names, images: Path, summaries: Path):
     for name in names:
         cfg = load_config(REPO / "docs" / "examples" / "falsify" / f"{name}.toml")
         if quick:
             cfg.replicates, cfg.drift_replicates = 5, 2
         res = cfg.run(progress=lambda m, name=name: print(f"[{name}] {m}", file=sys.stderr, flush=True))
-        plot_sweep(res.dataset, REPO / "docs" / "images" / f"falsify_{name}.png")
-        (HERE / f"{name}_summary.json").write_text(json.dumps(res.summary(), indent=2) + "\n", encoding="utf-8")
+        plot_sweep(res.dataset, images / f"falsify_{name}.png")
+        (summaries / f"{name}_summary.json").write_text(json.dumps(res.summary(), indent=2) + "\n", encoding="utf-8")
         print(res.text())
 
 
-def micromixing():
+def micromixing(images: Path):
     """Product of a mill with aggregation + cushioning, 3 tanks RTD: the two micromixing
     limits against the perfectly mixed and linear answers."""
     import rtd
@@ -69,12 +71,32 @@ def micromixing():
     ax.set_ylabel("cumulative passing")
     ax.set_title(f"3 tanks, tau 10 min: micromixing spread {mm.spread:.3f}", fontsize=10)
     ax.legend(fontsize=8)
-    save(fig, REPO / "docs" / "images" / "micromixing.png", dpi=80)
+    save(fig, images / "micromixing.png", dpi=80)
     print(f"micromixing: spread {mm.spread:.4f}, error estimate {mm.error_estimate:.1e}, {mm.runtime_s:.2f} s")
 
 
-if __name__ == "__main__":
-    chosen = [a for a in sys.argv[1:] if not a.startswith("--")] or ["micromixing", "aggregation", "population"]
+def main(argv=None) -> int:
+    import argparse
+
+    p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    p.add_argument("names", nargs="*", choices=["aggregation", "population", "micromixing"], default=[])
+    p.add_argument("--quick", action="store_true", help="5 replicates per strength (a smoke run)")
+    p.add_argument("--out", default=None, help="folder for figures and summaries (default: the committed "
+                                               "ones for a full run, make_studies-quick/ for --quick)")
+    args = p.parse_args(argv)
+    out = args.out or ("make_studies-quick" if args.quick else None)
+    if out is None:  # a full run refreshes the committed figures and summaries
+        images, summaries = REPO / "docs" / "images", HERE
+    else:  # a smoke run never overwrites tracked files
+        images = summaries = Path(out).resolve()
+        images.mkdir(parents=True, exist_ok=True)
+    chosen = args.names or ["micromixing", "aggregation", "population"]
     if "micromixing" in chosen:
-        micromixing()
-    studies("--quick" in sys.argv, [n for n in chosen if n != "micromixing"])
+        micromixing(images)
+    studies(args.quick, [n for n in chosen if n != "micromixing"], images, summaries)
+    print(f"written to {images}" + ("" if summaries == images else f" and {summaries}"))
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

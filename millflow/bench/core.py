@@ -65,7 +65,7 @@ BASELINE = {"method": "BDF", "rtol": 1e-6, "atol": 1e-9}
 #: the directory named by MILLFLOW_BENCH_DATA.
 REFERENCE_DIR = Path(os.environ.get("MILLFLOW_BENCH_DATA", Path(__file__).resolve().parents[2] / "benchmarks" / "data"))
 
-# Targets of issue 2 for the exact path at N = 100, 10 output times.
+# Targets for the exact path at N = 100, 10 output times.
 TARGET_MS = {"baseline": 1.0, "stiff": 5.0, "degenerate": 5.0}
 TARGET_ERR = 1e-12
 TARGET_MIN = -1e-15

@@ -6,7 +6,7 @@ root-2 sieves on a 25-class grid, 1 % Gaussian noise, each replicate fitted by
 ``millflow.fitting.fit`` with the study's default global search (differential evolution,
 population 8 x 5, up to 60 generations, 3 local starts), plus short/long drift refits on
 10 replicates. Run serially and with 2 worker processes. ``ratio_vs_budget`` is the run
-time over the 120 s budget of issue 12 ("< 2 minutes on 2 cores");
+time over the 120 s budget ("< 2 minutes on 2 cores");
 ``ratio_vs_one_fit`` the run time over one replicate's fit timed first in the same process
 (the baseline).
 """

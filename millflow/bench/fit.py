@@ -6,14 +6,16 @@ solved on a 60-class numerical grid, 1 % noise on cumulative passing; differenti
 evolution with vectorised population evaluation, then 20 local least-squares starts
 (DE optimum + 19 Sobol points) and a polish. ``max_abs_error`` is the largest
 |estimate - truth| over the parameters; ``ratio_vs_baseline`` the run time over the
-10 s budget of issue 6.
+10 s budget.
 
-Case ``knife_mill_loo_12fold`` (full run only, when the SPRITE knife-mill data are found
-next to the repository, ``../shared/data/sprite-knife-mill`` or ``$MILLFLOW_KNIFE_DATA``):
+Case ``knife_mill_loo_12fold`` (full run only, when the SPRITE knife-mill data are found:
+not part of this repository, they are the measurements published with the open-source SPRITE
+suite (Idaho National Laboratory, MIT licence; Lu et al. 2024, Powder Technology 441, 119830),
+looked for at ``../shared/data/sprite-knife-mill`` beside the repository or ``$MILLFLOW_KNIFE_DATA``):
 the knife-mill example's 12-fold leave-one-run-out prediction with the global search in
 every fold (examples/knife_mill/knife_mill.toml: 8 parameters, 151-class grid, DE popsize
-10, maxiter 150, 8 starts). ``ratio_vs_baseline`` is the run time over the 20 s target of
-issue 15 §4 (62.6 s measured before the fit called the core's population solves).
+10, maxiter 150, 8 starts). ``ratio_vs_baseline`` is the run time over the 20 s target
+(62.6 s measured before the fit called the core's population solves).
 """
 from __future__ import annotations
 

@@ -1,4 +1,4 @@
-"""Benchmark of the continuous mill (issue 4): error against run time for every path.
+"""Benchmark of the continuous mill: error against run time for every path.
 
 One kernel at N = 100 classes (2^(1/4) grid, power-law rates eq. 5 with alpha = 1 and
 tau S_1 = 100, normalized B eq. 6: phi 0.4, gamma 0.8, beta 3; feed in the three top
@@ -43,7 +43,7 @@ from millflow.mill.segregated import segregated
 
 __all__ = ["DESCRIPTION", "run", "format_table", "kernel"]
 
-DESCRIPTION = "continuous mill (issue 4): error vs run time of every transport path, axial cells vs error"
+DESCRIPTION = "continuous mill: error vs run time of every transport path, axial cells vs error"
 
 TAU = 600.0
 N_CLASSES = 100

@@ -1,4 +1,4 @@
-"""Benchmark suite ``model-error`` (issue 12): the non-linear kinetics and mills.
+"""Benchmark suite ``model-error``: the non-linear kinetics and mills.
 
 One kernel at N = 100 classes (2^(1/4) grid from 10 mm, power-law rates eq. 5 with
 alpha = 1 and tau S_1 = 100, normalized B eq. 6: phi 0.4, gamma 0.8, beta 3, feed in the
@@ -25,7 +25,7 @@ import time
 
 import numpy as np
 
-DESCRIPTION = "non-linear kinetics and mills (issue 12): batch + aggregation, PM and TIS Newton, work-precision"
+DESCRIPTION = "non-linear kinetics and mills: batch + aggregation, PM and TIS Newton, work-precision"
 
 TAU = 600.0
 N = 100

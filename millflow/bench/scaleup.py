@@ -5,7 +5,7 @@ eq. 9 fit to synthetic batch data (3 times x 12 sieves, noise sd 0.004); plant a
 4 m x 6 m ball mill (Austin power, Herbst-Fuerstenau scaling, 3 tanks in series) closed
 by a Plitt cyclone (d50c 200 um, m 2, bypass 0.25), 100 t/h, 37-class grid; quantities
 product PSD, P80, and the throughput and specific energy at a target P80 of 150 um
-(a root through the whole circuit per evaluation). Budgets of issue 13: Monte Carlo
+(a root through the whole circuit per evaluation). Budgets: Monte Carlo
 band from 1,000 draws < 5 s, delta-method band < 0.5 s; ``ratio_vs_budget`` = runtime /
 budget (< 1 meets it). The point prediction, timed in the same process, is the baseline.
 """
@@ -16,7 +16,7 @@ import time
 
 import numpy as np
 
-DESCRIPTION = "closed-circuit scale-up with bands: delta method and 1,000-draw Monte Carlo (issue 13 budgets)"
+DESCRIPTION = "closed-circuit scale-up with bands: delta method and 1,000-draw Monte Carlo (budgets)"
 
 TRUTH = {"ln_A0": math.log(1 / 240), "alpha": 1.0, "phi": 0.4, "gamma": 0.8, "beta": 3.5}
 

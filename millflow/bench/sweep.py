@@ -1,4 +1,4 @@
-"""Benchmark of sweeps (issue 14 §3): many closed-circuit cases on a Dask LocalCluster.
+"""Benchmark of sweeps: many closed-circuit cases on a Dask LocalCluster.
 
 Case: the closed-circuit ball mill of :mod:`millflow.bench.flowsheet` on N = 60 classes
 with a 5-cell mill, a grid of cases over the mill's tau and the cyclones' d50c. Rows:
@@ -12,7 +12,7 @@ with a 5-cell mill, a grid of cases over the mill's tau and the cyclones' d50c. 
   over the baseline's per case (target <= 2), ``max_rel_diff`` the largest relative
   difference from the serial Dataset (the same numbers: rounding only, target 1e-12).
 
-Targets (issue 14): 10,000 cases in < 60 s on 2 cores; per-case cost within 2x of a single
+Targets: 10,000 cases in < 60 s on 2 cores; per-case cost within 2x of a single
 solve in a loop; the LocalCluster Dataset equal to the serial one to rounding. ``--quick``
 runs 400 cases.
 """

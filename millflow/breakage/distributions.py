@@ -1,4 +1,4 @@
-"""Breakage distributions B_ij and b_ij on a size grid (EQUATIONS.md eqs. 6 and 8).
+"""Breakage distributions B_ij and b_ij on a size grid (docs/equations.md, eqs. 6 and 8).
 
 B_ij [-] is the mass fraction of the material broken out of class j that is finer
 than the upper size of class i (i > j); b_ij = B_ij - B_{i+1,j} is the fraction that

@@ -1,4 +1,4 @@
-"""Specific breakage rates S_i [1/s] on a size grid (EQUATIONS.md eqs. 5, 7, 10).
+"""Specific breakage rates S_i [1/s] on a size grid (docs/equations.md, eqs. 5, 7, 10).
 
 A rate model is anything callable as ``model(x) -> S``: x the representative (upper)
 class sizes [m] of a :class:`~millflow.grid.SizeGrid` (or the grid itself), S an

@@ -120,7 +120,12 @@ def run_command(args) -> int:
         maker()
     if args.plot and os.path.exists(args.plot):  # checked before the run, not after it
         raise InputError(f"--plot {args.plot}: exists; give a new file name (or remove it)")
-    rows = suite.run(quick=args.quick)
+    from millflow.progress import stages
+
+    label = f"suite {args.suite}" + (" (quick)" if args.quick else "")
+    with stages("millflow bench", [label], enabled=not getattr(args, "quiet", False)) as stage:
+        stage(label)
+        rows = suite.run(quick=args.quick)
     kernels = kernel_status()
     for row in rows:
         row.setdefault("suite", args.suite)

@@ -24,7 +24,7 @@ def add_parser(subparsers) -> None:
     p.add_argument("b", help="second flowsheet file (TOML)")
     add_output_flags(p, out="output folder (default: <A stem>-vs-<B stem>)",
                      json="print one JSON object instead of the table",
-                     plots="do not write compare.png", quiet="print nothing but errors (and --json output)")
+                     plots="do not write compare.png")
     p.set_defaults(func=run)
 
 
@@ -40,7 +40,13 @@ def run(args) -> int:
     pa, pb = Path(args.a), Path(args.b)
     out = Path(args.out) if args.out else Path.cwd() / f"{pa.stem}-vs-{pb.stem}"
     check_target(out, overwrite=args.overwrite, input_path=pa)
-    sa, sb = summary(solve(load(pa))), summary(solve(load(pb)))
+    from millflow.progress import stages
+
+    with stages("millflow compare", ["solve A", "solve B"], enabled=not args.quiet) as stage:
+        stage("solve A")
+        sa = summary(solve(load(pa)))
+        stage("solve B")
+        sb = summary(solve(load(pb)))
     shared = [n for n in sa["streams"] if n in sb["streams"]]
     if not shared:
         raise InputError(f"{pa} and {pb} share no stream name; compare needs streams of the same name")
@@ -59,20 +65,27 @@ def run(args) -> int:
 
         pd.DataFrame(rows).to_csv(tmp / "compare.csv", index=False, float_format="%.6g")
         (tmp / "compare.json").write_text(json.dumps(result, indent=1) + "\n", encoding="utf-8")
+        from millflow.report.studies import compare_report, write_page
+
+        write_page(tmp / "report.html", compare_report(result, sa, sb))
         if not args.no_plots:
             _plot(sa, sb, shared, pa.stem, pb.stem, tmp / "compare.png")
     if args.json:
         print(json.dumps(result))
-    elif not args.quiet:
+    else:  # --quiet hides progress only
         def f(v, fmt="{:.4g}"):
             return "-" if v is None or not math.isfinite(v) else fmt.format(v)
+
         head = f"{'stream':<20}{'t/h A':>9}{'t/h B':>9}{'P80 A':>9}{'P80 B':>9}{'dP80':>9}{'P50 A':>9}{'P50 B':>9}"
         print(f"A = {pa}\nB = {pb}\n{head}\n{'-' * len(head)}")
         for r in rows:
             print(f"{r['stream']:<20}{f(r['tph_a'], '{:.1f}'):>9}{f(r['tph_b'], '{:.1f}'):>9}"
                   f"{f(r['p80_um_a'], '{:.0f}'):>9}{f(r['p80_um_b'], '{:.0f}'):>9}{f(r['d_p80_um'], '{:+.0f}'):>9}"
                   f"{f(r['p50_um_a'], '{:.0f}'):>9}{f(r['p50_um_b'], '{:.0f}'):>9}")
-        print(f"circulating load: A {sa['circulating_load']}, B {sb['circulating_load']}")
+        def loads(cl):
+            return ", ".join(f"{n} {f(100 * v, '{:.1f}')} %" for n, v in cl.items()) or "none (no recycle)"
+        print(f"circulating load (recycle / new feed): A {loads(sa['circulating_load'])}; "
+              f"B {loads(sb['circulating_load'])}")
         print(f"specific energy [kWh/t]: A {f(sa['specific_energy_kWh_per_t'] or math.nan)}, "
               f"B {f(sb['specific_energy_kWh_per_t'] or math.nan)}")
         print(f"written to {out}/")

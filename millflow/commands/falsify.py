@@ -1,8 +1,8 @@
-"""``millflow falsify CONFIG.toml [--json] [--out DIR]``: a falsification study (issue 12).
+"""``millflow falsify CONFIG.toml [--json] [--out DIR]``: a falsification study.
 
 Generates synthetic measurements from a truth with model error, fits the assumed model
 over replicates and strengths, and writes results.nc, summary.json, summary.csv and
-bias_coverage.png into DIR (default ``falsify-results/`` beside the config). The files
+bias_coverage.png into DIR (default ``<config stem>-falsify/`` in the current folder). The files
 are written into a temporary folder beside DIR and renamed when complete; an existing
 non-empty DIR is refused unless --overwrite. See docs/model-error.md.
 """
@@ -19,9 +19,9 @@ def add_parser(subparsers) -> None:
     p = subparsers.add_parser("falsify", help="measure how model error falsifies fitted breakage kinetics",
                               description=__doc__.splitlines()[0])
     p.add_argument("config", help="TOML configuration (see docs/model-error.md)")
-    add_output_flags(p, out="output folder (default falsify-results/ beside the config)",
+    add_output_flags(p, out="output folder (default: <config stem>-falsify)",
                      json="print one JSON object instead of the text summary",
-                     plots="do not write plots", quiet="no progress messages")
+                     plots="do not write plots")
     p.set_defaults(func=run)
 
 
@@ -32,7 +32,7 @@ def run(args) -> int:
 
     say = (lambda msg: None) if args.quiet else (lambda msg: print(f"[falsify] {msg}", file=sys.stderr, flush=True))
     cfg = load_config(args.config)
-    out = Path(args.out) if args.out else Path(args.config).resolve().parent / "falsify-results"
+    out = Path(args.out) if args.out else Path.cwd() / f"{Path(args.config).stem}-falsify"
     check_target(out, overwrite=args.overwrite, input_path=args.config)  # before the study, not after
     res = cfg.run(progress=say)
     summary = res.summary()
@@ -47,7 +47,7 @@ def run(args) -> int:
             files.append("bias_coverage.png")
     if args.json:
         print(json.dumps({**summary, "out": str(out), "files": files}))
-    elif not args.quiet:
+    else:  # --quiet hides progress only
         print(res.text())
         print(f"files: {', '.join(files)} in {out}")
     return 0

@@ -18,11 +18,31 @@ def add_parser(subparsers) -> None:
     p = subparsers.add_parser("fit", help="fit breakage (and classification) parameters to PSD data",
                               description=__doc__.splitlines()[0])
     p.add_argument("config", help="TOML configuration (see docs/fitting.md)")
-    add_output_flags(p, out="output folder (overrides output.dir of the config)",
+    add_output_flags(p, out="output folder (default: output.dir of the config, else <config stem>-fit)",
                      json="print one JSON object instead of the text summary",
-                     plots="do not write plots", quiet="no progress messages")
+                     plots="do not write plots")
     p.add_argument("--data-dir", default=None, help="SPRITE data folder (overrides data.sprite_folder)")
     p.set_defaults(func=run)
+
+
+def ranking_table(table: list, fitted: str) -> str:
+    """The AIC ranking of candidate models as aligned columns (as wide as the longest name),
+    and, when the model fitted above (the config's [model], ``fitted``) is not the
+    lowest-AIC one, a note saying so and why it is still the one reported."""
+    names = [str(r["model"]) for r in table]
+    w = max([len("model")] + [len(n) for n in names])
+    lines = ["model ranking (AIC, lowest first):",
+             f"  {'model':<{w}}  {'SSR':>10}  {'params':>6}  {'AIC':>10}  {'BIC':>10}  {'dAIC':>8}"]
+    for r in table:
+        lines.append(f"  {str(r['model']):<{w}}  {r['ssr']:>10.5g}  {r['n_params']:>6}  {r['aic']:>10.2f}  "
+                     f"{r['bic']:>10.2f}  {r['delta_aic']:>8.2f}")
+    best = min(table, key=lambda r: r["aic"]) if table else None
+    if best is not None and str(best["model"]) != fitted:
+        mine = next((r for r in table if str(r["model"]) == fitted), None)
+        gap = f" (dAIC {mine['delta_aic']:.2f})" if mine else ""
+        lines.append(f"  note: the estimates above are of the config's [model] {fitted!r}{gap}, as configured; "
+                     f"the lowest-AIC candidate is {best['model']!r}: make it the [model] to report its estimates")
+    return "\n".join(lines)
 
 
 def run(args) -> int:
@@ -64,10 +84,7 @@ def run(args) -> int:
     else:
         print(result.summary())
         if "discrimination" in out:
-            print("model ranking (AIC):")
-            for row in out["discrimination"]["table"]:
-                print(f"  {row['model']:<50} SSR {row['ssr']:.5g}  p {row['n_params']}  AIC {row['aic']:.2f}  "
-                      f"BIC {row['bic']:.2f}  dAIC {row['delta_aic']:.2f}")
+            print(ranking_table(out["discrimination"]["table"], cfg.label))
             for t in out["discrimination"]["f_tests"]:
                 print(f"  F test {t['small']} -> {t['big']}: F {t['F']:.3g}, p {t['p_value']:.3g}")
         if prediction:
@@ -75,7 +92,13 @@ def run(args) -> int:
                   f"over {len(prediction['rmse'])} held-out conditions")
         sys.stdout.flush()
     with staged_folder(out_dir, overwrite=args.overwrite, input_path=args.config, command="fit") as tmp:
-        files = relocate(write_report(result, tmp, prediction, plots=cfg.plots and not args.no_plots), tmp, out_dir)
-    if not args.quiet:
-        print("wrote " + ", ".join(files), file=sys.stderr if args.json else sys.stdout)
+        written = write_report(result, tmp, prediction, plots=cfg.plots and not args.no_plots)
+        from millflow.report.studies import fit_report, write_page
+
+        pngs = [f for f in written if str(f).endswith(".png")]
+        written.append(str(write_page(Path(tmp) / "report.html",
+                                      fit_report(json.loads(json.dumps(out, default=float)), input_path=args.config,
+                                                 images=pngs))))
+        files = relocate(written, tmp, out_dir)
+    print("wrote " + ", ".join(files), file=sys.stderr if args.json else sys.stdout)
     return 0

@@ -141,14 +141,50 @@ def relocate(paths, tmp: Path, out: Path) -> list[str]:
     return [str(Path(out) / Path(p).relative_to(tmp)) for p in paths]
 
 
-def add_output_flags(p, *, out: str, json: str, plots: str, quiet: str) -> None:
+#: The one meaning of ``--quiet`` in every command (docs/cli.md).
+QUIET_HELP = "no progress bars or progress messages on stderr (the results still print)"
+
+
+def add_output_flags(p, *, out: str, json: str, plots: str, quiet: str | None = None) -> None:
     """The output flags every writing command shares, one meaning each: ``--out DIR`` (a
-    folder), ``--json``, ``--no-plots``, ``--quiet``, ``--overwrite``; the help texts say what
-    they mean for that command."""
+    folder), ``--json``, ``--no-plots``, ``--quiet`` (:data:`QUIET_HELP`: progress only),
+    ``--overwrite``; the help texts say what the others mean for that command (``quiet``
+    is accepted and ignored: the flag has one meaning)."""
     p.add_argument("--out", default=None, help=out)
     p.add_argument("--json", action="store_true", help=json)
     p.add_argument("--no-plots", action="store_true", help=plots)
-    p.add_argument("--quiet", action="store_true", help=quiet)
+    p.add_argument("--quiet", action="store_true", help=QUIET_HELP)
     p.add_argument("--overwrite", action="store_true",
                    help="replace an output folder that holds files millflow did not write")
 
+
+
+def write_extras(sol, summary: dict, folder, *, input_path=None, command: str = "millflow run") -> dict:
+    """``report.html`` (always) and ``results.xlsx`` (when openpyxl is installed) of a
+    solved flowsheet into ``folder``; returns name -> path."""
+    from millflow.report import partition_curves, write_report
+
+    folder = Path(folder)
+    files = {"report_html": write_report(folder / "report.html", summary, input_path=input_path,
+                                         partition=partition_curves(sol), command=command)}
+    from millflow.report.excel import excel_available, write_workbook
+
+    if excel_available():
+        from millflow.report.excel import class_flows_tph
+
+        files["results_xlsx"] = write_workbook(folder / "results.xlsx", summary, class_flows_tph(sol))
+    return files
+
+
+def deprecated_alias(p, old: str, new: str, dest: str) -> None:
+    """``old`` as a hidden alias of the option ``new`` (same ``dest``), warning when used."""
+    import argparse
+    import sys
+
+    class _Alias(argparse.Action):
+        def __call__(self, parser, namespace, values, option_string=None):
+            # printed, not warnings.warn: arguments are parsed before main() formats warnings
+            print(f"{parser.prog}: warning: {old} is deprecated here; use {new}", file=sys.stderr)
+            setattr(namespace, dest, values)
+
+    p.add_argument(old, dest=dest, action=_Alias, help=argparse.SUPPRESS)

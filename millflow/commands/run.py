@@ -1,9 +1,12 @@
-"""`millflow run FILE.toml [--out DIR] [--json] [--no-plots] [--overwrite] [--quiet]`: solve a flowsheet.
+"""`millflow run FILE.toml [--out DIR] [--json] [--no-plots] [--overwrite] [--quiet]
+[--tear-method M]`: solve a flowsheet.
 
 Prints a compact table (stream, t/h, P80, P50, % passing the named sizes), the
 circulating loads, mass balance, specific energy and run time, and writes results.nc,
-CSV tables, summary.json and PNG plots to the output folder (default
-``<file stem>-results/`` in the current directory). With ``--json`` one JSON object
+CSV tables, summary.json, PNG plots, report.html (one self-contained page: flowsheet,
+tables, plots, input file) and, whenever openpyxl is installed (extra ``report``),
+results.xlsx to the output folder (default ``<file stem>-results/`` in the current
+directory). With ``--json`` one JSON object
 (the summary) is printed instead of the table.
 """
 from __future__ import annotations
@@ -12,7 +15,7 @@ import json
 import math
 from pathlib import Path
 
-from millflow.commands.output import add_output_flags
+from millflow.commands.output import add_output_flags, deprecated_alias
 
 
 def add_parser(subparsers) -> None:
@@ -21,11 +24,12 @@ def add_parser(subparsers) -> None:
     p.add_argument("file", help="flowsheet file (TOML), e.g. flowsheets/closed_circuit_ball_mill.toml")
     add_output_flags(p, out="output folder (default: <file stem>-results)",
                      json="print one JSON object instead of the table",
-                     plots="do not write the PNG plots", quiet="print nothing but errors (and --json output)")
+                     plots="do not write the PNG plots")
     p.add_argument("--no-grid-check", action="store_true",
                    help="skip the second solve on a refined size grid (Principle IV)")
-    p.add_argument("--method", default="wegstein", help="tear method for nonlinear units (wegstein, newton, "
-                                                        "substitution)")
+    p.add_argument("--tear-method", default="wegstein", dest="tear_method",
+                   help="tear method for nonlinear units (wegstein, newton, substitution)")
+    deprecated_alias(p, "--method", "--tear-method", "tear_method")
     p.set_defaults(func=run)
 
 
@@ -95,34 +99,43 @@ def format_summary(s: dict, out_dir: str | None, written: list[str] | None = Non
 
 
 def run(args) -> int:
-    from millflow.commands.output import check_target, relocate, staged_folder
+    from millflow.commands.output import check_target, relocate, staged_folder, write_extras
     from millflow.flowsheet import load, save, solve, summary
     from millflow.flowsheet.results import stream_properties
 
     path = Path(args.file)
     out = Path(args.out) if args.out else Path.cwd() / f"{path.stem}-results"
     check_target(out, overwrite=args.overwrite, input_path=path)  # before the work, not after
-    fs = load(path)
-    sol = solve(fs, method=args.method)
-    props = stream_properties(sol)  # once, for the grid check, the summary and the files
-    check = None
-    if not args.no_grid_check:
-        import warnings
+    from millflow.progress import stages
 
-        from millflow.errors import ModelRangeWarning
-        from millflow.flowsheet.gridcheck import grid_check
+    names = ["solve"] + ([] if args.no_grid_check else ["grid check"]) + ["write"]
+    with stages("millflow run", names, enabled=not args.quiet) as stage:
+        stage("solve")
+        fs = load(path)
+        sol = solve(fs, method=args.tear_method)
+        props = stream_properties(sol)  # once, for the grid check, the summary and the files
+        check = None
+        if not args.no_grid_check:
+            import warnings
 
-        with warnings.catch_warnings():  # the refined solve repeats the range warnings the run has given
-            warnings.simplefilter("ignore", ModelRangeWarning)
-            check = grid_check(sol, props)
-    s = summary(sol, props, grid_check=check)
-    with staged_folder(out, overwrite=args.overwrite, input_path=path, command="run") as tmp:
-        files = relocate(save(sol, tmp, plots=not args.no_plots, grid_check=check, props=props).values(), tmp, out)
+            from millflow.errors import ModelRangeWarning
+            from millflow.flowsheet.gridcheck import grid_check
+
+            stage("grid check")
+            with warnings.catch_warnings():  # the refined solve repeats the range warnings the run has given
+                warnings.simplefilter("ignore", ModelRangeWarning)
+                check = grid_check(sol, props)
+        s = summary(sol, props, grid_check=check)
+        stage("write")
+        with staged_folder(out, overwrite=args.overwrite, input_path=path, command="run") as tmp:
+            written = save(sol, tmp, plots=not args.no_plots, grid_check=check, props=props)
+            written.update(write_extras(sol, s, tmp, input_path=path, command="millflow run"))
+            files = relocate(written.values(), tmp, out)
     s["output_dir"] = str(out)
     s["files_written"] = [Path(f).name for f in files]
     if args.json:
         print(json.dumps(s))
-    elif not args.quiet:
+    else:
         try:
             shown = str(out.relative_to(Path.cwd()))
         except ValueError:

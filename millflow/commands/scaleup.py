@@ -21,7 +21,7 @@ import threading
 import time
 from pathlib import Path
 
-from millflow.commands.output import add_output_flags
+from millflow.commands.output import add_output_flags, deprecated_alias
 
 
 def add_parser(subparsers) -> None:
@@ -34,11 +34,13 @@ def add_parser(subparsers) -> None:
     p.add_argument("--target-p80-um", type=float, default=None, help="target product P80 [um]: solve for throughput")
     add_output_flags(p, out="output folder (default: <plant stem>-scaleup)",
                      json="print one JSON object instead of the text summary",
-                     plots="do not write scaleup.png", quiet="print nothing but errors (and --json output)")
+                     plots="do not write scaleup.png")
     p.add_argument("--draws", type=int, default=400,
                    help="Monte Carlo draws (default 400: the percentiles of a 95 %% band to about 1 %% of the "
                         "band; the model-form contributions are usually larger)")
-    p.add_argument("--method", choices=["both", "delta", "mc"], default="both", help="band method(s)")
+    p.add_argument("--band-method", choices=["both", "delta", "mc"], default="both", dest="band_method",
+                   help="method(s) of the 95 %% bands: delta method, Monte Carlo or both (default both)")
+    deprecated_alias(p, "--method", "--band-method", "band_method")
     p.set_defaults(func=run)
 
 
@@ -100,9 +102,9 @@ def run(args) -> int:
     if args.draws < 10:
         from millflow.errors import InputError
         raise InputError(f"--draws {args.draws}: expected >= 10")
-    methods = {"both": ("delta", "mc"), "delta": ("delta",), "mc": ("mc",)}[args.method]
+    methods = {"both": ("delta", "mc"), "delta": ("delta",), "mc": ("mc",)}[args.band_method]
     t0 = time.perf_counter()
-    with _Progress(enabled=not (args.quiet or args.json)) as progress:
+    with _Progress(enabled=not args.quiet) as progress:
         progress.stage(f"parameter bands ({', '.join(methods)}"
                        + (f", Monte Carlo {args.draws} draws" if "mc" in methods else "") + ")")
         res = predict_plant(su, target, methods=methods, n_draws=args.draws)  # SolverError: exit 1 (cli.main)
@@ -117,13 +119,14 @@ def run(args) -> int:
              power_gross_kW=sc["plant_gross_kW"], holdup_kg=sc["plant_holdup_kg"], A_factor=sc["A"],
              mu_factor=sc["mu"], transport=notes["transport"], transport_params=notes["transport_params"],
              transport_source=notes["transport_source"])
+    s["plant_file"] = str(args.plant)
     with staged_folder(out, overwrite=args.overwrite, input_path=args.plant, command="scaleup") as tmp:
         files = _write(res, s, tmp, plots=not args.no_plots)
         files += _write_contributions(s, tmp, plots=not args.no_plots)
     s["files_written"] = [f.name for f in files]
     if args.json:
         print(json.dumps(s, default=float))
-    elif not args.quiet:
+    else:
         print(format_summary(s))
         print(f"wrote {out}/ ({', '.join(s['files_written'])})")
     return 0
@@ -206,12 +209,27 @@ def _write(res, s, out: Path, plots: bool):
     files = [out / "scaleup.nc", out / "scaleup_psd.csv", out / "scaleup.json"]
     ds = res.dataset
     ds.to_netcdf(files[0])
-    cols = {"size_um": ds.x.values * 1e6, "passing": ds.passing.values, "feed_passing": ds.feed_passing.values}
+    # passing in % (every CSV: docs/cli.md) at 6 significant digits; a band edge beyond
+    # [0, 100] % is a linearisation artefact of the delta method: shown at the bound and
+    # counted in scaleup.json (band_edges_at_physical_bounds)
+    import numpy as np
+
+    cols = {"size_um": ds.x.values * 1e6, "passing_pct": 100 * ds.passing.values,
+            "feed_passing_pct": 100 * ds.feed_passing.values}
+    clipped = 0
     for m in ds.estimator.values:
-        cols[f"passing_lo_{m}"] = ds.passing_lo.sel(estimator=m).values
-        cols[f"passing_hi_{m}"] = ds.passing_hi.sel(estimator=m).values
-    pd.DataFrame(cols).to_csv(files[1], index=False)
+        for side in ("lo", "hi"):
+            v = 100 * ds[f"passing_{side}"].sel(estimator=m).values
+            clipped += int(np.count_nonzero((v < 0) | (v > 100)))
+            cols[f"passing_{side}_{m}_pct"] = np.clip(v, 0.0, 100.0)
+    cols["passing_pct"] = np.clip(cols["passing_pct"], 0.0, 100.0)  # rounding above 100 % only
+    s["band_edges_at_physical_bounds"] = clipped
+    pd.DataFrame(cols).to_csv(files[1], index=False, float_format="%.6g")
     files[2].write_text(json.dumps(s, indent=1, default=float))
+    from millflow.report.studies import scaleup_report, write_page
+
+    files.append(write_page(out / "report.html", scaleup_report(json.loads(json.dumps(s, default=float)), ds,
+                                                                input_path=s.get("plant_file"))))
     if plots:
         from millflow.plotting import figure
 

@@ -33,7 +33,7 @@ def add_parser(subparsers) -> None:
     p.add_argument("--workers", type=int, default=None, help="LocalCluster workers (default: all cores)")
     add_output_flags(p, out="output folder (default: <file stem>-sweep)",
                      json="print a JSON summary instead of the text one",
-                     plots="do not write the plots", quiet="no progress bar")
+                     plots="do not write the plots")
     p.set_defaults(func=run)
 
 
@@ -54,13 +54,17 @@ def run(args) -> int:
                "design": ds.attrs["design"], "varied": ds.attrs["varied"], "out": str(out)}
     with staged_folder(out, overwrite=args.overwrite, input_path=path, command="sweep") as tmp:
         ds.to_netcdf(tmp / "sweep.nc")
-        ds.to_dataframe().reset_index().to_csv(tmp / "sweep.csv", index=False, float_format="%.6g")
+        cases = ds.to_dataframe().reset_index()
+        cases.to_csv(tmp / "sweep.csv", index=False, float_format="%.6g")
+        from millflow.report.studies import sweep_report, write_page
+
+        write_page(tmp / "report.html", sweep_report(summary, cases, input_path=path))
         (tmp / "summary.json").write_text(json.dumps(summary, indent=1) + "\n", encoding="utf-8")
         if not args.no_plots:
             _plots(ds, axes, tmp / "sweep.png")
     if args.json:
         print(json.dumps(summary))
-    elif not args.quiet:
+    else:  # --quiet hides progress only
         print(f"{path}: {summary['cases']} cases ({summary['design']}; {summary['varied']}), "
               f"{summary['failed']} failed; written to {out}/")
     if summary["failed"]:

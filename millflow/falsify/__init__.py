@@ -1,4 +1,4 @@
-"""Falsification studies (issue 12, Principle I): fit an assumed linear model to synthetic
+"""Falsification studies (Principle I): fit an assumed linear model to synthetic
 data from a truth with model error, over replicates and strengths, and measure bias,
 coverage, goodness of fit, residual structure and rate drift. See docs/model-error.md.
 

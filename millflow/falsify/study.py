@@ -1,4 +1,4 @@
-"""The falsification study (issue 12, Principle I): how wrong are fitted kinetics when the
+"""The falsification study (Principle I): how wrong are fitted kinetics when the
 assumed model leaves out physics that the truth has?
 
 For every strength of the model error a truth is built, its noiseless measurements are

@@ -1,4 +1,4 @@
-"""Parameter estimation for population-balance models of milling (issue 6, Principles II-VI).
+"""Parameter estimation for population-balance models of milling (Principles II-VI).
 
 Read PSD long tables (:mod:`.data`), describe and compile a forward model with shared
 parameters and eq. 10 power laws (:mod:`.models`), estimate globally with eq. 9

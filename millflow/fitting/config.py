@@ -15,7 +15,8 @@ Tables and keys (paths relative to the config file)::
     [params.NAME] value, min, max, vary
     [optimizer]   global = true, starts = 20, popsize = 15, maxiter = 200, seed = 0
     [validation]  hold_out = "each" | ["cond", ...] | [["a", "b"], ...]
-    [output]      dir = "fit-results", plots = true   (relative to the config file)
+    [output]      dir = "fit-results", plots = true   (relative to the config file; without
+                  dir: <config stem>-fit in the current folder, as every command)
     [[candidates]] label = "...", plus any [model] keys: extra forms to rank (AIC/BIC, F)
 """
 from __future__ import annotations
@@ -23,6 +24,7 @@ from __future__ import annotations
 import os
 import tomllib
 from dataclasses import dataclass, field
+from pathlib import Path
 
 import numpy as np
 
@@ -230,7 +232,8 @@ def load_config(path, data_dir: str | None = None) -> FitConfig:
     check_keys(val, {"hold_out"}, f"{path} [validation]")
     out = table_of(cfg, "output", where)
     check_keys(out, {"dir", "plots"}, f"{path} [output]")
-    out_dir = string(out, "dir", f"{path} [output]", "fit-results")
+    # default: <config stem>-fit in the current folder, as every command (docs/cli.md)
+    out_dir = string(out, "dir", f"{path} [output]", "") if "dir" in out else None
     plots = boolean(out, "plots", f"{path} [output]", True)
     cands = []
     for k, c in enumerate(cfg.get("candidates", [])):
@@ -244,7 +247,8 @@ def load_config(path, data_dir: str | None = None) -> FitConfig:
     wt = table_of(cfg, "weights", where)
     weights = {str(k): number(wt, k, f"{path} [weights]", lo=0.0) for k in wt}
     return FitConfig(path, data, spec, params, grid, opt, val.get("hold_out"),
-                     rel(out_dir), plots, cands, label, tracer, weights)
+                     rel(out_dir) if out_dir is not None else str(Path.cwd() / f"{Path(path).stem}-fit"),
+                     plots, cands, label, tracer, weights)
 
 
 def read_tracer_table(path):

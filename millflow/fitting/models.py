@@ -156,7 +156,7 @@ class ModelSpec:
         (e.g. ``{"n": 10}``, ``{"pe": 8.0}``, ``{"n": 5, "r": 1.0}``); stored as sorted pairs.
     where : mode "mill": where classification acts (None: the mill's default), see
         :func:`millflow.mill.steady_mill`.
-    transport_fit : mode "mill": transport parameters fitted with S and B (issue 15 §3),
+    transport_fit : mode "mill": transport parameters fitted with S and B,
         a subset of :data:`TRANSPORT_FIT` for the transport: "tau" (parameter ``ln_tau``,
         tau [s]; with a ``tau_column`` it scales the column: tau_c = exp(ln_tau) *
         column_c / geometric mean), "pe" (``ln_pe``, axial dispersion) and "r" (``r``,

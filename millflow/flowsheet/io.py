@@ -396,7 +396,7 @@ def _curve_params(t: _Table, curve: str, skip=()) -> dict:
 
 # --------------------------------------------------------------- units
 def _kinetics(t: _Table) -> dict:
-    """A mill's [kinetics] table (issue 12): aggregation and/or fines cushioning.
+    """A mill's [kinetics] table: aggregation and/or fines cushioning.
 
     aggregation = "constant" (sum, product, shear), aggregation_beta0_per_s = ...,
     x_ref_um = ... (the kernel's reference size); cushion_lambda = -1.0, fines_um = ...

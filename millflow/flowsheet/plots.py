@@ -3,12 +3,12 @@
 - ``psd.png``: cumulative passing of every stream on a log size axis [um].
 - ``classifiers.png``: partition curves of every classifier and mill discharge screen
   (fraction of each size to the coarse stream).
-- ``flowsheet.png``: a simple drawing of units (boxes, placed by distance from the
-  feeds) and streams (arrows, recycles curved) labelled with solids rates [t/h].
+- ``flowsheet.png``: the drawing of report.html (:mod:`millflow.report.layout`): units
+  placed by distance from the feeds, streams labelled with solids and water t/h, % solids
+  and P80, recycles routed below their row.
 """
 from __future__ import annotations
 
-from collections import deque
 from pathlib import Path
 
 import numpy as np
@@ -59,86 +59,91 @@ def plot_classifiers(sol, ax):
         ax.legend(fontsize=8)
 
 
-def _levels(fs) -> dict:
-    adj = {u: [] for u in fs.units}
-    for s in fs.streams.values():
-        adj[s.source].append(s.target)
-    level = {}
-    q = deque()
-    for u, unit in fs.units.items():
-        if unit.type == "feed":
-            level[u] = 0
-            q.append(u)
-    while q:
-        u = q.popleft()
-        for v in adj[u]:
-            if v not in level:
-                level[v] = level[u] + 1
-                q.append(v)
-    for u in fs.units:
-        level.setdefault(u, 0)
-    return level
+def _flowsheet_labels(sol, ds=None):
+    """Stream label lines (solids t/h; water t/h and % solids when wet; P80 um), as
+    report.html shows them; from ``ds`` (:func:`~millflow.flowsheet.results.to_dataset`)
+    when given, else from the solution's flows."""
+    from millflow.errors import GridError
+    from millflow.psd import percentile_size
+    from millflow.report.flowsheet import stream_label
 
-
-#: Layers per row of the flowsheet drawing: longer circuits wrap onto further rows.
-LAYERS_PER_ROW = 6
-_DX, _DY = 3.6, 1.7  # spacing of layers and of units within a layer [data units]
-
-
-def flowsheet_layout(fs) -> tuple[dict, dict, tuple]:
-    """Positions of units (layers by distance from the feeds, wrapped after
-    :data:`LAYERS_PER_ROW` layers, alternate rows running back), their layers, and the figure size [in] that keeps
-    boxes and labels legible for circuits of 10-20 units."""
-    level = _levels(fs)
-    per_level = {}
-    for u in fs.units:
-        per_level.setdefault(level[u], []).append(u)
-    depth = max(len(v) for v in per_level.values())
-    n_levels = max(level.values()) + 1
-    row_height = _DY * depth + 1.8
-    pos = {}
-    for lv, units in per_level.items():
-        row, col = divmod(lv, LAYERS_PER_ROW)
-        if row % 2:  # boustrophedon: the next row runs back, so a wrapped loop stays short
-            col = LAYERS_PER_ROW - 1 - col
-        for k, u in enumerate(units):
-            pos[u] = (_DX * col, -row * row_height - _DY * k)
-    rows = (n_levels - 1) // LAYERS_PER_ROW + 1
-    cols = min(n_levels, LAYERS_PER_ROW)
-    size = (max(6.0, 1.9 * cols + 1.5), max(3.5, 1.25 * rows * (depth + 1) + 1.0))
-    return pos, level, size
-
-
-def plot_flowsheet(sol, ax):
-    """Boxes for units, arrows for streams with their solids rates [t/h] (recycles in red)."""
     fs = sol.flowsheet
-    pos, level, _ = flowsheet_layout(fs)
-    for u, (x, y) in pos.items():
+    wet = sol.water is not None and bool(np.any(sol.water.flows > 0))
+    out = {}
+    for k, n in enumerate(fs.stream_names):
+        if ds is not None:
+            s = {"solids_tph": float(ds["solids"].sel(stream=n)) * 3.6, "p80_um": float(ds["p80"].sel(stream=n)) * 1e6}
+        else:
+            f = np.maximum(np.asarray(sol.flows[k], float), 0.0)
+            try:
+                p80 = percentile_size(fs.grid, f / f.sum(), 80) * 1e6 if f.sum() > 0 else float("nan")
+            except GridError:
+                p80 = float("nan")
+            s = {"solids_tph": float(sol.flows[k].sum()) * 3.6, "p80_um": p80}
+        if wet:
+            water = float(sol.water_flow(n)) * 3.6
+            total = s["solids_tph"] + water
+            s.update(water_tph=water, solids_pct=100 * s["solids_tph"] / total if total > 0 else float("nan"))
+        out[n] = stream_label(n, s)
+    return out
+
+
+def flowsheet_drawing(sol, ds=None):
+    """The layout (:mod:`millflow.report.layout`) and label lines of the flowsheet drawing."""
+    from millflow.report.layout import layout
+
+    fs = sol.flowsheet
+    labels = _flowsheet_labels(sol, ds)
+    lay = layout({u: x.type for u, x in fs.units.items()}, {n: (s.source, s.target) for n, s in fs.streams.items()},
+                 max(len(v) for v in labels.values()))
+    return lay, labels
+
+
+#: Pixels of the layout per inch of flowsheet.png (labels then print at 8 pt on 15 px lines).
+PX_PER_IN = 100.0
+
+
+def plot_flowsheet(sol, ax, ds=None):
+    """Boxes for units, arrows for streams (recycles in red, routed below their row) and one
+    label per stream: solids t/h, water t/h and % solids (wet circuits), P80 [um]; the
+    layout of report.html's drawing."""
+    import html
+
+    fs = sol.flowsheet
+    lay, labels = flowsheet_drawing(sol, ds)
+    for u, b in lay.units.items():
         unit = fs.units[u]
-        ax.text(x, y, f"{u}\n[{getattr(unit, 'kind', unit.type)}]", ha="center", va="center", fontsize=8,
-                bbox=dict(boxstyle="round", fc="#e8f0fa", ec="#3060a0"), zorder=3)
-    tot = {n: float(sol.flows[k].sum()) * 3.6 for k, n in enumerate(fs.stream_names)}
-    for n, s in fs.streams.items():
-        (x0, y0), (x1, y1) = pos[s.source], pos[s.target]
-        back = level[s.target] <= level[s.source]
-        dist = max(float(np.hypot(x1 - x0, y1 - y0)), 1e-9)
-        rad = 0.45 * min(1.0, 2.0 * _DX / dist) if back else 0.0  # arcs about one layer high at most
-        if back and (x0, y0) == (x1, y1):
-            x1, y1 = x1 + 0.01, y1 - 0.01
-        ax.annotate("", xy=(x1, y1), xytext=(x0, y0), zorder=2,
-                    arrowprops=dict(arrowstyle="-|>", color="#a03030" if back else "#303030", shrinkA=34,
-                                    shrinkB=34, connectionstyle=f"arc3,rad={rad}"))
-        # label at the arc's apex (mid + rad/2 (dy, -dx)) or just above a straight arrow
-        mx, my = (x0 + x1) / 2 + 0.5 * rad * (y1 - y0), (y0 + y1) / 2 - 0.5 * rad * (x1 - x0)
-        my += 0.35 if not back else (0.3 if my >= (y0 + y1) / 2 else -0.3)
-        ax.text(mx, my, f"{n}\n{tot[n]:.4g} t/h", ha="center", va="center", fontsize=7, color="#202020",
-                bbox=dict(boxstyle="round,pad=0.1", fc="white", ec="none", alpha=0.8), zorder=4)
-    xs = [p[0] for p in pos.values()]
-    ys = [p[1] for p in pos.values()]
-    ax.set_xlim(min(xs) - 1.8, max(xs) + 1.8)
-    ax.set_ylim(min(ys) - 0.6 - 0.5 * _DX, max(ys) + 0.6 + 0.5 * _DX)
+        ax.add_patch(_rect(b, fc="#e8f0fa", ec="#3060a0"))
+        ax.text(b.x, b.y, f"{u}\n{getattr(unit, 'kind', unit.type)}", ha="center", va="center", fontsize=8,
+                zorder=3)
+    for n, route in lay.routes.items():
+        color = "#a03030" if lay.recycle[n] else "#303030"
+        xs, ys = zip(*route)
+        ax.plot(xs, ys, color=color, lw=1.2, zorder=1)
+        ax.annotate("", xy=route[-1], xytext=route[-2], zorder=2,
+                    arrowprops=dict(arrowstyle="-|>", color=color, lw=1.2, shrinkA=0, shrinkB=0))
+    for n, b in lay.labels.items():
+        ax.add_patch(_rect(b, fc="white", ec="#bbbbbb", alpha=0.92, zorder=4))
+        ax.text(b.x, b.y, "\n".join(html.unescape(t) for t in labels[n]), ha="center", va="center", fontsize=7.5,
+                linespacing=1.25, zorder=5)
+    ax.set_xlim(0, lay.width)
+    ax.set_ylim(lay.height, 0)
+    ax.set_aspect("equal")
     ax.set_axis_off()
     ax.set_title(fs.title or "flowsheet", fontsize=10)
+
+
+def _rect(b, **kw):
+    from matplotlib.patches import FancyBboxPatch
+
+    kw.setdefault("zorder", 2)
+    return FancyBboxPatch((b.x - b.w / 2, b.y - b.h / 2), b.w, b.h, boxstyle="round,pad=0,rounding_size=5", **kw)
+
+
+def flowsheet_figsize(sol, ds=None) -> tuple:
+    """flowsheet.png's size [in]: the layout at :data:`PX_PER_IN`, plus room for the title."""
+    lay, _ = flowsheet_drawing(sol, ds)
+    return lay.width / PX_PER_IN, lay.height / PX_PER_IN + 0.4
 
 
 def save_plots(sol, ds, out_dir) -> dict:
@@ -151,7 +156,8 @@ def save_plots(sol, ds, out_dir) -> dict:
     plots = [("psd_png", "psd.png", plot_psd, ds, (8, 5))]
     if classifies:
         plots.append(("classifiers_png", "classifiers.png", plot_classifiers, sol, (8, 5)))
-    plots.append(("flowsheet_png", "flowsheet.png", plot_flowsheet, sol, flowsheet_layout(sol.flowsheet)[2]))
+    plots.append(("flowsheet_png", "flowsheet.png", lambda s, ax: plot_flowsheet(s, ax, ds), sol,
+                  flowsheet_figsize(sol, ds)))
     for key, fname, fun, arg, size in plots:
         fig, ax = figure(figsize=size)
         fun(arg, ax)

@@ -394,12 +394,13 @@ def unit_table(sol):
 
 
 def psd_table(sol, props=None):
-    """pandas DataFrame: cumulative passing [%] of every stream (columns) at every grid size (rows, um)."""
+    """pandas DataFrame: cumulative passing [%] of every stream (columns ``<stream>_passing_pct``)
+    at every grid size (rows, index ``size_um``)."""
     import pandas as pd
 
     fs = sol.flowsheet
     props = props or stream_properties(sol)
-    data = {n: props[n]["cum_passing"] * 100 for n in fs.stream_names}
+    data = {f"{n}_passing_pct": props[n]["cum_passing"] * 100 for n in fs.stream_names}
     df = pd.DataFrame(data, index=pd.Index(fs.grid.x * 1e6, name="size_um"))
     return df
 

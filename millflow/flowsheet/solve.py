@@ -18,7 +18,7 @@ size, and the smallest singular value of each I - G_k then names the streams and
 of the loop (the support of the null vector) in a :class:`~millflow.errors.SolverError`
 instead of returning huge numbers.
 
-Mills with non-linear kinetics (aggregation, population-dependent rates; issue 12) are
+Mills with non-linear kinetics (aggregation, population-dependent rates) are
 not linear maps of their feed: each is torn on its inlet flow vector. For given inlet
 vectors their products are computed (:meth:`~millflow.flowsheet.units.Mill.product_flows`,
 Newton on the mill's steady state) and enter the linear system as sources; the inlet

@@ -129,7 +129,7 @@ class MillUnit:
         Mill power draw [W]: drives the breakage when the rates are per energy; otherwise
         information only (the specific energy it gives is not causal, see ``power_role``).
     kinetics : dict or None
-        Non-linear kinetics (issue 12): ``aggregation_kernel`` (constant, sum, product,
+        Non-linear kinetics: ``aggregation_kernel`` (constant, sum, product,
         shear) with ``aggregation_beta0`` [1/s] and ``x_ref_m`` [m]; ``cushion_lambda``
         with ``fines_m`` [m] (S_i (1 + F)^lambda, F the mass fraction at or below fines_m).
         Such a mill is not a linear map of its feed: the solver tears its inlet flow

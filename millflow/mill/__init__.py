@@ -17,7 +17,7 @@ scene, :func:`transient_mill` the dynamics. Modules, one job each:
   flux discharge);
 - :mod:`~millflow.mill.transient`: the dynamic response;
 - :mod:`~millflow.mill.nonlinear`: mills with non-linear kinetics (aggregation,
-  population-dependent rates; issue 12): perfect mixing by Newton, tanks in series,
+  population-dependent rates): perfect mixing by Newton, tanks in series,
   plug flow, axial dispersion, and the two micromixing limits of any RTD.
 """
 from millflow.mill.composed import Mill

@@ -277,8 +277,11 @@ def solve_axial_open(S, b, feed, tau: float, pe: float, d=None, w=None, *, disch
     d, w : (N,) relative axial velocity d_i* and relative dispersion (default w = d).
     discharge : "sampled" (v c(1)) or "flux" (net flux through z = 1).
 
-    The returned ``z``, ``density`` (tau c [s]) and ``holdup`` cover the whole line of the
-    finest grid; profiles inside the mill are its nodes with 0 <= z <= 1.
+    Returns
+    -------
+    AxialSolution
+        Its ``z``, ``density`` (tau c [s]) and ``holdup`` cover the whole line of the
+        finest grid; profiles inside the mill are its nodes with 0 <= z <= 1.
     """
     S = np.asarray(S, dtype=float)
     v = np.ones(S.size) if d is None else np.asarray(d, dtype=float)

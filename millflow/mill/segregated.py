@@ -2,7 +2,7 @@
 
 Each parcel of feed grinds as a batch (eq. 4) for its residence time t, which is
 distributed with the exit-age density E(t) of the transport model. For first-order
-breakage without classification this is exact (EQUATIONS.md, "segregated flow is
+breakage without classification this is exact (docs/equations.md, "segregated flow is
 exact for first-order kinetics"):
 
     product = int_0^inf E(t) exp(K t) f dt = E_hat(A) f,             A = -K,

@@ -1,4 +1,4 @@
-"""Non-linear grinding kinetics (issue 12, Principle I): aggregation by fixed pivots,
+"""Non-linear grinding kinetics (Principle I): aggregation by fixed pivots,
 population-dependent and slowing-down breakage rates, the batch solve, exact solutions.
 
 - :mod:`.kernels`: aggregation kernels (constant, sum, product, shear, user);

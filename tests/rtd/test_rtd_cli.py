@@ -35,7 +35,8 @@ def test_bad_file_one_line_exit_2(tmp_path, capsys):
 def test_python_dash_m_rtd_runs():
     r = subprocess.run([sys.executable, "-m", "rtd", "fit", str(EXAMPLE), "--model", "cstr", "--quiet"],
                        capture_output=True, text=True, cwd=HERE.parents[1], timeout=120)
-    assert r.returncode == 0 and r.stdout == "" and r.stderr == ""
+    # --quiet hides progress only (one meaning everywhere): the fit still prints
+    assert r.returncode == 0 and "cstr" in r.stdout and r.stderr == ""
 
 
 def test_rtd_tests_import_nothing_from_millflow():

@@ -83,7 +83,7 @@ def test_example_end_to_end_json_and_files(tmp_path, fit_json, capsys):
 ])
 def test_bad_plant_input_exit_2(tmp_path, fit_json, capsys, edit, match):
     plant = _plant(tmp_path, edit)
-    assert main(["scaleup", str(fit_json), "--to", str(plant), "--method", "delta"]) == 2
+    assert main(["scaleup", str(fit_json), "--to", str(plant), "--band-method", "delta"]) == 2
     err = capsys.readouterr().err
     assert err.count("\n") == 1 and "Traceback" not in err
     import re
@@ -111,7 +111,7 @@ def test_fit_without_covariance_or_other_family_exit_2(tmp_path, fit_json, capsy
 
 def test_unreachable_target_exit_2(tmp_path, fit_json, capsys):
     plant = _plant(tmp_path)
-    assert main(["scaleup", str(fit_json), "--to", str(plant), "--target-p80-um", "12", "--method", "delta",
+    assert main(["scaleup", str(fit_json), "--to", str(plant), "--target-p80-um", "12", "--band-method", "delta",
                  "--out", str(tmp_path / "o")]) == 2
     assert "not reachable" in capsys.readouterr().err
 
@@ -120,7 +120,7 @@ def test_rtd_fit_json_gives_the_transport_shape(tmp_path, fit_json, capsys):
     (tmp_path / "tracer.json").write_text(json.dumps({"model": "tis", "params": {"tau": {"value": 240.0, "se": 5.0},
                                                                                   "n": {"value": 2.5, "se": 0.2}}}))
     plant = _plant(tmp_path, ('model = "tanks_in_series"\nn = 3', 'rtd_fit = "tracer.json"'))
-    assert main(["scaleup", str(fit_json), "--to", str(plant), "--method", "delta", "--json",
+    assert main(["scaleup", str(fit_json), "--to", str(plant), "--band-method", "delta", "--json",
                  "--out", str(tmp_path / "o")]) == 0
     s = json.loads(capsys.readouterr().out)
     assert s["transport"] == "tanks_in_series" and s["transport_params"] == {"n": 2.5}
@@ -139,7 +139,7 @@ def test_fit_json_carries_eq9_covariance(fit_json):
 def test_austin_scaling_from_the_plant_file(tmp_path, fit_json, capsys):
     from millflow.scaleup import austin_factors
     plant = _plant(tmp_path, ('scaling = "herbst_fuerstenau"', 'scaling = "austin"'))
-    assert main(["scaleup", str(fit_json), "--to", str(plant), "--method", "delta", "--json",
+    assert main(["scaleup", str(fit_json), "--to", str(plant), "--band-method", "delta", "--json",
                  "--out", str(tmp_path / "o")]) == 0
     s = json.loads(capsys.readouterr().out)
     lab = dict(diameter_m=0.2, ball_size_mm=25, ball_filling=0.35, critical_speed_fraction=0.80, powder_filling=1.0)
@@ -152,7 +152,7 @@ def test_transport_shape_from_a_stated_aspect_ratio_correlation(fit_json, tmp_pa
     corr = ('model = "axial_dispersion"\n[transport.from_aspect_ratio]\nparameter = "pe"\ncoefficient = 2.5\n'
             'exponent = 1.0\nsource = "stated for this test"')
     plant = _plant(tmp_path, ('model = "tanks_in_series"\nn = 3', corr))
-    assert main(["scaleup", str(fit_json), "--to", str(plant), "--method", "delta", "--json",
+    assert main(["scaleup", str(fit_json), "--to", str(plant), "--band-method", "delta", "--json",
                  "--out", str(tmp_path / "o")]) == 0
     s = json.loads(capsys.readouterr().out)
     assert s["transport"] == "axial_dispersion"

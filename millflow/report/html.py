@@ -1,0 +1,239 @@
+"""A self-contained HTML page: tables, SVG line plots, the flowsheet drawing.
+
+No network: styles and the one small script are inline, plots are inline SVG. Every
+number shown in a table cell carries ``data-key`` (its path in the summary the page was
+made from, e.g. ``streams.overflow.p80_um``) so a reader or a test can map it back. The
+page's script records JavaScript errors in ``#js-errors``, counts overlapping boxes of
+the flowsheet drawing as the browser lays them out (``data-overlaps`` on ``<body>``) and
+marks the page ``data-rendered="ok"`` when every SVG has a non-empty size.
+
+Numbers are shown to :data:`SIG` significant digits (integers above that keep all their
+digits: 1287 um, not 1.287e+03).
+"""
+from __future__ import annotations
+
+import html
+import json
+import math
+
+from millflow.report.layout import FlowsheetLayout
+
+__all__ = ["SIG", "fmt", "table", "line_plot", "flowsheet_svg", "page"]
+
+#: Significant digits of the numbers in a report.
+SIG = 4
+
+
+def fmt(v, sig: int = SIG, *, pct: bool = False) -> str:
+    """A number at ``sig`` significant digits ("-" for None or not finite); errors and
+    other small numbers in exponent form."""
+    if v is None or isinstance(v, bool) or not isinstance(v, (int, float)) or not math.isfinite(v):
+        return "-" if not isinstance(v, str) else html.escape(v)
+    if v == 0:
+        return "0"
+    a = abs(v)
+    if a >= 10 ** sig:
+        return f"{v:.0f}"
+    if a < 1e-3:
+        return f"{v:.{sig - 1}e}" if sig > 2 else f"{v:.1e}"
+    return f"{v:.{sig}g}"
+
+
+def esc(s) -> str:
+    return html.escape(str(s), quote=True)
+
+
+def table(head: list, rows: list, *, cls: str = "") -> str:
+    """An HTML table. ``rows``: lists of cells; a cell is text, a number, or
+    ``(value, key[, sig[, scale]])`` for a number with its summary key (shown as
+    value * scale, e.g. 1e-3 for Pa shown in kPa; ``data-scale`` says so)."""
+    out = [f'<table class="{esc(cls)}"><thead><tr>' + "".join(f"<th>{esc(h)}</th>" for h in head)
+           + "</tr></thead><tbody>"]
+    for r in rows:
+        cells = []
+        for c in r:
+            if isinstance(c, tuple):
+                value, key = c[0], c[1]
+                sig = c[2] if len(c) > 2 else SIG
+                scale = c[3] if len(c) > 3 else 1.0
+                shown = value * scale if isinstance(value, (int, float)) and value is not None else value
+                attr = f' data-scale="{scale:g}"' if scale != 1.0 else ""
+                cells.append(f'<td class="num" data-key="{esc(key)}"{attr}>{fmt(shown, sig)}</td>')
+            elif isinstance(c, (int, float)) and not isinstance(c, bool):
+                cells.append(f'<td class="num">{fmt(c)}</td>')
+            else:
+                cells.append(f"<td>{esc(c)}</td>")
+        out.append("<tr>" + "".join(cells) + "</tr>")
+    out.append("</tbody></table>")
+    return "".join(out)
+
+
+COLORS = ["#1f77b4", "#d62728", "#2ca02c", "#ff7f0e", "#9467bd", "#8c564b", "#e377c2", "#17becf",
+          "#7f7f7f", "#bcbd22"]
+
+
+def _ticks_log(lo: float, hi: float) -> list[float]:
+    out = []
+    for e in range(math.floor(math.log10(lo)), math.ceil(math.log10(hi)) + 1):
+        for m in (1, 2, 5):
+            v = m * 10.0 ** e
+            if lo * (1 - 1e-9) <= v <= hi * (1 + 1e-9):
+                out.append(v)
+    return out
+
+
+def line_plot(series: list, *, xlabel: str, ylabel: str, ylim=None, xlog: bool = True,
+              width: int = 760, height: int = 380, title: str = "") -> str:
+    """An SVG line plot. ``series``: (label, xs, ys) with finite positive xs on a log axis."""
+    pts = [(lab, [(x, y) for x, y in zip(xs, ys) if x is not None and y is not None and math.isfinite(x)
+                  and math.isfinite(y) and (x > 0 or not xlog)]) for lab, xs, ys in series]
+    pts = [(lab, p) for lab, p in pts if p]
+    left, right, top, bottom = 64, 220, 16 + (18 if title else 0), 48
+    pw, ph = width - left - right, height - top - bottom
+    parts = [f'<svg xmlns="http://www.w3.org/2000/svg" class="plot" viewBox="0 0 {width} {height}" '
+             f'width="{width}" height="{height}" role="img" aria-label="{esc(title or ylabel)}">']
+    if title:
+        parts.append(f'<text x="{left}" y="16" class="ttl">{esc(title)}</text>')
+    if not pts:
+        parts.append(f'<text x="{width / 2}" y="{height / 2}" text-anchor="middle">no data</text></svg>')
+        return "".join(parts)
+    xs = [x for _, p in pts for x, _ in p]
+    ys = [y for _, p in pts for _, y in p]
+    x0, x1 = min(xs), max(xs)
+    if x1 <= x0:
+        x1 = x0 * 10 if xlog else x0 + 1
+    y0, y1 = ylim if ylim else (min(ys), max(ys) if max(ys) > min(ys) else min(ys) + 1)
+
+    def X(x):
+        f = (math.log10(x) - math.log10(x0)) / (math.log10(x1) - math.log10(x0)) if xlog else (x - x0) / (x1 - x0)
+        return left + f * pw
+
+    def Y(y):
+        return top + (1 - (y - y0) / (y1 - y0)) * ph
+
+    parts.append(f'<rect x="{left}" y="{top}" width="{pw}" height="{ph}" class="frame"/>')
+    for t in (_ticks_log(x0, x1) if xlog else [x0 + k * (x1 - x0) / 5 for k in range(6)]):
+        parts.append(f'<line x1="{X(t):.1f}" x2="{X(t):.1f}" y1="{top}" y2="{top + ph}" class="grid"/>'
+                     f'<text x="{X(t):.1f}" y="{top + ph + 16}" text-anchor="middle">{fmt(t, 3)}</text>')
+    for k in range(6):
+        t = y0 + k * (y1 - y0) / 5
+        parts.append(f'<line x1="{left}" x2="{left + pw}" y1="{Y(t):.1f}" y2="{Y(t):.1f}" class="grid"/>'
+                     f'<text x="{left - 6}" y="{Y(t) + 4:.1f}" text-anchor="end">{fmt(t, 3)}</text>')
+    parts.append(f'<text x="{left + pw / 2}" y="{height - 10}" text-anchor="middle">{esc(xlabel)}</text>'
+                 f'<text transform="translate(16 {top + ph / 2}) rotate(-90)" text-anchor="middle">'
+                 f'{esc(ylabel)}</text>')
+    for k, (lab, p) in enumerate(pts):
+        c = COLORS[k % len(COLORS)]
+        d = " ".join(f"{X(x):.1f},{Y(min(max(y, y0), y1)):.1f}" for x, y in p)
+        parts.append(f'<polyline points="{d}" fill="none" stroke="{c}" stroke-width="1.8"/>')
+        ly = top + 8 + 18 * k
+        parts.append(f'<line x1="{left + pw + 12}" x2="{left + pw + 34}" y1="{ly}" y2="{ly}" stroke="{c}" '
+                     f'stroke-width="2.5"/><text x="{left + pw + 40}" y="{ly + 4}">{esc(lab)}</text>')
+    parts.append("</svg>")
+    return "".join(parts)
+
+
+def flowsheet_svg(lay: FlowsheetLayout, unit_text: dict, label_text: dict) -> str:
+    """The flowsheet drawing: unit boxes (``unit_text``: name -> lines), stream routes with
+    arrow heads (recycles in red) and label boxes (``label_text``: name -> lines)."""
+    w, h = lay.width, lay.height
+    parts = [f'<svg xmlns="http://www.w3.org/2000/svg" class="flowsheet" viewBox="0 0 {w:.0f} {h:.0f}" '
+             f'width="{w:.0f}" height="{h:.0f}" role="img" aria-label="flowsheet">',
+             '<defs><marker id="arr" viewBox="0 0 10 10" refX="10" refY="5" markerWidth="7" markerHeight="7" '
+             'orient="auto-start-reverse"><path d="M0,0 L10,5 L0,10 z" fill="#303030"/></marker>'
+             '<marker id="arr-r" viewBox="0 0 10 10" refX="10" refY="5" markerWidth="7" markerHeight="7" '
+             'orient="auto-start-reverse"><path d="M0,0 L10,5 L0,10 z" fill="#a03030"/></marker></defs>']
+    for n, route in lay.routes.items():
+        red = lay.recycle[n]
+        d = " ".join(f"{x:.1f},{y:.1f}" for x, y in route)
+        parts.append(f'<polyline class="stream{" recycle" if red else ""}" data-stream="{esc(n)}" points="{d}" '
+                     f'marker-end="url(#{"arr-r" if red else "arr"})"/>')
+    for u, b in lay.units.items():
+        lines = unit_text.get(u, [u])
+        parts.append(f'<g class="unit" data-unit="{esc(u)}"><rect x="{b.x - b.w / 2:.1f}" y="{b.y - b.h / 2:.1f}" '
+                     f'width="{b.w:.0f}" height="{b.h:.0f}" rx="6"/>' + _lines(b, lines) + "</g>")
+    for n, b in lay.labels.items():
+        parts.append(f'<g class="stream-label" data-stream="{esc(n)}"><rect x="{b.x - b.w / 2:.1f}" '
+                     f'y="{b.y - b.h / 2:.1f}" width="{b.w:.0f}" height="{b.h:.0f}" rx="3"/>'
+                     + _lines(b, label_text.get(n, [n])) + "</g>")
+    parts.append("</svg>")
+    return "".join(parts)
+
+
+def _lines(b, lines) -> str:
+    y0 = b.y - 7.5 * (len(lines) - 1) + 4
+    out = []
+    for k, line in enumerate(lines):
+        text, key = (line if isinstance(line, tuple) else (line, None))
+        attr = f' data-key="{esc(key)}"' if key else ""
+        cls = ' class="b"' if k == 0 else ""
+        out.append(f'<text x="{b.x:.1f}" y="{y0 + 15 * k:.1f}" text-anchor="middle"{cls}{attr}>{text}</text>')
+    return "".join(out)
+
+
+def finite(d):
+    """A JSON-ready copy: non-finite floats as None (the page embeds strict JSON), numpy
+    scalars as Python numbers."""
+    if isinstance(d, dict):
+        return {str(k): finite(v) for k, v in d.items()}
+    if isinstance(d, (list, tuple)):
+        return [finite(v) for v in d]
+    if isinstance(d, float):
+        return d if math.isfinite(d) else None
+    if hasattr(d, "item") and not isinstance(d, (str, bytes)):
+        try:
+            return finite(d.item())
+        except (ValueError, TypeError):
+            return str(d)
+    return d
+
+
+CSS = """
+body{font-family:system-ui,-apple-system,"Segoe UI",Roboto,sans-serif;margin:1.5em auto;max-width:1500px;
+padding:0 1em;color:#222}
+h1{font-size:1.5em;margin-bottom:.2em}h2{font-size:1.15em;border-bottom:1px solid #ccc;margin-top:1.6em}
+table{border-collapse:collapse;font-size:.85em;margin:.5em 0}th,td{border:1px solid #ccc;padding:2px 6px}
+th{background:#eef2f7;text-align:left}td.num{text-align:right;font-variant-numeric:tabular-nums}
+.meta td:first-child{font-weight:600}
+svg{max-width:100%;height:auto;font-size:12px}svg text{fill:#222}svg .ttl{font-weight:600}
+svg .b{font-weight:600}svg .frame{fill:none;stroke:#888}svg .grid{stroke:#e4e4e4}
+.flowsheet .unit rect{fill:#e8f0fa;stroke:#3060a0;stroke-width:1.5}
+.flowsheet .stream{fill:none;stroke:#303030;stroke-width:1.4}.flowsheet .recycle{stroke:#a03030}
+.flowsheet .stream-label rect{fill:#fff;fill-opacity:.92;stroke:#bbb}
+pre{background:#f6f6f6;padding:.6em;overflow:auto;font-size:.8em}
+.warn{color:#a03030}#js-errors:empty{display:none}
+@media print{body{max-width:none}h2{page-break-after:avoid}}
+"""
+
+SCRIPT = """
+(function(){
+var errs=[];function rec(m){errs.push(m);var e=document.getElementById('js-errors');
+if(e){e.textContent=errs.join('\\n');}}
+window.addEventListener('error',function(ev){rec('error: '+ev.message);});
+window.addEventListener('load',function(){
+ var ok=true;document.querySelectorAll('svg').forEach(function(s){var r=s.getBoundingClientRect();
+  if(!(r.width>0&&r.height>0)){ok=false;rec('empty svg');}});
+ var n=0;document.querySelectorAll('svg.flowsheet').forEach(function(svg){var bs=[];
+  svg.querySelectorAll('.unit rect, .stream-label rect').forEach(function(r){bs.push(r.getBBox());});
+  for(var i=0;i<bs.length;i++){for(var j=i+1;j<bs.length;j++){var a=bs[i],b=bs[j];
+   if(a.x<b.x+b.width&&b.x<a.x+a.width&&a.y<b.y+b.height&&b.y<a.y+a.height){n++;}}}});
+ document.body.setAttribute('data-overlaps',String(n));
+ document.body.setAttribute('data-rendered',ok&&errs.length===0?'ok':'failed');
+});})();
+"""
+
+
+def page(title: str, sections: list, *, data: dict | None = None) -> str:
+    """The whole page. ``sections``: (heading, html) pairs; ``data``: embedded as JSON in
+    ``<script type="application/json" id="summary">`` (the numbers the page shows)."""
+    body = [f"<h1>{esc(title)}</h1>", '<pre id="js-errors" class="warn"></pre>']
+    for heading, content in sections:
+        body.append(f"<h2>{esc(heading)}</h2>{content}" if heading else content)
+    blob = ""
+    if data is not None:
+        text = json.dumps(finite(data), allow_nan=False).replace("</", "<\\/")
+        blob = f'<script type="application/json" id="summary">{text}</script>'
+    return ("<!DOCTYPE html>\n<html lang=\"en\"><head><meta charset=\"utf-8\">"
+            f"<meta name=\"viewport\" content=\"width=device-width, initial-scale=1\"><title>{esc(title)}</title>"
+            f"<style>{CSS}</style><script>{SCRIPT}</script></head><body>" + "".join(body) + blob
+            + "</body></html>\n")
