@@ -29,19 +29,29 @@ __all__ = ["refine_document", "grid_check", "GRID_THRESHOLD"]
 GRID_THRESHOLD = 0.02
 
 
-def refine_document(doc: dict) -> dict:
-    """The flowsheet document with every size class split in two (geometric midpoints)."""
+def refine_document(doc: dict, k: int = 2, grid=None) -> dict:
+    """The flowsheet document with every size class split into ``k`` (equal ratios in ln x).
+
+    With ``grid`` (the grid the document gives) the refined grid is written as its edges,
+    ``grid.refine(k)``: every coarse edge is kept, so the two grids are nested (the sink
+    edge x_N too, which a refined ``ratio`` between the same top and bottom would move).
+    """
     out = copy.deepcopy(doc)
     g = out.get("grid", {})
+    if grid is not None:
+        keep = {key: v for key, v in g.items() if key == "scheme"}
+        out["grid"] = {**keep, "edges_m": [float(v) for v in grid.refine(k).upper_m]}
+        return out
     if "ratio" in g:
-        g["ratio"] = float(g["ratio"]) ** 0.5
+        g["ratio"] = float(g["ratio"]) ** (1.0 / k)
     elif "n" in g:
-        g["n"] = 2 * int(g["n"]) - 1
+        g["n"] = k * (int(g["n"]) - 1) + 1
     else:
-        for key in [k for k in g if k.startswith("edges_")]:
+        for key in [key for key in g if key.startswith("edges_")]:
             e = np.asarray(g[key], float)
-            mid = np.sqrt(e[:-1] * e[1:])
-            g[key] = [float(v) for v in np.ravel(np.column_stack([e[:-1], mid]))] + [float(e[-1])]
+            frac = np.arange(k) / k
+            pieces = e[:-1, None] * (e[1:, None] / e[:-1, None]) ** frac[None, :]
+            g[key] = [float(v) for v in pieces.ravel()] + [float(e[-1])]
     return out
 
 

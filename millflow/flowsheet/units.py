@@ -22,6 +22,7 @@ from typing import Callable, ClassVar
 
 import numpy as np
 
+from millflow.breakage.averaged import breakage_on_grid, curve_on_grid
 from millflow.classifiers import efficiency, mill_discharge_rates
 from millflow.errors import InputError, SolverError
 
@@ -231,7 +232,8 @@ class MillUnit:
             return None
         params = dict(self.classification)
         params.pop("where", None)
-        return efficiency(params.pop("curve"), grid.x, **params)
+        curve = params.pop("curve")
+        return curve_on_grid(lambda x: efficiency(curve, x, **params), grid)
 
     def residence_time(self, throughput=None, water=None) -> float:
         """tau [s]: given, H / F (solids hold-up), or V / Q (slurry hold-up, Q in m3/s)."""
@@ -248,10 +250,20 @@ class MillUnit:
         return float(self.holdup) / float(throughput)
 
     def breakage_functions(self, grid):
-        S = np.asarray(self.rate(grid.x), dtype=float)
-        fun = getattr(self.breakage, "b", self.breakage)
-        b = np.asarray(fun(grid.x), dtype=float)
+        """(S [1/s], b [-]) on ``grid``: continuous forms class-averaged (or at the upper edges
+        on an "upper_edge" grid), a user's discrete S_i, b_ij as given
+        (:func:`millflow.breakage.averaged.breakage_on_grid`)."""
+        S, b, _ = breakage_on_grid(self.rate, self.breakage, grid)
         return S, b
+
+    def discretisation(self, grid) -> str:
+        """How this mill's breakage is put on ``grid``: "class average", "upper edge" or
+        "discrete (as given)" (:func:`millflow.breakage.averaged.breakage_on_grid`)."""
+        from millflow.breakage.averaged import continuous_rate
+
+        if continuous_rate(self.rate) is None or not callable(getattr(self.breakage, "cumulative", None)):
+            return "discrete (as given)"
+        return "class average" if grid.scheme == "class_average" else "upper edge"
 
     def blocks(self, grid, throughput=None, water=None):
         t0 = time.perf_counter()
@@ -318,7 +330,7 @@ class Classifier:
         return CLASSIFIER_PORTS[self.kind]
 
     def efficiency(self, grid) -> np.ndarray:
-        return efficiency(self.curve, grid.x, **self.params)
+        return curve_on_grid(lambda x: efficiency(self.curve, x, **self.params), grid)
 
     def blocks(self, grid, throughput=None, water=None):
         t0 = time.perf_counter()
