@@ -4,7 +4,9 @@ import re
 
 import pytest
 
-from millflow.flowsheet import load, loads, solve
+import numpy as np
+
+from millflow.flowsheet import from_dict, load, loads, solve
 from millflow.flowsheet.gridcheck import grid_check, refine_document
 from tests.paths import FLOWSHEETS
 
@@ -18,14 +20,26 @@ def test_refine_document_halves_every_class():
     assert edges == pytest.approx([400, 200, 100, 50, 25], rel=1e-15)
 
 
+def test_refined_document_keeps_every_edge_of_the_grid():
+    fs = load(CIRCUIT)
+    doc = refine_document(fs.meta["document"], 2, fs.grid)
+    fine = from_dict(doc)
+    assert fine.grid.n == 2 * fs.grid.n - 1
+    np.testing.assert_array_equal(fine.grid.x[::2], fs.grid.x)  # nested: the sink edge too
+
+
 def test_coarse_grid_is_said_too_coarse_and_fine_grid_passes():
-    coarse = loads(re.sub(r"(?m)^ratio = .*$", "ratio = 1.189207115", CIRCUIT.read_text()))
+    # Austin's upper-edge scheme at 2^(1/4): first order, P50 moves ~7 % on refinement and the
+    # grid error (3 x 2 x the change) is ~40 %, far above the 0.5 % threshold
+    coarse = loads(re.sub(r"(?m)^ratio = .*$", 'ratio = 1.189207115\nscheme = "upper_edge"', CIRCUIT.read_text()))
     g = grid_check(solve(coarse))
-    # first order in the class width: 7.5 % at 2^(1/4) (measured), far above the 2 % threshold
-    assert g["status"] == "grid too coarse" and 0.05 < g["worst"] < 0.10
+    assert g["status"] == "grid too coarse" and g["order"] == 1 and 0.2 < g["worst"] < 0.6
     assert set(g["streams"]) == set(coarse.stream_names) and "underflow" in g["circulating_load"]
+    # the class-averaged scheme at 2^(1/2) is still too coarse (grid error ~3 %)
+    half = loads(re.sub(r"(?m)^ratio = .*$", "ratio = 1.4142135623730951", CIRCUIT.read_text()))
+    assert grid_check(solve(half))["status"] == "grid too coarse"
     fine = grid_check(solve(load(CIRCUIT)))
-    assert fine["status"] == "ok" and fine["worst"] <= 0.02 and fine["refined_classes"] > 300
+    assert fine["status"] == "ok" and fine["worst"] <= 0.005 and fine["refined_classes"] > 300
 
 
 def test_flowsheet_without_document_says_not_available():
