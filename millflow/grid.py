@@ -21,7 +21,26 @@ import numpy as np
 
 from millflow.errors import GridError
 
-__all__ = ["SizeGrid", "SCHEMES", "as_sizes", "class_label", "validate_edges"]
+__all__ = ["SizeGrid", "SCHEMES", "SAFETY_FACTOR", "richardson", "as_sizes", "class_label", "validate_edges"]
+
+#: Roache's safety factor of the two-grid convergence index (grid error estimates).
+SAFETY_FACTOR = 3.0
+
+
+def richardson(coarse: float, fine: float, order: float, factor: float = 2.0,
+               safety: float = SAFETY_FACTOR) -> tuple[float, float]:
+    """(extrapolated value, estimated relative grid error of ``coarse``) from two grids.
+
+    ``fine`` is on the grid whose class width in ln x is 1/``factor`` of the coarse one;
+    ``order`` the order p of the discretisation. Q_ext = Q_f + (Q_f - Q_c)/(factor^p - 1);
+    the error is safety |Q_c - Q_ext| / |Q_ext| (Roache's grid convergence index of the
+    coarse grid; the safety factor 3 covers the pre-asymptotic range that two grids
+    cannot detect). NaN when either value is not finite.
+    """
+    if not (math.isfinite(coarse) and math.isfinite(fine)):
+        return float("nan"), float("nan")
+    ext = fine + (fine - coarse) / (factor ** order - 1.0)
+    return ext, safety * abs(coarse - ext) / max(abs(ext), 1e-300)
 
 #: Discretisation schemes of continuous-size forms (see :class:`SizeGrid`).
 SCHEMES = ("class_average", "upper_edge")

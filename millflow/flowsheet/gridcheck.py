@@ -32,12 +32,12 @@ import time
 
 import numpy as np
 
+from millflow.grid import SAFETY_FACTOR, richardson
+
 __all__ = ["refine_document", "grid_check", "richardson", "GRID_THRESHOLD", "SAFETY_FACTOR"]
 
 #: Largest estimated relative grid error (GCI) of P80, P50 or circulating load accepted.
 GRID_THRESHOLD = 0.005
-#: Roache's safety factor of the two-grid convergence index.
-SAFETY_FACTOR = 3.0
 
 
 def refine_document(doc: dict, k: int = 2, grid=None) -> dict:
@@ -64,21 +64,6 @@ def refine_document(doc: dict, k: int = 2, grid=None) -> dict:
             pieces = e[:-1, None] * (e[1:, None] / e[:-1, None]) ** frac[None, :]
             g[key] = [float(v) for v in pieces.ravel()] + [float(e[-1])]
     return out
-
-
-def richardson(coarse: float, fine: float, order: float, factor: float = 2.0,
-               safety: float = SAFETY_FACTOR) -> tuple[float, float]:
-    """(extrapolated value, estimated relative grid error of ``coarse``) from two grids.
-
-    ``fine`` is on the grid whose class width in ln x is 1/``factor`` of the coarse one;
-    ``order`` the order p of the discretisation. Q_ext = Q_f + (Q_f - Q_c)/(factor^p - 1);
-    the error is safety |Q_c - Q_ext| / |Q_ext| (Roache's GCI of the coarse grid). NaN
-    when either value is not finite.
-    """
-    if not (math.isfinite(coarse) and math.isfinite(fine)):
-        return float("nan"), float("nan")
-    ext = fine + (fine - coarse) / (factor ** order - 1.0)
-    return ext, safety * abs(coarse - ext) / max(abs(ext), 1e-300)
 
 
 def scheme_order(fs) -> tuple[int, str]:
