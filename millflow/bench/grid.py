@@ -89,3 +89,37 @@ def format_table(rows: list[dict]) -> str:
         lines.append(f"{r['circuit']:30s} {r['scheme']:14s} {r['ratio']:9.5f} {r['classes']:5d} "
                      f"{1e3 * r['runtime_s']:9.2f} {100 * r['p80_rel_error']:9.4f}%  {r['worst_stream']}")
     return "\n".join(lines)
+
+
+def figure(rows: list[dict], path) -> None:
+    """Draw the rows as docs/img/grid_convergence.png does: per circuit, P80 error [%]
+    against solve time, class averages solid, upper edges dashed (matplotlib, PNG)."""
+    from matplotlib.backends.backend_agg import FigureCanvasAgg
+    from matplotlib.figure import Figure
+
+    fig = Figure(figsize=(8, 5.2))
+    FigureCanvasAgg(fig)
+    ax = fig.add_subplot()
+    circuits = sorted({r["circuit"] for r in rows})
+    for k, c in enumerate(circuits):
+        for scheme, ls, mk in (("upper_edge", "--", "s"), ("class_average", "-", "o")):
+            pts = sorted((r["classes"], r["runtime_s"], r["p80_rel_error"]) for r in rows
+                         if r["circuit"] == c and r["scheme"] == scheme)
+            ax.loglog([p[1] for p in pts], [100 * p[2] for p in pts], ls, marker=mk, color=f"C{k}", ms=4,
+                      label=f"{c.replace('_', ' ')}: {scheme.replace('_', ' ')}")
+    ax.axhline(0.5, color="k", lw=0.8, ls=":")
+    ax.set_xlabel("solve time [s] (median; ratio 2^(1/2) ... 2^(1/32) along each line)")
+    ax.set_ylabel("largest relative P80 error over the streams [%]")
+    ax.set_title("millflow bench grid: P80 error against run time, class averages (solid) vs upper edges "
+                 "(dashed); dotted: 0.5 %", fontsize=8)
+    ax.grid(True, which="major", alpha=0.3)
+    ax.legend(fontsize=5.5, ncol=2)
+    fig.tight_layout()
+    fig.savefig(path, dpi=110)
+
+
+if __name__ == "__main__":  # python -m millflow.bench.grid rows.json out.png (rows from --json)
+    import json
+    import sys
+
+    figure(json.loads(open(sys.argv[1]).read()), sys.argv[2])
