@@ -77,6 +77,8 @@ def format_summary(s: dict, out_dir: str | None, written: list[str] | None = Non
         else:
             lines.append(line + f": the grid is too coarse for {100 * g['threshold']:.3g} % "
                                 "(refine grid.ratio or grid.n)")
+    elif g and g.get("status") == "not available":
+        lines.append(f"grid error: not estimated: {g.get('reason', '')}")
     tear = s["solver"].get("tear")
     how = s["solver"]["structure"]
     if tear:

@@ -32,6 +32,7 @@ import time
 
 import numpy as np
 
+from millflow.errors import MillflowError
 from millflow.grid import SAFETY_FACTOR, richardson
 
 __all__ = ["refine_document", "grid_check", "richardson", "GRID_THRESHOLD", "SAFETY_FACTOR"]
@@ -95,7 +96,15 @@ def grid_check(sol, props=None, threshold: float = GRID_THRESHOLD) -> dict:
                                                      "from_dict or load to get the grid check)"}
     t0 = time.perf_counter()
     order, why = scheme_order(fs)
-    fine_fs = from_dict(refine_document(doc, 2, fs.grid), source=fs.source_file, base_dir=fs.meta.get("base_dir"))
+    try:
+        fine_fs = from_dict(refine_document(doc, 2, fs.grid), source=fs.source_file,
+                            base_dir=fs.meta.get("base_dir"))
+    except MillflowError as exc:  # e.g. a breakage matrix given on the default grid only
+        discrete = [n for n, u in fs.units.items() if hasattr(u, "discretisation")
+                    and u.discretisation(fs.grid) == "discrete (as given)"]
+        why = (f"; {', '.join(discrete)} use S_i, b_ij given per class: the discrete model itself, with no grid "
+               "error of its own" if discrete else "")
+        return {"status": "not available", "reason": f"the refined grid cannot be built ({exc}){why}"}
     fine = solve(fine_fs)
     props = props or stream_properties(sol)
     fprops = stream_properties(fine)

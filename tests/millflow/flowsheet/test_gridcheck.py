@@ -46,3 +46,18 @@ def test_flowsheet_without_document_says_not_available():
     fs = load(CIRCUIT)
     fs.meta.pop("document")
     assert grid_check(solve(fs))["status"] == "not available"
+
+
+def test_breakage_table_on_the_default_grid_says_why_no_grid_check(tmp_path):
+    """A b matrix given per class is the discrete model: the refined grid cannot carry it,
+    and the check says so (not a failed run)."""
+    from millflow.breakage import NormalizedBreakage
+
+    text = CIRCUIT.read_text()
+    fs = load(CIRCUIT)
+    np.savetxt(tmp_path / "b.csv", NormalizedBreakage(0.55, 0.8, 3.5).b(fs.grid.x), delimiter=",", fmt="%.17g")
+    text = text.replace('breakage = {form = "normalized", phi = 0.55, gamma = 0.8, beta = 3.5}',
+                        'breakage = {form = "table", file = "b.csv", matrix = "b"}')
+    (tmp_path / "fs.toml").write_text(text)
+    g = grid_check(solve(load(tmp_path / "fs.toml")))
+    assert g["status"] == "not available" and "discrete model itself" in g["reason"]
