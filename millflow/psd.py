@@ -33,6 +33,7 @@ __all__ = [
     "cum_retained",
     "retained",
     "percentile_size",
+    "percentile_from_cum",
     "p80",
     "p50",
     "regrid",
@@ -370,6 +371,13 @@ def percentile_size(grid, frac, percent: float) -> float:
             f"P{percent:g} lies below the grid: {P[-1]:.6g} of the mass passes the finest edge "
             f"{x[-1]:.6g} m ({class_label(x.size - 1, x)} is the sink); extend the grid to finer sizes"
         )
+    return percentile_from_cum(x, P, q)
+
+
+def percentile_from_cum(x: np.ndarray, P: np.ndarray, q: float) -> float:
+    """Size [m] where cumulative passing ``P`` at the upper edges ``x`` (coarse -> fine,
+    P[0] = 1, P[-1] < q) reaches the fraction ``q``: the reading of
+    :func:`percentile_size` without validation, for loops that have checked their input."""
     # first edge (from fine to coarse) where P reaches q: the crossing is between it
     # and the edge below it
     k = int(np.flatnonzero(P >= q)[-1])
@@ -377,11 +385,8 @@ def percentile_size(grid, frac, percent: float) -> float:
         return float(x[k])
     ln_hi, ln_lo = math.log(x[k]), math.log(x[k + 1])
     cubic = _local_cubic(np.log(x), P, k)
-    if cubic is not None:
-        fun, target = cubic, q
-    else:
-        fun, target = _pchip_logx(x, P), q
-    root = brentq(lambda u: float(fun(u)) - target, ln_lo, ln_hi, xtol=1e-14, rtol=4 * np.finfo(float).eps)
+    fun = cubic if cubic is not None else _pchip_logx(x, P)
+    root = brentq(lambda u: float(fun(u)) - q, ln_lo, ln_hi, xtol=1e-14, rtol=4 * np.finfo(float).eps)
     return float(math.exp(root))
 
 
