@@ -21,7 +21,29 @@ import numpy as np
 
 from millflow.errors import GridError
 
-__all__ = ["SizeGrid", "as_sizes", "class_label", "validate_edges"]
+__all__ = ["SizeGrid", "SCHEMES", "SAFETY_FACTOR", "richardson", "as_sizes", "class_label", "validate_edges"]
+
+#: Roache's safety factor of the two-grid convergence index (grid error estimates).
+SAFETY_FACTOR = 3.0
+
+
+def richardson(coarse: float, fine: float, order: float, factor: float = 2.0,
+               safety: float = SAFETY_FACTOR) -> tuple[float, float]:
+    """(extrapolated value, estimated relative grid error of ``coarse``) from two grids.
+
+    ``fine`` is on the grid whose class width in ln x is 1/``factor`` of the coarse one;
+    ``order`` the order p of the discretisation. Q_ext = Q_f + (Q_f - Q_c)/(factor^p - 1);
+    the error is safety |Q_c - Q_ext| / |Q_ext| (Roache's grid convergence index of the
+    coarse grid; the safety factor 3 covers the pre-asymptotic range that two grids
+    cannot detect). NaN when either value is not finite.
+    """
+    if not (math.isfinite(coarse) and math.isfinite(fine)):
+        return float("nan"), float("nan")
+    ext = fine + (fine - coarse) / (factor ** order - 1.0)
+    return ext, safety * abs(coarse - ext) / max(abs(ext), 1e-300)
+
+#: Discretisation schemes of continuous-size forms (see :class:`SizeGrid`).
+SCHEMES = ("class_average", "upper_edge")
 
 # Relative tolerance under which successive class ratios count as one geometric ratio.
 _RATIO_RTOL = 1e-9
@@ -122,6 +144,12 @@ class SizeGrid:
     upper_m : array_like
         Upper class edges [m], strictly decreasing, finite, > 0. Stored as a read-only
         float64 array.
+    scheme : str
+        How continuous-size forms (rates, breakage, classification curves) are put on
+        the classes: "class_average" (default; averages over each class, second order in
+        the class width, :mod:`millflow.breakage.averaged`) or "upper_edge" (Austin's
+        values at the upper edges, first order). Discrete S_i, b_ij are used as given
+        under either.
 
     Examples
     --------
@@ -133,8 +161,11 @@ class SizeGrid:
     """
 
     upper_m: np.ndarray
+    scheme: str = "class_average"
 
     def __post_init__(self):
+        if self.scheme not in SCHEMES:
+            raise GridError(f"scheme = {self.scheme!r}: expected one of {', '.join(SCHEMES)}")
         arr = validate_edges(self.upper_m, name="upper_m")
         check_classes(arr.size)
         arr.setflags(write=False)
@@ -214,7 +245,11 @@ class SizeGrid:
         # geometric subdivision: x_i * (x_{i+1}/x_i)^(m/k), m = 0..k-1
         pieces = x[:-1, None] * (x[1:, None] / x[:-1, None]) ** frac[None, :]
         pieces[:, 0] = x[:-1]  # exact old edges (power of 0 is exact, this documents it)
-        return SizeGrid(np.concatenate([pieces.ravel(), x[-1:]]))
+        return SizeGrid(np.concatenate([pieces.ravel(), x[-1:]]), self.scheme)
+
+    def with_scheme(self, scheme: str) -> "SizeGrid":
+        """The same edges with another discretisation scheme (see :class:`SizeGrid`)."""
+        return SizeGrid(self.upper_m, scheme)
 
     # ------------------------------------------------------------------ properties
     @property
@@ -263,7 +298,7 @@ class SizeGrid:
     def __eq__(self, other) -> bool:
         if not isinstance(other, SizeGrid):
             return NotImplemented
-        return bool(np.array_equal(self.upper_m, other.upper_m))
+        return bool(np.array_equal(self.upper_m, other.upper_m)) and self.scheme == other.scheme
 
     def __hash__(self) -> int:
         return hash(self.upper_m.tobytes())
@@ -271,7 +306,8 @@ class SizeGrid:
     def __repr__(self) -> str:
         r = self.ratio
         rs = "" if r is None else f", ratio={r:.6g}"
-        return f"SizeGrid(n={self.n}, top={self.upper_m[0]:.6g} m, sink below {self.upper_m[-1]:.6g} m{rs})"
+        sc = "" if self.scheme == "class_average" else f", scheme={self.scheme!r}"
+        return f"SizeGrid(n={self.n}, top={self.upper_m[0]:.6g} m, sink below {self.upper_m[-1]:.6g} m{rs}{sc})"
 
 
 def memory_budget_bytes() -> float:

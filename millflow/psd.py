@@ -33,6 +33,7 @@ __all__ = [
     "cum_retained",
     "retained",
     "percentile_size",
+    "percentile_from_cum",
     "p80",
     "p50",
     "regrid",
@@ -343,9 +344,13 @@ def _handle_top(P_new, x, lump: bool, where: str, tol: float = 1e-12) -> None:
 def percentile_size(grid, frac, percent: float) -> float:
     """Size [m] at which ``percent`` % of the mass passes (P80: percent = 80).
 
-    Cumulative passing is known at the upper edges; between them it is interpolated
-    by PCHIP in ln x (the same monotone interpolation as :func:`from_sieves`) and the
-    crossing is found by Brent's method on the one bracketing interval.
+    Cumulative passing is known at the upper edges; between the two edges that bracket
+    the crossing it is interpolated by the cubic in ln x through those and their two
+    neighbours (error O(h^4) in the class width h; at ratio 2^(1/4) ~1e-6 relative for
+    Rosin-Rammler and Gates-Gaudin-Schuhmann PSDs, against ~1e-4 for PCHIP, whose
+    derivative estimates are first order), and the crossing is found by Brent's method.
+    Where that cubic is not monotone on the interval, or the crossing is in the first or
+    last class, P is interpolated by PCHIP in ln x (monotone; as :func:`from_sieves`).
 
     Raises
     ------
@@ -366,15 +371,37 @@ def percentile_size(grid, frac, percent: float) -> float:
             f"P{percent:g} lies below the grid: {P[-1]:.6g} of the mass passes the finest edge "
             f"{x[-1]:.6g} m ({class_label(x.size - 1, x)} is the sink); extend the grid to finer sizes"
         )
+    return percentile_from_cum(x, P, q)
+
+
+def percentile_from_cum(x: np.ndarray, P: np.ndarray, q: float) -> float:
+    """Size [m] where cumulative passing ``P`` at the upper edges ``x`` (coarse -> fine,
+    P[0] = 1, P[-1] < q) reaches the fraction ``q``: the reading of
+    :func:`percentile_size` without validation, for loops that have checked their input."""
     # first edge (from fine to coarse) where P reaches q: the crossing is between it
     # and the edge below it
     k = int(np.flatnonzero(P >= q)[-1])
     if P[k] == q:
         return float(x[k])
     ln_hi, ln_lo = math.log(x[k]), math.log(x[k + 1])
-    spline = _pchip_logx(x, P)
-    root = brentq(lambda u: float(spline(u)) - q, ln_lo, ln_hi, xtol=1e-14, rtol=4 * np.finfo(float).eps)
+    cubic = _local_cubic(np.log(x), P, k)
+    fun = cubic if cubic is not None else _pchip_logx(x, P)
+    root = brentq(lambda u: float(fun(u)) - q, ln_lo, ln_hi, xtol=1e-14, rtol=4 * np.finfo(float).eps)
     return float(math.exp(root))
+
+
+def _local_cubic(u: np.ndarray, P: np.ndarray, k: int):
+    """The cubic in u = ln x through the four edges k-1..k+2 around the crossing between
+    edges k and k+1 (three or four edges nearer the ends of the grid: no cubic), if it is
+    monotone (P non-increasing in x) on that interval; else None."""
+    lo, hi = k - 1, k + 3
+    if lo < 0 or hi > P.size:
+        return None
+    c = np.polyfit(u[lo:hi] - u[k], P[lo:hi], 3)
+    t = np.linspace(u[k + 1], u[k], 33) - u[k]
+    if np.any(np.diff(np.polyval(c, t)) < 0):  # increasing in u = non-increasing coarse -> fine
+        return None
+    return lambda v: np.polyval(c, v - u[k])
 
 
 def p80(grid, frac) -> float:

@@ -25,6 +25,7 @@ __all__ = [
     "normalized_B",
     "non_normalized_B",
     "breakage_population",
+    "continuous_B",
     "b_from_B",
     "B_from_b",
     "validate_B",
@@ -143,6 +144,24 @@ def breakage_population(x, phi0, gamma, beta, theta=0.0, x_max=None, *, kind: st
     if not ok.all():
         out[~ok] = np.nan
     return out
+
+
+def continuous_B(x, y, phi0, gamma, beta, theta=0.0, x_max=None):
+    """B(x; y) [-] of eqs. 6 and 8 as a function of continuous sizes (broadcasting, [m]).
+
+    The mass fraction of the fragments of a particle of size y finer than x:
+    phi(y) (x/y)^gamma + (1 - phi(y)) (x/y)^beta for x < y, 1 for x >= y, with
+    phi(y) = phi0 (x_max/y)^theta (theta = 0: eq. 6). The discrete B_ij of
+    :func:`breakage_population` is this at x = x_{i-1}, y = x_j (Austin's convention);
+    :mod:`millflow.breakage.averaged` averages it over the classes instead. ``x_max``
+    is required when theta != 0.
+    """
+    x, y = np.asarray(x, dtype=float), np.asarray(y, dtype=float)
+    r = np.minimum(x / y, 1.0)
+    phi = phi0 if theta == 0 else phi0 * (float(x_max) / y) ** theta
+    with np.errstate(divide="ignore"):
+        lr = np.log(r)
+    return phi * np.exp(gamma * lr) + (1.0 - phi) * np.exp(beta * lr)
 
 
 def normalized_B(x, phi: float, gamma: float, beta: float) -> np.ndarray:
@@ -377,6 +396,10 @@ class NormalizedBreakage:
         """Cumulative B (N, N) on the sizes x [m]."""
         return normalized_B(x, self.phi, self.gamma, self.beta)
 
+    def cumulative(self, x, y, top=None) -> np.ndarray:
+        """Continuous B(x; y) [-] (:func:`continuous_B`); ``top`` is unused (eq. 6 has no x_max)."""
+        return continuous_B(x, y, self.phi, self.gamma, self.beta)
+
     def b(self, x) -> np.ndarray:
         """Fractional b (N, N) on the sizes x [m]."""
         return b_from_B(self.B(x), x)
@@ -408,6 +431,13 @@ class NonNormalizedBreakage:
     def B(self, x) -> np.ndarray:
         """Cumulative B (N, N) on the sizes x [m]."""
         return non_normalized_B(x, self.phi0, self.gamma, self.beta, self.theta, self.x_max)
+
+    def cumulative(self, x, y, top=None) -> np.ndarray:
+        """Continuous B(x; y) [-] (:func:`continuous_B`); x_max defaults to ``top``, the grid's top size [m]."""
+        x_max = self.x_max if self.x_max is not None else top
+        if self.theta != 0 and x_max is None:
+            raise BreakageError("NonNormalizedBreakage.cumulative: x_max is not set; pass top= (the grid top [m])")
+        return continuous_B(x, y, self.phi0, self.gamma, self.beta, self.theta, x_max)
 
     def b(self, x) -> np.ndarray:
         """Fractional b (N, N) on the sizes x [m]."""

@@ -79,13 +79,15 @@ def format_summary(s: dict, out_dir: str | None, written: list[str] | None = Non
                      f"worst unit {w_worst:.1e}")
     g = s.get("grid_check")
     if g and g.get("status") in ("ok", "grid too coarse"):
-        line = (f"grid check ({g['refined_classes']} classes): P80, P50 and circulating loads move at most "
-                f"{100 * g['worst']:.2g} % ({g['worst_at']})")
+        line = (f"grid error (Richardson, order {g.get('order', '?')}, vs {g['refined_classes']} classes): P80, P50 "
+                f"and circulating loads within {100 * g['worst']:.2g} % of the converged values ({g['worst_at']})")
         if g["status"] == "ok":
             lines.append(line + f": within {100 * g['threshold']:.3g} %")
         else:
             lines.append(line + f": the grid is too coarse for {100 * g['threshold']:.3g} % "
                                 "(refine grid.ratio or grid.n)")
+    elif g and g.get("status") == "not available":
+        lines.append(f"grid error: not estimated: {g.get('reason', '')}")
     tear = s["solver"].get("tear")
     how = s["solver"]["structure"]
     if tear:

@@ -19,6 +19,7 @@ from typing import ClassVar
 
 import numpy as np
 
+from millflow.breakage.averaged import curve_on_grid
 from millflow.classifiers import plitt, whiten
 from millflow.errors import InputError, SolverError
 
@@ -119,7 +120,7 @@ class PredictedCyclone:
             raise SolverError(f"units.{self.name}: a predicted hydrocyclone needs its feed flows (torn by the solver)")
         pred, corrected = self.predict(float(throughput), float(water), recovery)
         rf = pred["water_split"]
-        c = rf + (1.0 - rf) * np.asarray(corrected(grid.x), float)
+        c = rf + (1.0 - rf) * curve_on_grid(corrected, grid)
         info = {"method": f"{self.model} model ({self.cyclones} cyclones): d50c {pred['d50c_m'] * 1e6:.4g} um, "
                           f"pressure {pred['pressure_Pa'] / 1e3:.4g} kPa, R_f {rf:.4g}",
                 "error_estimate": 0.0, "runtime_s": time.perf_counter() - t0, **pred}
@@ -130,7 +131,7 @@ class PredictedCyclone:
         total = float(np.sum(inflow))
         if not total > 0:
             return 0.5
-        cc = _CORRECTED[self.model](grid.x, info["d50c_m"], info["sharpness"])
+        cc = curve_on_grid(lambda x: _CORRECTED[self.model](x, info["d50c_m"], info["sharpness"]), grid)
         return float(np.dot(np.asarray(inflow, float) / total, cc))
 
 

@@ -25,7 +25,7 @@ from millflow.flowsheet.graph import Stream
 from millflow.flowsheet.water import Slurry
 from millflow.flowsheet.units import (TRANSPORTS, UNIT_TYPES, Classifier, Feed, MillUnit, Mixer,
                                       Product, Splitter, build_transport)
-from millflow.grid import SizeGrid
+from millflow.grid import SCHEMES, SizeGrid
 from rtd import names as rtd_names
 from millflow.inputs import UNITS, quantity, read_json, read_text, suffixes
 from millflow.psd import from_distribution, from_sieves, gates_gaudin_schuhmann, rosin_rammler
@@ -126,15 +126,22 @@ def _wrap(where: str, fun, *args, **kw):
 
 # ------------------------------------------------------------------------ grid
 def _grid(t: _Table) -> SizeGrid:
+    scheme = t.plain("scheme", "class_average", kind=str)
+    if scheme not in SCHEMES:
+        raise InputError(f"grid.scheme = {scheme!r}: expected one of {', '.join(SCHEMES)}")
+    return _grid_edges(t).with_scheme(scheme)
+
+
+def _grid_edges(t: _Table) -> SizeGrid:
     if "edges_um" in t.data or "edges_mm" in t.data or "edges_m" in t.data:
         edges = t.quantity("edges", "length", array=True)
-        t.finish("edges_um")
+        t.finish("edges_um, scheme")
         return _wrap("grid.edges", SizeGrid.from_edges, edges)
     top = t.quantity("top", "length")
     bottom = t.quantity("bottom", "length")
     n = t.plain("n", None, kind=float)
     ratio = t.plain("ratio", None, kind=float)
-    t.finish("top_um, bottom_um, and n or ratio (or edges_um)")
+    t.finish("top_um, bottom_um, and n or ratio (or edges_um), scheme")
     if (n is None) == (ratio is None):
         raise InputError("grid: give exactly one of n (number of classes) or ratio (e.g. 1.189207 = 2^(1/4))")
     if n is not None:
@@ -443,6 +450,10 @@ class _FittedBreakage:
 
     def b(self, x):
         return self.fitted.frac_b(self.fitted.theta, np.asarray(x, float))
+
+    def cumulative(self, x, y, top=None):
+        """Continuous B(x; y) of the fitted eq. 6 (for the class-averaged grid scheme)."""
+        return self.fitted.cumulative(self.fitted.theta, x, y)
 
     def __repr__(self):
         return f"fitted breakage ({self.fitted.source}, {self.fitted.spec['breakage']})"

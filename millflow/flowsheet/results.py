@@ -25,7 +25,7 @@ from millflow.errors import GridError
 from millflow.flowsheet.water import slurry_properties
 from millflow.psd import _fix_sum, cum_passing, cum_passing_at, percentile_size
 
-__all__ = ["stream_properties", "circulating_loads", "mass_balance", "to_dataset", "summary",
+__all__ = ["stream_properties", "circulating_loads", "mass_balance", "to_dataset", "summary", "error_report",
            "stream_table", "unit_table", "psd_table", "save"]
 
 TPH = 3.6  # kg/s -> t/h
@@ -173,6 +173,11 @@ def to_dataset(sol, props=None, grid_check=None):
     ds["solids"] = var("stream", [props[n]["solids_kg_s"] for n in names], "kg/s", "solids mass flow")
     ds["p80"] = var("stream", [props[n]["p80_m"] for n in names], "m", "80 % passing size")
     ds["p50"] = var("stream", [props[n]["p50_m"] for n in names], "m", "50 % passing size")
+    gs = (grid_check or {}).get("streams")
+    if gs:
+        for key in ("p80", "p50"):
+            ds[f"{key}_grid_error"] = var("stream", [gs[n][f"{key}_grid_error"] for n in names], "1",
+                                          f"relative grid error of {key.upper()} (Richardson, two-grid GCI)")
     ds["source"] = var("stream", [f"{fs.streams[n].source}.{fs.streams[n].port}" for n in names], "",
                        "unit and outlet the stream leaves")
     ds["target"] = var("stream", [fs.streams[n].target for n in names], "", "unit the stream enters")
@@ -245,7 +250,9 @@ def to_dataset(sol, props=None, grid_check=None):
         "kernel": _kernel_status(),
         **_provenance(fs),
         "grid_check": json.dumps(_clean(grid_check)) if grid_check else "not run",
-        "conventions": "class 1 coarsest, class N the sink; size = upper class edge (Austin)",
+        "error_estimate": json.dumps(_clean(error_report(sol, grid_check))),
+        "conventions": "class 1 coarsest, class N the sink; size = upper class edge (Austin); continuous forms "
+                       f"put on the grid by scheme {fs.grid.scheme!r}",
     })
     return ds
 
@@ -280,6 +287,22 @@ def _kernel_status() -> str:
     return status()
 
 
+def error_report(sol, grid_check=None) -> dict:
+    """The error estimate of a solved flowsheet split by source: ``solver`` (the largest of
+    the recycle solve's relative residual and the units' error estimates) and ``grid``
+    (the largest relative grid error of P80, P50 and circulating loads from the grid
+    check, :mod:`millflow.flowsheet.gridcheck`), each with the method that estimated it."""
+    unit_err = max((float(r.get("error_estimate") or 0.0) for r in sol.units.values()), default=0.0)
+    solver = {"value": max(float(sol.solver.get("relative_residual") or 0.0), unit_err),
+              "method": "largest of the recycle solve's relative residual and the units' own error estimates"}
+    g = grid_check or {}
+    if g.get("status") in ("ok", "grid too coarse"):
+        grid = {"value": g["worst"], "at": g["worst_at"], "method": g["method"]}
+    else:
+        grid = {"value": None, "method": "not estimated (grid check not run)"}
+    return {"solver": solver, "grid": grid}
+
+
 def summary(sol, props=None, grid_check=None) -> dict:
     """JSON-ready summary: streams, circulating_load, mass_balance_error, specific energy, units, runtime_s."""
     fs = sol.flowsheet
@@ -295,6 +318,10 @@ def summary(sol, props=None, grid_check=None) -> dict:
             "passing_pct": {f"{x * 1e6:g}": v * 100 for x, v in zip(fs.passing_sizes, p["passing"])},
             "size_um": fs.grid.x * 1e6, "cum_passing": p["cum_passing"],
         }
+        gs = (grid_check or {}).get("streams", {}).get(n)
+        if gs:  # relative grid errors (Richardson + GCI) and the converged values
+            streams[n].update(p80_grid_error=gs["p80_grid_error"], p50_grid_error=gs["p50_grid_error"],
+                              p80_converged_um=gs["p80_converged_um"], p50_converged_um=gs["p50_converged_um"])
         if "water_kg_s" in p:
             streams[n].update(water_tph=p["water_kg_s"] * TPH, solids_pct=p["solids_content"] * 100)
             if "volume_flow_m3_s" in p:
@@ -324,6 +351,7 @@ def summary(sol, props=None, grid_check=None) -> dict:
         "kernel": _kernel_status(),
         **_provenance(fs),
         "grid_check": grid_check,
+        "error_estimate": error_report(sol, grid_check),
         "runtime_s": sol.runtime_s,
     })
 

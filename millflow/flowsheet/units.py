@@ -23,6 +23,7 @@ from typing import Callable, ClassVar
 
 import numpy as np
 
+from millflow.breakage.averaged import breakage_on_grid, curve_on_grid
 from millflow.classifiers import efficiency, mill_discharge_rates
 from millflow.errors import InputError, SolverError
 
@@ -272,7 +273,8 @@ class MillUnit:
             return None
         params = dict(self.classification)
         params.pop("where", None)
-        return efficiency(params.pop("curve"), grid.x, **params)
+        curve = params.pop("curve")
+        return curve_on_grid(lambda x: efficiency(curve, x, **params), grid)
 
     def residence_time(self, throughput=None, water=None) -> float:
         """tau [s]: given, H / F (solids hold-up), or V / Q (slurry hold-up, Q in m3/s)."""
@@ -289,17 +291,28 @@ class MillUnit:
         return float(self.holdup) / float(throughput)
 
     def breakage_functions(self, grid, tau=None, throughput=None):
-        """(S [1/s], b) on ``grid``; rates per energy become S = S^E P / H with H = tau F [kg]."""
+        """(S [1/s], b [-]) on ``grid``: continuous forms class-averaged (or at the upper edges
+        on an "upper_edge" grid), a user's discrete S_i, b_ij as given
+        (:func:`millflow.breakage.averaged.breakage_on_grid`); rates per energy become
+        S = S^E P / H with H = tau F [kg] (the class average of S^E times P / H: the map is linear)."""
+        S, b, _ = breakage_on_grid(self.rate, self.breakage, grid)
         if self.breakage_basis == "energy":
             if tau is None or throughput is None or not throughput > 0:
                 raise SolverError(f"units.{self.name}: rates per energy need the mill's hold-up, H = tau F; "
                                   f"throughput {throughput!r} kg/s")
-            S = self.rate.time_rates(grid.x, float(self.power), float(tau) * float(throughput))
-        else:
-            S = np.asarray(self.rate(grid.x), dtype=float)
-        fun = getattr(self.breakage, "b", self.breakage)
-        b = np.asarray(fun(grid.x), dtype=float)
+            from millflow.breakage.energy import time_rates
+
+            S = time_rates(S, float(self.power), float(tau) * float(throughput))
         return S, b
+
+    def discretisation(self, grid) -> str:
+        """How this mill's breakage is put on ``grid``: "class average", "upper edge" or
+        "discrete (as given)" (:func:`millflow.breakage.averaged.breakage_on_grid`)."""
+        from millflow.breakage.averaged import continuous_rate
+
+        if continuous_rate(self.rate) is None or not callable(getattr(self.breakage, "cumulative", None)):
+            return "discrete (as given)"
+        return "class average" if grid.scheme == "class_average" else "upper edge"
 
     def blocks(self, grid, throughput=None, water=None):
         t0 = time.perf_counter()
@@ -366,7 +379,7 @@ class Classifier:
         return CLASSIFIER_PORTS[self.kind]
 
     def efficiency(self, grid) -> np.ndarray:
-        return efficiency(self.curve, grid.x, **self.params)
+        return curve_on_grid(lambda x: efficiency(self.curve, x, **self.params), grid)
 
     def blocks(self, grid, throughput=None, water=None):
         t0 = time.perf_counter()

@@ -305,6 +305,11 @@ def _samples(ds: xr.Dataset, locations) -> xr.DataArray:
                         attrs={"units": "1", "long_name": "mass fraction at the sampling location"})
 
 
+#: Why a mill solved from S_i and b_ij has no size-grid error of its own.
+_GRID_NOTE = ("none: S_i and b_ij given per class are the discrete model itself; continuous forms put on a "
+              "grid carry the grid error their caller estimates (flowsheet grid check, batch.grind)")
+
+
 def steady_mill(S, b, feed, transport, d=None, *, where=None, dispersion=None, discharge=None, method=None,
                 x=None, positions=None, locations=None, tol: float = 1e-8,
                 on_inaccuracy: str = "raise") -> xr.Dataset:
@@ -399,6 +404,9 @@ def steady_mill(S, b, feed, transport, d=None, *, where=None, dispersion=None, d
     ds.attrs.update(
         method=solved["method"],
         error_estimate=float(solved["error"]) * scale,
+        solver_error_estimate=float(solved["error"]) * scale,
+        grid_error_estimate=0.0,
+        grid_error_method=_GRID_NOTE,
         runtime_s=float(runtime),
         mass_balance_error=float(abs(product.sum() - feed.sum())),
         transport=repr(transport),

@@ -289,6 +289,9 @@ def transient_mill(S, b, transport, t, *, feed=None, initial_feed=None, pulse=No
     ds = xr.Dataset(data, coords=coords)
     err = rtol * float(np.abs(product).max(initial=0.0)) + atol if name.endswith(method) else 0.0
     err += extra.get("spatial_error_estimate", 0.0)
+    from millflow.mill.steady import _GRID_NOTE
+
+    ds.attrs.update(solver_error_estimate=err, grid_error_estimate=0.0, grid_error_method=_GRID_NOTE)
     ds.attrs.update(method=name, error_estimate=err, runtime_s=runtime, transport=repr(transport),
                     classification="none" if sc.d is None else f"d* at {sc.where}", **info, **extra)
     return ds

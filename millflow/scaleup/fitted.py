@@ -150,6 +150,16 @@ class FittedBreakage:
             b = breakage_population(x, p["phi"], p["gamma"], p["beta"], kind="b")
         return b if np.ndim(theta) > 1 else b[0]
 
+    def cumulative(self, theta, x, y) -> np.ndarray:
+        """Continuous B(x; y) [-] of eq. 6 at sizes x, y [m] (broadcasting) for one parameter
+        vector theta (:func:`millflow.breakage.distributions.continuous_B`)."""
+        from millflow.breakage.distributions import continuous_B
+
+        p = dict(zip(self.names, np.asarray(theta, float)))
+        if self.spec["breakage"] == "single":
+            return continuous_B(x, y, 1.0, p["gamma"], p["gamma"])
+        return continuous_B(x, y, p["phi"], p["gamma"], p["beta"])
+
 
 def load_fit(path) -> FittedBreakage:
     """Read a ``millflow fit --json`` result; one-line InputError naming what is missing."""

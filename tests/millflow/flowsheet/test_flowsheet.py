@@ -141,7 +141,7 @@ def test_stream_properties_p80_matches_psd():
 
     sol = solve(load(CLOSED))
     props = stream_properties(sol)
-    f = sol.flow("overflow")
+    f = np.maximum(sol.flow("overflow"), 0.0)  # rounding-level negatives (~1e-21) of the linear solve
     assert props["overflow"]["p80_m"] == pytest.approx(p80(sol.flowsheet.grid, f / f.sum()), rel=1e-12)
     s = summary(sol)
     assert math.isfinite(s["specific_energy_kWh_per_t"])

@@ -34,9 +34,12 @@ POWER = 'rate = {form = "power", A_per_min = 0.6, alpha = 1.1}'
 NORMAL = 'breakage = {form = "normalized", phi = 0.5, gamma = 0.8, beta = 3.0}'
 
 
-def _fs(tmp_path, rate=POWER, breakage=NORMAL):
+def _fs(tmp_path, rate=POWER, breakage=NORMAL, scheme=None):
     p = tmp_path / "fs.toml"
-    p.write_text(BASE.replace("RATE", rate).replace("BREAKAGE", breakage))
+    text = BASE.replace("RATE", rate).replace("BREAKAGE", breakage)
+    if scheme:
+        text = text.replace("[grid]", f'[grid]\nscheme = "{scheme}"', 1)
+    p.write_text(text)
     return load(p)
 
 
@@ -49,10 +52,13 @@ def test_austin_rate_with_ball_size_terms_is_the_library_form(tmp_path):
 
 @pytest.mark.parametrize("kind", ["B", "b"])
 def test_breakage_matrix_from_csv_equals_the_form(tmp_path, kind):
-    fs0 = _fs(tmp_path)
+    # a table is the discrete model itself, used as given: it equals the form evaluated at
+    # the upper edges (Austin's scheme), with the same rates at the upper edges
+    fs0 = _fs(tmp_path, scheme="upper_edge")
     B = NormalizedBreakage(0.5, 0.8, 3.0).B(fs0.grid.x)
     np.savetxt(tmp_path / "m.csv", B if kind == "B" else b_from_B(B), delimiter=",", fmt="%.17g")
     fs = _fs(tmp_path, breakage=f'breakage = {{form = "table", file = "m.csv", matrix = "{kind}"}}')
+    assert fs.units["mill"].discretisation(fs.grid) == "discrete (as given)"
     a, b = solve(fs0).flow("s2"), solve(fs).flow("s2")
     np.testing.assert_allclose(b, a, rtol=1e-12, atol=1e-15 * a.sum())  # %.17g round-trips exactly
 

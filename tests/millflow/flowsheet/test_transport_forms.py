@@ -5,6 +5,7 @@ import pytest
 import rtd
 
 from millflow.breakage import NormalizedBreakage, PowerLawRate
+from millflow.breakage.averaged import breakage_on_grid, curve_on_grid
 from millflow.classifiers import mill_discharge_rates, screen_efficiency
 from millflow.errors import InputError
 from millflow.flowsheet import loads, solve
@@ -38,9 +39,13 @@ def run(transport, classification=""):
     sol = solve(loads(BASE.replace("TRANSPORT", transport).replace("CLASSIFICATION", classification)))
     fs = sol.flowsheet
     feed = fs.units["f"].source()["out"]
-    S = PowerLawRate(0.01, 1.1, 1e-3)(fs.grid.x)
-    b = NormalizedBreakage(0.5, 0.8, 3.0).b(fs.grid.x)
+    # the continuous forms put on the grid as the flowsheet does (class averages)
+    S, b, _ = breakage_on_grid(PowerLawRate(0.01, 1.1, 1e-3), NormalizedBreakage(0.5, 0.8, 3.0), fs.grid)
     return sol, feed, S, b, fs.grid
+
+
+def _screen(grid):
+    return mill_discharge_rates(curve_on_grid(lambda x: screen_efficiency(x, 1.5e-3, 4.0), grid))
 
 
 def test_series_composition_is_rtd_series_of_its_parts():
@@ -54,7 +59,7 @@ def test_series_composition_is_rtd_series_of_its_parts():
 def test_classification_where_in_cells(where):
     sol, feed, S, b, grid = run('transport = {model = "tanks_in_series", n = 3}',
                                 f'classification = {{curve = "screen", d50_um = 1500, m = 4, where = {where}}}')
-    d = mill_discharge_rates(screen_efficiency(grid.x, 1.5e-3, 4.0))
+    d = _screen(grid)
     w = eval(where.replace('"', "'"))  # noqa: S307 - a literal from the parametrisation
     ref = transfer_matrix(S, b, rtd.TanksInSeries(300.0, 3), d, where=tuple(w) if isinstance(w, list) else w) @ feed
     np.testing.assert_allclose(sol.flow("s2"), ref, rtol=1e-12, atol=1e-14 * feed.sum())
@@ -81,7 +86,7 @@ def test_open_vessel_classified_along_the_axis(discharge):
     key = "" if discharge is None else f', discharge = "{discharge}"'
     sol, feed, S, b, grid = run(f'transport = {{model = "axial_dispersion_open", pe = 4{key}}}',
                                 'classification = {curve = "screen", d50_um = 1500, m = 4, where = "axis"}')
-    d = mill_discharge_rates(screen_efficiency(grid.x, 1.5e-3, 4.0))
+    d = _screen(grid)
     ref = transfer_matrix(S, b, rtd.AxialDispersion(300.0, 4.0, bc="open"), d, discharge=discharge) @ feed
     np.testing.assert_allclose(sol.flow("s2"), ref, rtol=1e-12, atol=1e-14 * feed.sum())
     assert max(r["mass_balance_error"] for r in sol.units.values()) < 1e-12
