@@ -15,7 +15,6 @@ _EDITS = (
     ("holdup_t = 47.5              # solids hold-up: tau = H / F at the solved mill feed (with the recycle)",
      "tau_min = 3.5"),
     ("power_kW = 3800             # drives the breakage: S = S^E P / H", "power_kW = 3800"),
-    ("ratio = 1.029302236643492   # 2^(1/24)", "ratio = 1.044273782427414   # 2^(1/16)"),
 )
 
 
