@@ -1,0 +1,92 @@
+"""Mills at the extremes of their transport parameters: every reported error estimate is
+at least the actual error, measured against an exact limit or a high-precision solve."""
+import numpy as np
+import pytest
+
+import rtd
+from millflow import steady_mill
+from millflow.breakage import b_from_B, normalized_B
+from millflow.mill import cells as mill_cells
+
+
+def _mill(n_cls=10):
+    x = 2.0 ** (-np.arange(n_cls) / 2)
+    b = b_from_B(normalized_B(x, 0.4, 0.8, 3.0))
+    S = np.r_[0.02 * (x[:-1] / x[0]), 0.0]
+    return x, S, b, np.r_[1.0, np.zeros(n_cls - 1)]
+
+
+@pytest.mark.parametrize("pe", [1e-16, 1e-20, 1e-25, 1e-29, 1e-32, 1e-300])
+def test_closed_axial_at_tiny_peclet_is_the_perfect_mixer(pe):
+    # The closed vessel differs from one perfect mixer by O(Pe) (< 1e-15 here), so the
+    # well-mixed mill (one triangular solve, rounding N eps) is the exact reference.
+    # The Wehner-Wilhelm denominator used to cancel like eps sqrt(p/Pe): actual error
+    # 1e-8 at Pe = 1e-16 and negative products at 1e-29 against an estimate of 1e-14.
+    x, S, b, f = _mill()
+    ds = steady_mill(S, b, f, rtd.AxialDispersion(100.0, pe))
+    ref = steady_mill(S, b, f, rtd.PerfectMixing(100.0))
+    actual = float(np.abs(ds["product"].values - ref["product"].values).max())
+    assert actual <= ds.attrs["error_estimate"] + ref.attrs["error_estimate"]
+    # hold-up: the segregated path reports its error in units of the feed times tau
+    hold = float(np.abs(ds["holdup"].values - ref["holdup"].values).max())
+    assert hold <= 100.0 * (ds.attrs["error_estimate"] + ref.attrs["error_estimate"])
+    assert ds["product"].values.min() >= 0 and ds["holdup"].values.min() >= 0
+
+
+def test_closed_transform_has_no_cancellation_at_small_peclet():
+    # E_hat -> 1/(1 + p) with relative deviation O(Pe p): at Pe = 1e-20 that is rounding
+    p = np.array([1e-3, 0.5, 2.0, 40.0, 1e4])
+    got = rtd.AxialDispersion(1.0, 1e-20).laplace(p)
+    np.testing.assert_allclose(got, 1 / (1 + p), rtol=4e-16 * 8)  # a few ulp
+
+
+def _class_loop_mpmath(S, b, feed, net, d, where, dps=40):
+    """The class-by-class cell balance in ``dps`` digits, each diagonal built in mpmath
+    as the column's outflows plus what leaves the cell (S_i + H exit): the float
+    diagonal drain = sum F / V already carries eps r of rounding, so it cannot be the
+    reference at r >> 1."""
+    import mpmath as mp
+
+    offdiag, drain, exit_rate, G, H = mill_cells.cell_operators(net, d, where, S.size)
+    n, inlet = net.n, (1 - net.bypass) * np.asarray(net.inlet)
+    hold = []
+    with mp.workdps(dps):
+        for i in range(S.size):
+            M = mp.matrix(n, n)
+            for l in range(n):
+                out = mp.fsum(mp.mpf(offdiag[k, l]) for k in range(n) if k != l) * mp.mpf(G[i, l])
+                for k in range(n):
+                    M[k, l] = -mp.mpf(offdiag[k, l]) * mp.mpf(G[i, l]) if k != l else (
+                        out + mp.mpf(S[i]) + mp.mpf(H[i, l]) * mp.mpf(exit_rate[l]))
+            rhs = mp.matrix([mp.mpf(inlet[k]) * mp.mpf(feed[i])
+                             + mp.fsum(mp.mpf(b[i, j]) * mp.mpf(S[j]) * hold[j][k] for j in range(i))
+                             for k in range(n)])
+            hold.append(mp.lu_solve(M, rhs))
+        return np.array([[float(hold[i][k]) for i in range(S.size)] for k in range(n)])
+
+
+@pytest.mark.parametrize("r", [1e4, 1e6, 1e8])
+def test_strong_back_mixing_meets_a_high_precision_solve(r):
+    # cells with back-mixing ratio r: the Thomas pivots cancelled like eps r (mass error
+    # 3e-8 at r = 1e8 reported with an estimate of 1e-15)
+    x, S, b, f = _mill()
+    T = rtd.RecirculatingCells(100.0, 3, r=r)
+    ds = steady_mill(S, b, f, T)
+    ref = _class_loop_mpmath(S, b, f, T.network(), None, "discharge", dps=40)  # (cells, classes)
+    net = T.network()
+    p_ref = ref[-1] * (net.outlet[-1] / net.volumes[-1])
+    actual = float(np.abs(ds["product"].values - p_ref).max())
+    assert actual <= ds.attrs["error_estimate"]
+    assert ds.attrs["mass_balance_error"] <= ds.attrs["error_estimate"]
+    np.testing.assert_allclose(ds["cell_holdup"].values, ref, rtol=0, atol=1e-13 * np.abs(ref).max())
+
+
+def test_strong_back_mixing_with_a_screen_uses_the_accurate_factors():
+    x, S, b, f = _mill()
+    d = np.where(x > 0.3, 1e-2, 1.0)
+    net = rtd.RecirculatingCells(100.0, 5, r=1e7).network()
+    sol = mill_cells.solve_cells(S, b, f, net, d, "discharge")
+    ref = _class_loop_mpmath(S, b, f, net, d, "discharge", dps=40)
+    assert sol.kernel == "numpy_gth"
+    np.testing.assert_allclose(sol.holdup, ref, rtol=0, atol=1e-13 * np.abs(ref).max())
+    assert abs(sol.product.sum() - 1.0) < 1e-14
