@@ -427,18 +427,27 @@ def _solve_kinetic(fs, kin, method, tol, maxiter, t0, mass_tol=MASS_TOL):
         else:
             blocks[name], infos[name] = unit.blocks(fs.grid, None)
     outlets = {u: fs.outlet(u, "out") for u in kin}
+    # mills given by their slurry hold-up: tau = V / Q needs the water through them, torn too
+    wet = [u for u in kin if getattr(fs.units[u], "needs_water", False)]
     state = {}
 
     def g(X):
         extra = {}
         for k, u in enumerate(kin):
-            extra[outlets[u]], infos[u] = fs.units[u].product_flows(fs.grid, X[k * N:(k + 1) * N])
+            water = X[len(kin) * N + wet.index(u)] if u in wet else None
+            extra[outlets[u]], infos[u] = fs.units[u].product_flows(fs.grid, X[k * N:(k + 1) * N], water)
         flows, info = _linear_solve(fs, blocks, extra)
         state.update(flows=flows, info=info)
-        return np.concatenate([sum(flows[names.index(s)] for s in fs.inlets(u)) for u in kin])
+        out = [sum(flows[names.index(s)] for s in fs.inlets(u)) for u in kin]
+        if wet:
+            w = solve_water(fs, flows, infos)
+            out.append(np.array([w.units[u]["water_in_kg_s"] for u in wet]))
+        return np.concatenate(out)
 
     fresh = sum(u.solids * np.asarray(u.psd, float) for u in fs.units.values() if u.type == "feed")
-    X0 = np.concatenate([fresh for _ in kin])
+    water0 = sum(getattr(u, "water", 0.0) for u in fs.units.values() if u.type == "feed")
+    water0 += sum((getattr(fs, "water_added", {}) or {}).values())
+    X0 = np.concatenate([fresh for _ in kin] + [np.full(len(wet), float(water0))])
     X, its, hist, ok = _VECTOR_TEARS[method](g, X0, tol, maxiter)
     if not ok:
         raise SolverError(f"tear iterations on the inlet flows of {', '.join(kin)} (non-linear kinetics) did not "
