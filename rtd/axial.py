@@ -33,6 +33,12 @@ from rtd.base import ParameterError, RTDModel, as_s, as_time, check_positive
 SERIES_MAX_PE = 16.0   # below: series cancellation costs < exp(Pe/4) ~ 55 ulp
 SERIES_MIN_THETA = 2.0  # above: every series term is <= O(1), no cancellation
 _CHUNK = 1024
+#: Most Fourier nodes of the closed density (~ sqrt(41 Pe) T / (2 pi)): a block of
+#: _CHUNK times x nodes complex numbers is 1024 x 2e5 x 16 B = 3.3 GB at the limit; the
+#: blocks are cut to :data:`_BLOCK_BYTES` below it.
+MAX_FOURIER_NODES = 200_000
+MAX_DENSITY_PE = 1e9
+_BLOCK_BYTES = 2**26
 
 
 # ----------------------------------------------------------------------------- closed
@@ -159,6 +165,13 @@ def _fourier_nodes(pe: float) -> tuple[float, np.ndarray, np.ndarray]:
     while abs(closed_transform(1j * w_max, pe)) > 1e-18 and w_max < 1e9:
         w_max *= 1.25
     n = int(math.ceil(w_max * period / (2 * math.pi)))
+    # |E_hat(i w)| ~ exp(-w^2/Pe): the nodes grow like sqrt(Pe); each evaluation holds a
+    # block of (times x nodes) complex numbers, so refuse before allocating
+    if abs(closed_transform(1j * w_max, pe)) > 1e-18 or n > MAX_FOURIER_NODES:
+        raise ParameterError(
+            f"AxialDispersion: E(t) of the closed vessel at Pe = {pe:.3g} is a spike of relative width "
+            f"sqrt(2/Pe) = {math.sqrt(2 / pe):.2g}; its density needs more than {MAX_FOURIER_NODES:,} Fourier "
+            f"nodes (accurate for Pe <= {MAX_DENSITY_PE:.0e}); use rtd.PlugFlow, or the transform (laplace)")
     w = 2 * math.pi * np.arange(1, n + 1) / period
     return period, w, closed_transform(1j * w, pe)
 
@@ -174,12 +187,13 @@ def _closed_fourier(theta: np.ndarray, pe: float, integral: bool) -> np.ndarray:
     period, w, eh = _fourier_nodes(pe)
     coef = eh / (1j * w) if integral else eh
     out = np.empty_like(theta)
-    for i in range(0, theta.size, _CHUNK):
-        th = theta[i:i + _CHUNK, None]
+    rows = max(1, min(_CHUNK, _BLOCK_BYTES // (16 * w.size)))  # a block of ~64 MB at most
+    for i in range(0, theta.size, rows):
+        th = theta[i:i + rows, None]
         ph = np.exp(1j * w[None, :] * th)
         if integral:
             ph = ph - 1.0
-        out[i:i + _CHUNK] = 2 * (ph @ coef).real
+        out[i:i + rows] = 2 * (ph @ coef).real
     return (theta + out) / period if integral else (1.0 + out) / period
 
 
@@ -205,7 +219,7 @@ def closed_variance(pe: float) -> float:
     """variance/tau^2 = 2/Pe - 2 (1 - exp(-Pe))/Pe^2 (series for small Pe)."""
     if pe < 1e-3:
         return 1 - pe / 3 + pe**2 / 12 - pe**3 / 60
-    return 2 / pe + 2 * math.expm1(-pe) / pe**2
+    return 2 / pe + 2 * math.expm1(-pe) / pe / pe  # pe**2 would overflow for pe > 1e154
 
 
 # ------------------------------------------------------------------------------- open
@@ -299,7 +313,7 @@ class AxialDispersion(RTDModel):
     def variance(self) -> float:
         if self.bc == "closed":
             return self.tau**2 * closed_variance(self.pe)
-        return self.tau**2 * (2 / self.pe + 8 / self.pe**2)
+        return self.tau**2 * (2 / self.pe + 8 / self.pe / self.pe)
 
     @property
     def analytic_for_re_s_greater_than(self) -> float:
