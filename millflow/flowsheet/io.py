@@ -513,7 +513,7 @@ def _rtd_fit(tr: _Table, base: Path | None, classified: bool):
         raise InputError(f"{p}: model = {d['model']!r}: not a transport model; valid: "
                          f"{', '.join(sorted(TRANSPORTS))}") from None
     unit = d.get("time_unit")
-    if unit not in UNITS["time"]:
+    if not isinstance(unit, str) or unit not in UNITS["time"]:
         raise InputError(f"{p}: time_unit = {unit!r}; expected one of {', '.join(UNITS['time'])} (a fitted tau "
                          "without its unit cannot be used)")
     values = {}

@@ -261,7 +261,11 @@ class MillUnit:
         if throughput is None or not throughput > 0:
             raise SolverError(f"units.{self.name}: hold-up given but the throughput is {throughput!r} kg/s; "
                               "the mill receives no solids")
-        return float(self.holdup) / float(throughput)
+        tau = float(self.holdup) / float(throughput)
+        if not math.isfinite(tau):
+            raise SolverError(f"units.{self.name}: hold-up {self.holdup:.3g} kg / throughput {throughput:.3g} kg/s "
+                              "gives a residence time beyond floating point; expected a finite tau")
+        return tau
 
     def breakage_functions(self, grid):
         S = np.asarray(self.rate(grid.x), dtype=float)
