@@ -140,3 +140,67 @@ def test_transient_cells_estimate_is_at_least_the_actual_error(transport):
     assert actual <= ds.attrs["error_estimate"]
     assert actual_h <= ds.attrs["holdup_error_estimate"]
     assert ds.attrs["error_estimate"] < 1e-8  # and it stays a useful number (rtol 1e-8 on E ~ 3e-3 /s)
+
+
+def _mp_reference(S, b, f, tau, kind):
+    """Product and hold-up per unit feed in 40 digits: eq. 3 (one perfect mixer) or plug
+    flow exp(K tau) f with hold-up int_0^tau exp(K t) f dt (top-right block of the
+    exponential of [[K, I], [0, 0]] tau)."""
+    import mpmath as mp
+
+    n = S.size
+    with mp.workdps(40):
+        K = mp.matrix(n, n)
+        for i in range(n):
+            for j in range(n):
+                K[i, j] = (-mp.mpf(S[j]) if i == j else mp.mpf(b[i, j]) * mp.mpf(S[j]))
+        fv = mp.matrix([mp.mpf(v) for v in f])
+        if kind == "well_mixed":
+            p = mp.lu_solve(mp.eye(n) - K * mp.mpf(tau), fv)
+            h = p * mp.mpf(tau)
+        else:
+            aug = mp.zeros(2 * n, 2 * n)
+            for i in range(n):
+                for j in range(n):
+                    aug[i, j] = K[i, j] * mp.mpf(tau)
+                aug[i, n + i] = mp.mpf(tau)
+            E = mp.expm(aug)
+            p = mp.matrix([mp.fsum(E[i, j] * fv[j] for j in range(n)) for i in range(n)])
+            h = mp.matrix([mp.fsum(E[i, n + j] * fv[j] for j in range(n)) for i in range(n)])
+        return np.array([float(v) for v in p]), np.array([float(v) for v in h])
+
+
+@pytest.mark.parametrize("kind, transport", [("well_mixed", rtd.PerfectMixing(100.0)),
+                                             ("plug", rtd.PlugFlow(100.0))])
+def test_steady_linear_paths_meet_a_40_digit_reference(kind, transport):
+    # every steady path's estimate bounds its actual error, product and hold-up (the
+    # hold-up in units of the feed times tau, as the estimate is stated)
+    x, S, b, f = _mill()
+    f = np.linspace(1.0, 0.0, S.size)
+    ds = steady_mill(S, b, f, transport)
+    p_ref, h_ref = _mp_reference(S, b, f / f.sum(), 100.0, kind)
+    scale = f.sum()
+    est = ds.attrs["error_estimate"] + 1e-300
+    assert np.abs(ds["product"].values - p_ref * scale).max() <= est
+    assert np.abs(ds["holdup"].values - h_ref * scale).max() <= est * 100.0
+
+
+@pytest.mark.parametrize("solver", ["well_mixed", "tanks_in_series", "plug_flow"])
+def test_non_linear_paths_with_first_order_kinetics_bound_their_error(solver):
+    # first-order kinetics through the non-linear solvers: the linear mill is the exact
+    # answer (to its own rounding), so the difference is the non-linear path's actual error
+    from millflow.mill import nonlinear as nl
+    from millflow.nonlinear.kinetics import kinetics
+
+    x, S, b, f = _mill()
+    kin = kinetics(S, b)
+    tau = 100.0
+    if solver == "well_mixed":
+        r, T = nl.well_mixed(kin, f, tau), rtd.PerfectMixing(tau)
+    elif solver == "tanks_in_series":
+        r, T = nl.tanks_in_series(kin, f, tau, 3), rtd.TanksInSeries(tau, 3)
+    else:
+        r, T = nl.plug_flow(kin, f, tau), rtd.PlugFlow(tau)
+    ref = steady_mill(S, b, f, T)
+    actual = np.abs(r.product - ref["product"].values).max()
+    assert actual <= r.error_estimate + ref.attrs["error_estimate"]
