@@ -15,7 +15,7 @@ PACKAGES = ("millflow", "rtd")
 
 # Layers, lowest first: a module may import from its own layer and the ones below.
 LAYERS = [
-    ("base", ("millflow.errors", "millflow.grid", "millflow.compiled", "millflow.plotting", "millflow.inputs",
+    ("base", ("millflow.errors", "millflow._interrupt", "millflow.grid", "millflow.compiled", "millflow.plotting", "millflow.inputs",
               "millflow.balances")),
     ("kinetics", ("millflow.psd", "millflow.checks", "millflow.classifiers", "millflow.cyclones", "millflow.breakage",
                   "millflow.linalg",
