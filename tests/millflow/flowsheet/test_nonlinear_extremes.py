@@ -46,3 +46,13 @@ def test_aggregation_beyond_the_grid_top_is_refused_not_put_in_class_one():
 def test_non_integer_tanks_are_refused_for_non_linear_kinetics(n):
     with pytest.raises(InputError, match=r"units.ball_mill.transport.n"):
         solve(loads(_text(mill="tau_min = 4", transport=f'transport = {{model = "tanks_in_series", n = {n}}}')))
+
+
+@pytest.mark.parametrize("key", ["solids_content_pct = 95", "coarse_solids_content_pct = 75"])
+def test_a_fraction_written_as_percent_is_warned_at_the_key(key):
+    # solids_content_pct = 0.96 (meant 96) used to run on and fail later as a Plitt error
+    base, value = key.split(" = ")
+    text = WET.replace("MILL", "tau_min = 4").replace("CYCLONE", "coarse_solids_content_pct = 75")
+    text = text.replace(key, f"{base} = {float(value) / 100}")
+    with pytest.warns(UserWarning, match=rf"{base} = {float(value) / 100}: .* implausibly dilute.*{base} = {value}"):
+        loads(text)
