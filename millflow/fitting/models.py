@@ -589,6 +589,14 @@ class ForwardModel:
         out[:, starts] += 1.0
         return out
 
+    def _measured_sizes(self) -> list:
+        """[finest, coarsest] sieve size of the measured samples (not the feed) [m]: the
+        size range a prediction with this model is calibrated on."""
+        t = self.data.table
+        sizes = t.loc[t.location != "feed", "size_m"].to_numpy(float)
+        sizes = sizes[sizes > 0]
+        return [float(sizes.min()), float(sizes.max())] if sizes.size else []
+
     def describe(self) -> dict:
         """The spec, grid and eq. 10 reference values as plain JSON-able data (for the fit
         JSON: what another program needs to evaluate S and B of this model elsewhere)."""
@@ -601,6 +609,7 @@ class ForwardModel:
                 "transport_params": dict(s.transport_params), "transport_fit": list(s.transport_fit),
                 "param_names": list(s.param_names),
                 "grid_upper_m": [float(v) for v in self.x], "process_ref": dict(self._ref),
+                "measured_size_range_m": self._measured_sizes(),
                 "process": {str(c): {str(k): float(v) for k, v in proc.loc[c].items()
                                      if isinstance(v, (int, float, np.floating, np.integer))}
                             for c in self.conditions if c in proc.index}}

@@ -54,3 +54,18 @@ def test_circuits_without_a_steady_state_are_solver_errors(plant, clf):
     su = ScaleUp(make_fit(), LAB, {}, Circuit(plant, "tis", {"n": 3}, clf), FEED, 100.0)
     with pytest.raises(SolverError, match="no steady state.*returned by the classifier"):
         su.operate(su.fit.theta)
+
+
+def test_a_target_finer_than_the_finest_sieve_is_said(fit_dict):
+    # the lab sieves reach 4 mm / 2^5.5 = 88 um; a 20 um target extrapolates the fitted forms
+    from millflow.scaleup import predict_plant
+
+    fit = fit_from_dict(fit_dict, "fit.json")
+    lo, hi = fit.spec["measured_size_range_m"]
+    assert lo == pytest.approx(4e-3 * 2 ** -5.5, rel=1e-9) and hi == pytest.approx(4e-3, rel=1e-9)
+    fine = SizeGrid.geometric(4e-3, 2 ** 0.5, 24)  # the prediction grid reaches 10 um
+    feed = np.r_[np.full(3, 1 / 3), np.zeros(21)]
+    su = ScaleUp(fit, LAB, {}, Circuit(PLANT, "tis", {"n": 3}, CYCLONE), feed, 100.0, x=fine.x)
+    with pytest.warns(UserWarning, match=r"target P80 60 um is finer than the finest sieve .*88.39"):
+        res = predict_plant(su, 60e-6, methods=("delta",))
+    assert any("target P80" in n for n in res.summary["extrapolation"])
