@@ -40,3 +40,22 @@ def test_a_non_string_where_a_name_is_expected_is_named(tmp_path_factory, capsys
     toml_value = json.dumps(value).replace(":", "=").replace('"a"', "a").replace("true", "true")
     code, err = _run(tmp, BASE.replace(field, f"{key} = {toml_value}", 1), capsys)
     assert code == 2 and err.count("\n") == 1 and key in err, err
+
+
+def test_the_memory_guard_counts_the_run_and_its_grid_check(tmp_path, capsys, monkeypatch):
+    # ~420 classes: one N x N matrix (1.4 MB) is within a 10 MiB budget, but the run's
+    # transfer matrices and the grid check's on ~840 classes are not; refused before solving
+    monkeypatch.setenv("MILLFLOW_MEMORY_BUDGET_GB", str(10 / 1024))
+    text = BASE.replace("ratio = 1.044273782427414", "ratio = 1.0173")
+    assert "ratio = 1.0173" in text
+    code, err = _run(tmp_path, text, capsys)
+    assert code == 2 and err.count("\n") == 1
+    assert "for the grid check needs about" in err and "--no-grid-check" in err
+    assert not (tmp_path / "o").exists()
+    # without the grid check the same run fits the budget and runs
+    f = tmp_path / "f.toml"
+    assert main(["run", str(f), "--out", str(tmp_path / "o2"), "--quiet", "--no-plots", "--no-grid-check"]) == 0
+    # and a budget below even that refuses it too
+    monkeypatch.setenv("MILLFLOW_MEMORY_BUDGET_GB", str(2 / 1024))
+    assert main(["run", str(f), "--out", str(tmp_path / "o3"), "--quiet", "--no-plots", "--no-grid-check"]) == 2
+    assert "MILLFLOW_MEMORY_BUDGET_GB" in capsys.readouterr().err
