@@ -4,6 +4,7 @@ Class 1 is the coarsest size class, class N the finest (the sink, S_N = 0); size
 upper class edges in metres (Austin's convention), times in seconds, rates in 1/s.
 Equations are numbered as in docs/equations.md.
 """
+import millflow._interrupt  # noqa: F401  (first: Ctrl-C while the command line imports is quiet)
 from millflow.batch import batch_grind, batch_solve, grind, plug_flow_profile
 from millflow.breakage import (
     AustinRate,

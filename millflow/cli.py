@@ -88,8 +88,11 @@ def main(argv: list[str] | None = None) -> int:
     args = parser.parse_args(argv)
     name = f"millflow {args.command}"
     previous = signal.getsignal(signal.SIGTERM) if _main_thread() else None
+    previous_int = signal.getsignal(signal.SIGINT) if _main_thread() else None
     if previous is not None:
         signal.signal(signal.SIGTERM, _on_sigterm)
+    if previous_int is not None:  # Ctrl-C raises KeyboardInterrupt (cleaned up below) while the command runs
+        signal.signal(signal.SIGINT, signal.default_int_handler)
     try:
         with warnings.catch_warnings():
             warnings.showwarning = _one_line_warning
@@ -119,6 +122,8 @@ def main(argv: list[str] | None = None) -> int:
     finally:
         if previous is not None:
             signal.signal(signal.SIGTERM, previous)
+        if previous_int is not None:
+            signal.signal(signal.SIGINT, previous_int)
 
 
 def one_line(err) -> str:

@@ -332,6 +332,22 @@ def check_classes(n: int, how: str = "") -> None:
                         "use a coarser ratio or fewer classes")
 
 
+def check_run_memory(n: int, matrices: int, refined_n: int | None = None, what: str = "the run") -> float:
+    """Refuse, before a solve allocates anything, a run whose N x N matrices together exceed
+    the memory budget: ``matrices`` of them on the grid of ``n`` classes (a flowsheet holds a
+    transfer matrix per unit besides b and B), as many again on ``refined_n`` classes when
+    a grid check runs beside the first solution. Returns the bytes estimated."""
+    need = 8.0 * matrices * (float(n) ** 2 + (float(refined_n) ** 2 if refined_n else 0.0))
+    budget = memory_budget_bytes()
+    if need > budget:
+        check = f" and {refined_n} classes for the grid check" if refined_n else ""
+        raise GridError(f"{what} on {n} classes{check} needs about {need / 2**30:.3g} GiB ({matrices} N x N "
+                        f"matrices per grid), above the memory budget of {budget / 2**30:.3g} GiB "
+                        "(MILLFLOW_MEMORY_BUDGET_GB); use a coarser ratio or fewer classes"
+                        + (", or --no-grid-check" if refined_n else ""))
+    return need
+
+
 def _check_ratio(ratio) -> None:
     if not (np.isfinite(ratio) and ratio > 1.0):
         raise GridError(f"ratio = {ratio!r}: expected x_i/x_(i+1) > 1 (e.g. 2**0.5), finite")

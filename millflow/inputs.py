@@ -238,5 +238,10 @@ def quantity(table: dict, base: str, dim: str, where: str, default=..., *, posit
     if positive and (np.any(arr < 0) or (not allow_zero and np.any(arr == 0))):
         raise InputError(f"{where + '.' if where else ''}{key} = {_show(v)}: expected a value "
                          f"{'>= 0' if allow_zero else '> 0'}")
-    out = arr * UNITS[dim][key[len(base) + 1:]]
+    with np.errstate(over="ignore", under="ignore"):
+        out = arr * UNITS[dim][key[len(base) + 1:]]
+    lost = ~np.isfinite(out) | ((out == 0) & (arr != 0))
+    if np.any(lost):  # the unit conversion overflowed (1e306 t) or underflowed to 0
+        raise InputError(f"{where + '.' if where else ''}{key} = {_show(v)}: out of range (in SI units it "
+                         f"{'overflows' if not np.all(np.isfinite(out)) else 'underflows to 0'})")
     return float(out) if out.ndim == 0 else out

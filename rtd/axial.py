@@ -33,6 +33,12 @@ from rtd.base import ParameterError, RTDModel, as_s, as_time, check_positive
 SERIES_MAX_PE = 16.0   # below: series cancellation costs < exp(Pe/4) ~ 55 ulp
 SERIES_MIN_THETA = 2.0  # above: every series term is <= O(1), no cancellation
 _CHUNK = 1024
+#: Most Fourier nodes of the closed density (~ sqrt(41 Pe) T / (2 pi)): a block of
+#: _CHUNK times x nodes complex numbers is 1024 x 2e5 x 16 B = 3.3 GB at the limit; the
+#: blocks are cut to :data:`_BLOCK_BYTES` below it.
+MAX_FOURIER_NODES = 200_000
+MAX_DENSITY_PE = 1e9
+_BLOCK_BYTES = 2**26
 
 
 # ----------------------------------------------------------------------------- closed
@@ -49,18 +55,45 @@ def closed_transform(p, pe: float):
         # real p > -Pe/4: a is real and positive, den > 0; the same formula in float64
         # (a third of the cost of the complex one, and what a segregated mill evaluates)
         a = np.sqrt(1 + 4 * p.astype(float) / pe)
-        with np.errstate(over="ignore", divide="ignore"):
-            den = (1 + a) ** 2 - (1 - a) ** 2 * np.exp(-2 * q * a)
-            return np.exp(np.log(4 * a) - 2 * p / (1 + a) - np.log(den))
+        with np.errstate(over="ignore", divide="ignore", invalid="ignore"):
+            # the ratio directly (a few ulp; the logs of large a lose |log a| ulp), den/a
+            # written (1 + a)(1 + 1/a)(-expm1(-2 q a)) + 4 exp(-2 q a) so a^2 never overflows
+            e = np.exp(-2 * q * a)
+            out = 4 * np.exp(-2 * p / (1 + a)) / ((1 + a) * (1 + 1 / a) * -np.expm1(-2 * q * a) + 4 * e)
+            big = ~np.isfinite(out)  # exp(-2p/(1+a)) overflows near p = -Pe/4 at huge Pe
+            if np.any(big):
+                out = np.where(big, np.exp(np.log(4 * a) - 2 * p / (1 + a) - np.log(_closed_den(a, q))), out)
+        return _mixed_limit(out, p, a)
     p = p.astype(complex)
     a = np.sqrt(1 + 4 * p / pe)
     with np.errstate(over="ignore", invalid="ignore", divide="ignore"):
-        den = (1 + a)**2 - (1 - a)**2 * np.exp(-2 * q * a)
+        den = _closed_den(a, q)
         # one exponential of the summed logs: an overflowing factor exp(q (1 - a)) times
         # a finite one would give inf * 0j = nan in complex arithmetic
         out = np.exp(np.log(4 * a) - 2 * p / (1 + a) - np.log(den))
     # at a = 0 (p = -Pe/4) the expression is 0/0; the limit is 4 e^q/(4 + 2q)
-    return np.where(a == 0, 4 * math.exp(q) / (4 + 2 * q) if q < 700 else np.inf, out)
+    out = np.where(a == 0, 4 * math.exp(q) / (4 + 2 * q) if q < 700 else np.inf, out)
+    return _mixed_limit(out, p, a)
+
+
+def _closed_den(a, q):
+    """(1 + a)^2 - (1 - a)^2 exp(-2 q a) without cancellation.
+
+    Written as -(1 + a)^2 expm1(-2 q a) + 4 a exp(-2 q a): for real a > 0 both terms are
+    positive. The plain difference cancels when Pe -> 0 (a ~ sqrt(4p/Pe) large, 2 q a
+    small): its relative error grows like eps a, 1e-8 at Pe = 1e-16 and O(1) at 1e-32.
+    """
+    e = np.exp(-2 * q * a)
+    return -(1 + a) ** 2 * np.expm1(-2 * q * a) + 4 * a * e
+
+
+def _mixed_limit(out, p, a):
+    """Where 4p/Pe overflows (Pe below ~1e-300 p) the vessel is one perfect mixer to
+    relative O(Pe): E_hat = 1/(1 + p)."""
+    bad = ~np.isfinite(a)
+    if np.any(bad):
+        out = np.where(bad, 1.0 / (1.0 + p), out)
+    return out
 
 
 @functools.lru_cache(maxsize=128)
@@ -132,6 +165,13 @@ def _fourier_nodes(pe: float) -> tuple[float, np.ndarray, np.ndarray]:
     while abs(closed_transform(1j * w_max, pe)) > 1e-18 and w_max < 1e9:
         w_max *= 1.25
     n = int(math.ceil(w_max * period / (2 * math.pi)))
+    # |E_hat(i w)| ~ exp(-w^2/Pe): the nodes grow like sqrt(Pe); each evaluation holds a
+    # block of (times x nodes) complex numbers, so refuse before allocating
+    if abs(closed_transform(1j * w_max, pe)) > 1e-18 or n > MAX_FOURIER_NODES:
+        raise ParameterError(
+            f"AxialDispersion: E(t) of the closed vessel at Pe = {pe:.3g} is a spike of relative width "
+            f"sqrt(2/Pe) = {math.sqrt(2 / pe):.2g}; its density needs more than {MAX_FOURIER_NODES:,} Fourier "
+            f"nodes (accurate for Pe <= {MAX_DENSITY_PE:.0e}); use rtd.PlugFlow, or the transform (laplace)")
     w = 2 * math.pi * np.arange(1, n + 1) / period
     return period, w, closed_transform(1j * w, pe)
 
@@ -147,12 +187,13 @@ def _closed_fourier(theta: np.ndarray, pe: float, integral: bool) -> np.ndarray:
     period, w, eh = _fourier_nodes(pe)
     coef = eh / (1j * w) if integral else eh
     out = np.empty_like(theta)
-    for i in range(0, theta.size, _CHUNK):
-        th = theta[i:i + _CHUNK, None]
+    rows = max(1, min(_CHUNK, _BLOCK_BYTES // (16 * w.size)))  # a block of ~64 MB at most
+    for i in range(0, theta.size, rows):
+        th = theta[i:i + rows, None]
         ph = np.exp(1j * w[None, :] * th)
         if integral:
             ph = ph - 1.0
-        out[i:i + _CHUNK] = 2 * (ph @ coef).real
+        out[i:i + rows] = 2 * (ph @ coef).real
     return (theta + out) / period if integral else (1.0 + out) / period
 
 
@@ -178,7 +219,7 @@ def closed_variance(pe: float) -> float:
     """variance/tau^2 = 2/Pe - 2 (1 - exp(-Pe))/Pe^2 (series for small Pe)."""
     if pe < 1e-3:
         return 1 - pe / 3 + pe**2 / 12 - pe**3 / 60
-    return 2 / pe + 2 * math.expm1(-pe) / pe**2
+    return 2 / pe + 2 * math.expm1(-pe) / pe / pe  # pe**2 would overflow for pe > 1e154
 
 
 # ------------------------------------------------------------------------------- open
@@ -272,7 +313,7 @@ class AxialDispersion(RTDModel):
     def variance(self) -> float:
         if self.bc == "closed":
             return self.tau**2 * closed_variance(self.pe)
-        return self.tau**2 * (2 / self.pe + 8 / self.pe**2)
+        return self.tau**2 * (2 / self.pe + 8 / self.pe / self.pe)
 
     @property
     def analytic_for_re_s_greater_than(self) -> float:

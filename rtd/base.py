@@ -41,9 +41,19 @@ def check_memory(nbytes: float, what: str) -> None:
                              f"{budget / 2**30:.3g} GiB (RTD_MEMORY_BUDGET_GB); use fewer cells or times")
 
 
+def _as_float(model: str, name: str, value, expected: str) -> float:
+    """float(value), or a ParameterError naming the parameter (None, a list, a string)."""
+    if isinstance(value, bool):
+        raise ParameterError(f"{model}: {name} = {value!r}; expected {expected}")
+    try:
+        return float(value)
+    except (TypeError, ValueError):
+        raise ParameterError(f"{model}: {name} = {value!r}; expected {expected}") from None
+
+
 def check_positive(model: str, name: str, value) -> float:
     """Return ``value`` as float, or raise ParameterError if it is not finite and > 0."""
-    value = float(value)
+    value = _as_float(model, name, value, "a finite number > 0")
     if not (math.isfinite(value) and value > 0.0):
         raise ParameterError(f"{model}: {name} = {value!r}; expected a finite number > 0")
     return value
@@ -51,7 +61,7 @@ def check_positive(model: str, name: str, value) -> float:
 
 def check_fraction(model: str, name: str, value, upper_open: bool = False) -> float:
     """Return ``value`` as float, or raise ParameterError if it is not in [0, 1]."""
-    value = float(value)
+    value = _as_float(model, name, value, "a fraction in [0, 1]")
     ok = math.isfinite(value) and 0.0 <= value and (value < 1.0 if upper_open else value <= 1.0)
     if not ok:
         upper = "1)" if upper_open else "1]"

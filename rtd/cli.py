@@ -34,8 +34,8 @@ def add_arguments(p: argparse.ArgumentParser, several_models: bool = False) -> N
                        help="model to fit (default: tis); repeat to fit several and compare them")
     else:
         p.add_argument("--model", choices=sorted(MODELS), default="tis", help="model to fit (default: tis)")
-    p.add_argument("--cells", type=int, default=3, metavar="N",
-                   help="number of cells for --model cells (default 3)")
+    p.add_argument("--cells", type=int, default=None, metavar="N",
+                   help="number of cells of --model recirculating_cells (or any of its aliases; default 3)")
     p.add_argument("--kind", choices=["pulse", "step"], default=None,
                    help="pulse (E) or step (F) response; default from the columns")
     p.add_argument("--baseline", default=None, metavar="head|tail|VALUE",
@@ -60,9 +60,17 @@ def load_curve(csv, kind=None, baseline=None):
     return path, curve
 
 
-def fit_curve(path, curve, model: str, cells: int = 3):
-    """Fit ``model`` to the curve; errors name the file (and column)."""
-    fixed = {"n": cells} if model == "cells" else {}
+def fit_curve(path, curve, model: str, cells: int | None = None):
+    """Fit ``model`` to the curve; errors name the file (and column). ``cells`` is the
+    fixed number of cells of the recirculating-cells model, by any of its names."""
+    from rtd.names import canonical_name
+
+    is_cells = canonical_name(model) == "recirculating_cells"
+    if cells is not None and not is_cells:
+        raise RTDError(f"--cells {cells}: applies to --model recirculating_cells (or cells) only, not {model!r}")
+    if cells is not None and cells < 1:
+        raise RTDError(f"--cells {cells}: expected a whole number >= 1")
+    fixed = {"n": 3 if cells is None else cells} if is_cells else {}
     try:
         return fit(model, curve, **fixed)
     except TracerError as err:

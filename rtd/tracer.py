@@ -167,6 +167,7 @@ def read_tracer_csv(path, kind: str | None = None) -> TracerCurve:
         msg = " ".join(str(err).split())
         raise TracerError(f"{path}: cannot read as CSV ({msg})") from None
     df.columns = [str(col).strip() for col in df.columns]
+    _check_unique_header(path, text)
     times = [col for col in df.columns if TIME_COLUMN.match(col)]
     if len(times) != 1:
         raise TracerError(f"{path}: columns {list(df.columns)}; expected exactly one time column "
@@ -196,6 +197,21 @@ def read_tracer_csv(path, kind: str | None = None) -> TracerCurve:
     except TracerError as err:
         raise TracerError(f"{path}: {err}", err.column) from None
     return TracerCurve(t, c, kind, TIME_UNITS[unit], cols.get("inlet"), str(path))
+
+
+def _check_unique_header(path, text: str) -> None:
+    """A column named twice is refused (pandas would rename the second 'name.1' and one of
+    them would be fitted without a word)."""
+    import csv
+
+    line = next((ln for ln in text.splitlines() if ln.strip() and not ln.lstrip().startswith("#")), "")
+    names = [n.strip() for n in next(csv.reader([line]), [])]
+    seen = set()
+    for name in names:
+        if name in seen:
+            raise TracerError(f"{path}: column {name!r} appears twice in the header; expected each column once",
+                              name)
+        seen.add(name)
 
 
 def subtract_baseline(curve: TracerCurve, baseline="head", points: int = 5) -> TracerCurve:

@@ -105,8 +105,13 @@ def run(args) -> int:
     try:
         path, curve = rtd_cli.load_curve(args.csv, args.kind, args.baseline)
         mom = tracer_moments(curve)
-        for name in models:
-            result = rtd_cli.fit_curve(path, curve, name, args.cells)
+        from rtd.names import canonical_name
+
+        if args.cells is not None and not any(canonical_name(m) == "recirculating_cells" for m in models):
+            raise rtd.RTDError(f"--cells {args.cells}: applies to --model recirculating_cells (or cells) only")
+        for name in models:  # --cells belongs to the recirculating-cells model among several
+            cells = args.cells if canonical_name(name) == "recirculating_cells" else None
+            result = rtd_cli.fit_curve(path, curve, name, cells)
             fits[name] = (result, params_at_bounds(result, mom["mean"]))
     except rtd.RTDError as err:
         raise InputError(str(err)) from None

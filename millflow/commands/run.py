@@ -100,6 +100,16 @@ def format_summary(s: dict, out_dir: str | None, written: list[str] | None = Non
     return "\n".join(lines)
 
 
+def _check_memory(fs, grid_check: bool) -> None:
+    """The run's N x N matrices (a transfer matrix per unit, b, B and the solve's
+    workspace), and the grid check's as many on about 2N classes, within the budget."""
+    from millflow.grid import check_run_memory
+
+    n = fs.grid.n
+    check_run_memory(n, len(fs.units) + 3, 2 * n - 1 if grid_check else None,
+                     f"{getattr(fs, 'source_file', '') or 'the flowsheet'}")
+
+
 def run(args) -> int:
     from millflow.commands.output import check_target, relocate, staged_folder, write_extras
     from millflow.flowsheet import load, save, solve, summary
@@ -114,6 +124,7 @@ def run(args) -> int:
     with stages("millflow run", names, enabled=not args.quiet) as stage:
         stage("solve")
         fs = load(path)
+        _check_memory(fs, grid_check=not args.no_grid_check)
         sol = solve(fs, method=args.tear_method)
         props = stream_properties(sol)  # once, for the grid check, the summary and the files
         check = None

@@ -67,6 +67,10 @@ def run(args) -> int:
     else:  # --quiet hides progress only
         print(f"{path}: {summary['cases']} cases ({summary['design']}; {summary['varied']}), "
               f"{summary['failed']} failed; written to {out}/")
+    if summary["cases"] and summary["failed"] == summary["cases"]:
+        reason = str(ds["reason"].values.ravel()[0])
+        print(f"millflow sweep: error: every case failed (written to {out}/); the first: {reason}", file=sys.stderr)
+        return 1
     if summary["failed"]:
         print(f"millflow sweep: warning: {summary['failed']} of {summary['cases']} cases failed; "
               "their reasons are in the 'reason' variable", file=sys.stderr)
@@ -92,6 +96,9 @@ def _plots(ds, axes, path) -> None:
     for j, a in enumerate(axes):
         x = flat[a.key].values
         for i, (var, label) in enumerate(rows):
+            if var not in flat:  # e.g. no recycle stream in an open circuit
+                axs[i, j].set_ylabel(label + " (none)", fontsize=7)
+                continue
             y = flat[var]
             for extra in [d for d in y.dims if d != "case"]:
                 for name in y[extra].values:

@@ -139,6 +139,9 @@ def parse_config(raw: dict, src: str = "<config>") -> StudyConfig:
         if key in raw and raw[key] < (2 if key == "replicates" else 0 if key == "drift_replicates" else 1):
             raise InputError(f"{src}: {key} = {raw[key]!r}: expected an integer >= "
                              f"{2 if key == 'replicates' else 0 if key == 'drift_replicates' else 1}")
+    if "seed" in raw and not 0 <= raw["seed"] < 2**31:  # numpy's SeedSequence takes non-negative entries,
+        # and the seed is stored as an attribute of the netCDF (classic format: 32-bit integers)
+        raise InputError(f"{src}: seed = {raw['seed']!r}: expected a whole number 0 .. 2**31 - 1")
     for key in ("starts", "popsize", "maxiter"):
         if key in fopt and fopt[key] < 1:
             raise InputError(f"{src}: fit.{key} = {fopt[key]!r}: expected an integer >= 1")

@@ -164,9 +164,11 @@ class ModelSpec:
         (an integer: compare fits with different n instead).
     rate, breakage, classification : form names (classification None or "screen").
     rate_process : process-table columns entering A by eq. 10.
-    screen_column : process column holding the screen opening [mm] for "screen".
-    ball_column : process column holding the ball size [mm] for rate "austin_ball".
-    tau_column : process column holding tau [s] for continuous modes (None: tau = 1).
+    screen_column : process column holding the screen opening for "screen" (its unit from
+        its name: screen_mm, screen_um, screen_m).
+    ball_column : process column holding the ball size for rate "austin_ball" (ball_mm, ...).
+    tau_column : process column holding tau for continuous modes (tau_s, tau_min, tau_h;
+        None: tau = 1). A column whose name carries no unit is refused.
     x0_m : reference size of eq. 5 [m].
     b_matrix : (N, N) fractional b on the numerical grid for breakage "fixed".
     objective : "cumulative" (residuals of cumulative passing) or "fractional"
@@ -453,6 +455,15 @@ class ForwardModel:
             cols.append(spec.ball_column)
         if spec.tau_column:
             cols.append(spec.tau_column)
+        # columns read as a physical quantity take their unit from their name (tau_min is
+        # minutes, screen_um micrometres); the model works in s (tau) and mm (screen, ball)
+        self._factor = {}
+        if spec.classification in ("screen", "screen_power", "screen_power_cut"):
+            self._factor[spec.screen_column] = _column_factor(spec.screen_column, "screen_column", "length", 1e-3)
+        if spec.rate == "austin_ball":
+            self._factor[spec.ball_column] = _column_factor(spec.ball_column, "ball_column", "length", 1e-3)
+        if spec.tau_column:
+            self._factor[spec.tau_column] = _column_factor(spec.tau_column, "tau_column", "time", 1.0)
         out = {}
         for col in dict.fromkeys(cols):
             if col not in proc.columns:
@@ -461,9 +472,9 @@ class ForwardModel:
             v = proc.loc[self.conditions, col].to_numpy(dtype=float)
             if np.any(v <= 0):
                 raise InputError(f"process column {col!r}: values must be > 0 for power laws, got {v.min()!r}")
-            out[col] = v
+            out[col] = v * self._factor.get(col, 1.0)
         # references: geometric mean over all conditions of the data (not just these)
-        self._ref = {c: float(np.exp(np.log(proc[c].to_numpy(dtype=float)).mean()))
+        self._ref = {c: float(np.exp(np.log(proc[c].to_numpy(dtype=float)).mean())) * self._factor.get(c, 1.0)
                      for c in list(spec.rate_process) + [col for _, col in spec.param_process]
                      + ([spec.ball_column] if spec.rate == "austin_ball" else [])}
         return out
@@ -578,6 +589,14 @@ class ForwardModel:
         out[:, starts] += 1.0
         return out
 
+    def _measured_sizes(self) -> list:
+        """[finest, coarsest] sieve size of the measured samples (not the feed) [m]: the
+        size range a prediction with this model is calibrated on."""
+        t = self.data.table
+        sizes = t.loc[t.location != "feed", "size_m"].to_numpy(float)
+        sizes = sizes[sizes > 0]
+        return [float(sizes.min()), float(sizes.max())] if sizes.size else []
+
     def describe(self) -> dict:
         """The spec, grid and eq. 10 reference values as plain JSON-able data (for the fit
         JSON: what another program needs to evaluate S and B of this model elsewhere)."""
@@ -590,6 +609,7 @@ class ForwardModel:
                 "transport_params": dict(s.transport_params), "transport_fit": list(s.transport_fit),
                 "param_names": list(s.param_names),
                 "grid_upper_m": [float(v) for v in self.x], "process_ref": dict(self._ref),
+                "measured_size_range_m": self._measured_sizes(),
                 "process": {str(c): {str(k): float(v) for k, v in proc.loc[c].items()
                                      if isinstance(v, (int, float, np.floating, np.integer))}
                             for c in self.conditions if c in proc.index}}
@@ -671,7 +691,8 @@ class ForwardModel:
         if self.spec.classification in ("screen_power", "screen_power_cut"):
             # normalised so that d* = 1 at x = x0 for the geometric-mean screen: ln_A0 is
             # then the rate at x0 for a typical screen, which decorrelates it from n_screen
-            ref = float(np.exp(np.log(self.data.process[self.spec.screen_column].to_numpy(float)).mean())) * 1e-3
+            col = self.spec.screen_column
+            ref = float(np.exp(np.log(self.data.process[col].to_numpy(float)).mean())) * self._factor[col] * 1e-3
             d = screen_power_discharge(self.x, self.cond_param(p, "n_screen"), self.spec.x0_m * screen / ref)
             if self.spec.classification == "screen_power_cut":
                 # hard cut: a class whose lower edge is at or above the opening cannot pass
@@ -919,3 +940,15 @@ class ForwardModel:
     def __repr__(self):
         return (f"ForwardModel({self.spec.label()}, {len(self.conditions)} conditions, {self.n_data} values, "
                 f"grid {self.n} classes)")
+
+
+def _column_factor(col: str, key: str, dim: str, target: float) -> float:
+    """Factor from the unit in a process column's name (``tau_min``, ``screen_um``) to the
+    model's unit ``target`` (in SI: 1 s, 1e-3 m); a name without a known unit is refused."""
+    from millflow.inputs import UNITS
+
+    suffix = col.rsplit("_", 1)[-1] if "_" in col else ""
+    if suffix not in UNITS[dim]:
+        raise InputError(f"process column {col!r} ({key}): its unit is not in its name; expected a name ending in "
+                         f"_{', _'.join(UNITS[dim])} (e.g. {col.split('_')[0]}_{next(iter(UNITS[dim]))})")
+    return UNITS[dim][suffix] / target

@@ -554,7 +554,7 @@ def _rtd_fit(tr: _Table, base: Path | None, classified: bool):
         raise InputError(f"{p}: model = {d['model']!r}: not a transport model; valid: "
                          f"{', '.join(sorted(TRANSPORTS))}") from None
     unit = d.get("time_unit")
-    if unit not in UNITS["time"]:
+    if not isinstance(unit, str) or unit not in UNITS["time"]:
         raise InputError(f"{p}: time_unit = {unit!r}; expected one of {', '.join(UNITS['time'])} (a fitted tau "
                          "without its unit cannot be used)")
     values = {}
@@ -714,10 +714,26 @@ def _predicted_cyclone(name: str, t: _Table, slurry):
                  viscosity)
 
 
+#: Below this % solids a ``..._pct`` key is most likely a fraction written as percent
+#: (0.96 meant 96 %): real mill and classifier slurries carry a few % solids at least.
+PLAUSIBLE_MIN_PCT_SOLIDS = 2.0
+
+
+def _warn_pct_slip(t: _Table, base: str) -> None:
+    """One-line warning at a % solids key whose value looks like a fraction (unit slip)."""
+    import warnings
+
+    v = t.data.get(f"{base}_pct")
+    if isinstance(v, (int, float)) and not isinstance(v, bool) and 0 < v < PLAUSIBLE_MIN_PCT_SOLIDS:
+        warnings.warn(f"{t.where}.{base}_pct = {v!r}: {v:g} % solids by mass is implausibly dilute; if a fraction "
+                      f"was meant write {base}_pct = {v * 100:g} (or {base}_frac = {v!r})", UserWarning, stacklevel=2)
+
+
 def _feed_water(t: _Table, solids: float) -> float:
     """Water of a feed [kg/s]: water_<mass flow> or solids_content_<fraction> (% solids by mass)."""
     water = t.quantity("water", "mass_flow", None, allow_zero=True)
     content = t.quantity("solids_content", "fraction", None)
+    _warn_pct_slip(t, "solids_content")
     if water is not None and content is not None:
         raise InputError(f"{t.where}: give one of water_tph or solids_content_pct, not both")
     if content is not None:
@@ -731,6 +747,7 @@ def _classifier_water(t: _Table) -> dict | None:
     """Where a classifier's feed water goes: water_to_coarse (R_f) or coarse_solids_content_pct."""
     split = t.plain("water_to_coarse", None, kind=float)
     content = t.quantity("coarse_solids_content", "fraction", None)
+    _warn_pct_slip(t, "coarse_solids_content")
     if split is not None and content is not None:
         raise InputError(f"{t.where}: give one of water_to_coarse or coarse_solids_content_pct, not both")
     if split is not None:

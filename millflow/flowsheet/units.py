@@ -217,32 +217,48 @@ class MillUnit:
             lam = k["cushion_lambda"]
         return kinetics(S, b, w=w, lam=lam, aggregation=agg, grid=grid)
 
-    def product_flows(self, grid, inflow):
-        """Product flows [kg/s] for the inlet flows ``inflow`` [kg/s] (non-linear kinetics);
-        the aggregation overflow (coarser than the grid) is added to class 1 and reported."""
+    def product_flows(self, grid, inflow, water=None):
+        """Product flows [kg/s] for the inlet flows ``inflow`` [kg/s] (non-linear kinetics) and,
+        for a mill given by its slurry hold-up, the water through it [kg/s] (tau = V / Q at
+        those flows); the aggregation overflow (coarser than the grid) is added to class 1
+        and reported, and above :data:`MAX_OVERFLOW` of the throughput refused."""
         from millflow.mill import nonlinear as nl
 
         t0 = time.perf_counter()
         total = float(np.sum(inflow))
         if not total > 0:
             raise SolverError(f"units.{self.name}: the mill receives no solids (inflow {total!r} kg/s)")
-        tau = self.residence_time(total)
+        if self.needs_water and water is None:
+            raise SolverError(f"units.{self.name}: slurry hold-up given but the water through the mill is unknown")
+        tau = self.residence_time(total, water)
         kin = self.nonlinear_kinetics(grid, tau, total)
         feed = np.asarray(inflow, float) / total
         unit = f"units.{self.name}"
         if self.transport == "perfect_mixing":
             r = nl.well_mixed(kin, feed, tau, unit=unit)
         elif self.transport == "tanks_in_series":
-            r = nl.tanks_in_series(kin, feed, tau, int(self.transport_params["n"]))
+            n = self.transport_params["n"]
+            if not (isinstance(n, (int, float, np.integer, np.floating)) and float(n) == round(float(n)) and n >= 1):
+                raise InputError(f"units.{self.name}.transport.n = {n!r}: a mill with non-linear kinetics solves "
+                                 "each tank in turn and needs an integer number of tanks >= 1")
+            r = nl.tanks_in_series(kin, feed, tau, int(round(float(n))))
         elif self.transport == "plug_flow":
             r = nl.plug_flow(kin, feed, tau)
         else:
             r = nl.axial_dispersion(kin, feed, tau, float(self.transport_params["pe"]))
         p = r.product.copy()
-        p[0] += r.overflow_mass
+        overflow = float(r.overflow_mass)
+        if overflow > MAX_OVERFLOW:
+            raise SolverError(f"units.{self.name}: {overflow:.3g} of the mill's product aggregates beyond the top "
+                              f"of the size grid ({grid.x[0] * 1e6:.4g} um); expected at most {MAX_OVERFLOW:g}: "
+                              "raise [grid] top_um so the aggregates are resolved")
+        p[0] += overflow
         info = {"method": f"non-linear kinetics ({kin.describe()}): {r.method}", "error_estimate": r.error_estimate,
                 "residual": r.residual, "runtime_s": time.perf_counter() - t0, "tau_s": tau,
-                "overflow_kg_s": total * r.overflow_mass, **self._basis_info()}
+                "overflow_kg_s": total * overflow, **self._basis_info()}
+        if overflow > 1e-12:  # above rounding
+            info["note"] = (f"{overflow:.2g} of the product aggregated beyond the grid top "
+                            f"({grid.x[0] * 1e6:.4g} um); counted in class 1")
         return total * p, info
 
     def _basis_info(self) -> dict:
@@ -288,7 +304,11 @@ class MillUnit:
         if throughput is None or not throughput > 0:
             raise SolverError(f"units.{self.name}: hold-up given but the throughput is {throughput!r} kg/s; "
                               "the mill receives no solids")
-        return float(self.holdup) / float(throughput)
+        tau = float(self.holdup) / float(throughput)
+        if not math.isfinite(tau):
+            raise SolverError(f"units.{self.name}: hold-up {self.holdup:.3g} kg / throughput {throughput:.3g} kg/s "
+                              "gives a residence time beyond floating point; expected a finite tau")
+        return tau
 
     def breakage_functions(self, grid, tau=None, throughput=None):
         """(S [1/s], b [-]) on ``grid``: continuous forms class-averaged (or at the upper edges
@@ -346,6 +366,11 @@ class MillUnit:
             info["note"] = (f"{retained.size} classes retained completely by the discharge (c = 1): their "
                             "discharge rate d* is set to 1e-12; they leave as breakage products")
         return {"out": P}, info
+
+
+#: Largest fraction of a non-linear mill's product that may aggregate beyond the grid top
+#: (it is counted in class 1; more would misstate the coarse end of every PSD downstream).
+MAX_OVERFLOW = 1e-3
 
 
 #: Outlet port names (coarse, fine) of each classifier type.

@@ -60,7 +60,8 @@ class AxialSolution:
     density : (M + 1, N) or (M + 1, N, m) hold-up density tau c_i(z): hold-up per unit
         feed rate per unit fractional length [s]; its integral over z is the hold-up.
     holdup : (N,) or (N, m) hold-up per unit feed rate [s].
-    error_estimate : Richardson estimate of the max abs error of ``product``.
+    error_estimate : Richardson estimate of the max abs error of ``product`` and of
+        ``holdup`` / tau (both are refined until it is below the tolerance).
     order : observed order of convergence (nan if one grid only).
     history : list of (M, max |p_M - p_{M/2}|).
     """
@@ -225,12 +226,16 @@ def solve_axial(S, b, feed, tau: float, pe: float, d=None, w=None, *, tol: float
         z, c, p = solve_axial_grid(S, b, feed, tau, pe, m_cells, d, w)
         return AxialSolution(p, z, tau * c, _holdup(z, tau * c), float("nan"), float("nan"), [])
     ratio = v_arr / w_arr
-    product, estimate, order, history, finest, _, _ = refine_grids(
-        lambda M: solve_axial_grid(S, b, feed, tau, pe, M, d, w), float(ratio.max()) * pe,
-        tol=tol, m_start=m_start, m_max=m_max)
+
+    def grid(M):
+        # refined on what is reported: the product and the hold-up in units of tau
+        z, c, p = solve_axial_grid(S, b, feed, tau, pe, M, d, w)
+        return z, c, np.concatenate([p, _holdup(z, c)])
+
+    both, estimate, order, history, finest, _, _ = refine_grids(
+        grid, float(ratio.max()) * pe, tol=tol, m_start=m_start, m_max=m_max)
     z, c, _ = finest
-    density = tau * c
-    return AxialSolution(product, z, density, _holdup(z, density), estimate, order, history)
+    return AxialSolution(both[:n_cls], z, tau * c, tau * both[n_cls:], estimate, order, history)
 
 
 def refine_grids(solve_grid, cell_pe: float, *, tol: float, m_start: int, m_max: int):

@@ -267,7 +267,9 @@ def solve_axial_open(S, b, feed, tau: float, pe: float, d=None, w=None, *, disch
                      tol: float = 1e-8, m_start: int = 16, m_max: int = 16384,
                      m_cells: int | None = None) -> AxialSolution:
     """Steady open-vessel axial-dispersion mill (module docstring), refined until the
-    error estimate of the product is below ``tol`` (or on the one grid ``m_cells``).
+    error estimate of the product and of the hold-up / (tau (1 + 2/Pe)) is below ``tol`` (or on
+    the one grid ``m_cells``): ``error_estimate`` bounds both (the hold-up's error in units
+    of the open density's mean residence time).
 
     Parameters
     ----------
@@ -289,15 +291,20 @@ def solve_axial_open(S, b, feed, tau: float, pe: float, d=None, w=None, *, disch
     discharge = check_discharge(discharge, v, w_arr)
     L_t = tail_length(S, tau, pe, v, w_arr)
 
+    n_cls = S.size
+    mean = tau * (1.0 + 2.0 / pe)  # the open density's mean residence time [s]
+
     def grid(M):
-        return solve_axial_open_grid(S, b, feed, tau, pe, M, v, w_arr, discharge, tail=L_t)
+        # refined on what is reported: the product and the hold-up in units of the mean
+        # residence time (the product of a class that does not break is exact on every
+        # grid, its hold-up is not)
+        z, c, p, hold = solve_axial_open_grid(S, b, feed, tau, pe, M, v, w_arr, discharge, tail=L_t)
+        return z, c, np.concatenate([p, hold / mean]), hold
 
     if m_cells is not None:
-        z, c, p, hold = grid(m_cells)
+        z, c, p, hold = solve_axial_open_grid(S, b, feed, tau, pe, m_cells, v, w_arr, discharge, tail=L_t)
         return AxialSolution(np.maximum(p, 0.0), z, tau * c, hold, float("nan"), float("nan"), [])
-    product, estimate, order, history, finest, coarser, extrapolated = refine_grids(
+    both, estimate, order, history, finest, coarser, extrapolated = refine_grids(
         grid, float((v / w_arr).max()) * pe, tol=tol, m_start=m_start, m_max=m_max)
-    z, c, _, hold = finest
-    if extrapolated:  # the hold-up converges at the product's order 2
-        hold = hold + (hold - coarser[3]) / 3.0
-    return AxialSolution(product, z, tau * c, hold, estimate, order, history)
+    z, c, _, _ = finest
+    return AxialSolution(both[:n_cls], z, tau * c, mean * both[n_cls:], estimate, order, history)

@@ -181,8 +181,17 @@ def _solve_block(S, b, feed, net, d, where, kernel=None) -> CellSolution:
     sub, sup = np.diag(offdiag, -1), np.diag(offdiag, 1)  # flows l -> l+1 and l+1 -> l
     lower_all, upper_all = -G[:, :-1] * sub, -G[:, 1:] * sup  # (N, n - 1) each
     bS = b * S[np.newaxis, :]  # bS[i, j]: rate at which class j breaks into class i
-    module = compiled.kernel("cells", kernel) if tridiagonal else None
-    if module is not None:
+    # Strong back-mixing (r >> 1): the inter-cell flows dwarf what leaves a cell (breakage
+    # and exit) and Thomas/LAPACK pivots cancel, losing mass like eps * r (3e-8 at r = 1e8).
+    # The subtraction-free factors from the column sums S_i + H exit (what leaves a cell)
+    # keep every pivot accurate.
+    loss_all = S[:, np.newaxis] + H * exit_rate
+    gth = tridiagonal and float(np.max(drain)) > 1e3 * max(float(np.max(exit_rate)), 1e-300)
+    module = compiled.kernel("cells", kernel) if tridiagonal and not gth else None
+    if gth:
+        holdup = _gth_class_loop(loss_all, -lower_all, -upper_all, bS, source, cols)
+        kernel = "numpy_gth"
+    elif module is not None:
         holdup = np.empty((n_cls, n) + cols)
         bad = module.tridiagonal_classes(lower_all, diag_all, upper_all, bS, source, holdup,
                                             n_cls, n, int(np.prod(cols, dtype=int)))
@@ -194,7 +203,38 @@ def _solve_block(S, b, feed, net, d, where, kernel=None) -> CellSolution:
         kernel = "numpy"
     weights = H * exit_rate  # (N, n): classified exit rate of each class from each cell
     product = np.einsum("il,il...->i...", weights, holdup) + net.bypass * feed
+    if tridiagonal and not gth:
+        # strongly retained classes (d* << 1 at the exit) make the exit loss tiny beside
+        # the inter-cell flows, and the ordinary pivots cancel as with strong back-mixing:
+        # a mass balance off by more than rounding is solved again with the accurate factors
+        lost = np.abs(product.sum(axis=0) - feed.sum(axis=0)).max(initial=0.0)
+        if lost > 1e-11 * max(float(np.abs(feed).sum(axis=0).max(initial=0.0)), 1e-300):
+            holdup = _gth_class_loop(loss_all, -lower_all, -upper_all, bS, source, cols)
+            kernel = "numpy_gth"
+            product = np.einsum("il,il...->i...", weights, holdup) + net.bypass * feed
     return CellSolution(product, np.moveaxis(holdup, 1, 0), "cells_block", kernel)
+
+
+def _gth_class_loop(loss, alpha, beta, bS, source, cols):
+    """Hold-up (N, n, *cols) of rows of cells from the subtraction-free LU factors
+    (:func:`millflow.mill.axial._gth_factors`): alpha (N, n - 1) the flow rate from cell k
+    to k + 1, beta (N, n - 1) from k + 1 to k, loss (N, n) the column sums."""
+    from millflow.mill.axial import _gth_factors, _gttrs
+
+    n_cls, n = loss.shape
+    piv = _gth_factors(alpha, beta, loss)
+    holdup = np.empty((n_cls, n) + cols)
+    flat = holdup.reshape(n_cls, -1)
+    du2 = np.zeros(max(n - 2, 0))
+    ipiv = np.arange(1, n + 1, dtype=np.int32)  # no row exchanges (M-matrix factors)
+    for i in range(n_cls):
+        rhs = source[i] + (bS[i, :i] @ flat[:i]).reshape(source[i].shape) if i else source[i]
+        m_i, info = _gttrs(-alpha[i] / piv[i, :-1], piv[i], -beta[i], du2, ipiv,
+                           rhs if cols else rhs[:, np.newaxis])
+        if info != 0 or not np.all(np.isfinite(m_i)):
+            raise SolverError(f"cells: singular tridiagonal system for class {i + 1} (info {info})")
+        holdup[i] = m_i if cols else m_i[:, 0]
+    return holdup
 
 
 def _class_loop(diag_all, lower_all, upper_all, bS, source, offdiag, G, tridiagonal: bool, cols):

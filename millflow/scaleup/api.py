@@ -8,6 +8,7 @@ throughput that meets it and the specific energy there.
 from __future__ import annotations
 
 import time
+import warnings
 from dataclasses import dataclass
 
 import numpy as np
@@ -44,6 +45,29 @@ def _quantities(su, target):
             out.append([t["feed_tph"], t["specific_energy_kWh_t"]])
         return np.concatenate(out)
     return g, names
+
+
+def calibrated_range_notes(fit, su, p80_m: float, target_p80_m=None) -> list[str]:
+    """Where the prediction leaves what the lab data calibrated: a P80 (predicted or
+    target) outside the measured sieve range, an eq. 10 process value outside the range of
+    the fitted conditions."""
+    notes = []
+    lo_hi = fit.spec.get("measured_size_range_m") or []
+    if len(lo_hi) == 2:
+        lo, hi = lo_hi
+        for what, v in (("predicted P80", p80_m), ("target P80", target_p80_m)):
+            if v is not None and not lo <= v <= hi:
+                side = "finer than the finest" if v < lo else "coarser than the coarsest"
+                notes.append(f"{what} {v * 1e6:.4g} um is {side} sieve of the fitted lab data "
+                             f"({lo * 1e6:.4g}..{hi * 1e6:.4g} um): the breakage model is extrapolated there")
+    process = fit.spec.get("process") or {}
+    for c in fit.spec.get("rate_process", []):
+        seen = [float(p[c]) for p in process.values() if isinstance(p, dict) and c in p]
+        v = (su.lab_process or {}).get(c)
+        if seen and v is not None and not min(seen) <= float(v) <= max(seen):
+            notes.append(f"process value {c} = {float(v):.4g} is outside the fitted conditions' range "
+                         f"{min(seen):.4g}..{max(seen):.4g}: eq. 10 is extrapolated")
+    return notes
 
 
 def predict_plant(su, target_p80_m=None, methods=("delta", "mc"), n_draws: int = 1000, seed: int = 0,
@@ -110,6 +134,9 @@ def predict_plant(su, target_p80_m=None, methods=("delta", "mc"), n_draws: int =
         summary["mc"] = {"n": res["mc"]["n"], "rejected": res["mc"]["rejected"], "failed": res["mc"]["failed"]}
     if "delta" in res:
         summary["delta_step"] = {n: float(h) for n, h in zip(fit.varying, res["delta"]["step"])}
+    summary["extrapolation"] = calibrated_range_notes(fit, su, point["p80_m"], target_p80_m)
+    for note in summary["extrapolation"]:
+        warnings.warn(note, UserWarning, stacklevel=2)
     summary["runtime_s"] = time.perf_counter() - t0
     scale = {k: v for k, v in su.factors().items()}
     ds.attrs.update({"scaling": su.scaling, "power_model": scale["power_model"], "source_fit": fit.source,

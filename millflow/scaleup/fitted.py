@@ -175,17 +175,60 @@ def fit_from_dict(d: dict, src: str = "fit") -> FittedBreakage:
     """:func:`load_fit` for an already parsed fit result (``FitResult.to_dict()``)."""
     if not isinstance(d, dict) or "params" not in d:
         raise InputError(f"{src}: not a 'millflow fit --json' result (no 'params')")
+    if not isinstance(d.get("covariance"), (dict, type(None))):
+        raise InputError(f"{src}: covariance: expected a table with 'names' (the varying parameters) and "
+                         "'matrix' (a list of rows), as 'millflow fit --json' writes it")
     if "covariance" not in d or not d["covariance"] or d["covariance"].get("matrix") is None:
         raise InputError(f"{src}: fit result has no 'covariance' (eq. 9); rerun 'millflow fit --json' with this "
                          "version of millflow")
     if "model_spec" not in d:
         raise InputError(f"{src}: fit result has no 'model_spec'; rerun 'millflow fit --json' with this version")
     spec = d["model_spec"]
+    if not isinstance(spec, dict) or not _strings(spec.get("param_names")):
+        raise InputError(f"{src}: model_spec.param_names: expected a list of parameter names")
     names = tuple(spec["param_names"])
-    values = {**{k: v["value"] for k, v in d["params"].items()}, **d.get("fixed", {})}
+    params, fixed = d["params"], d.get("fixed", {})
+    if not isinstance(params, dict) or not isinstance(fixed, dict):
+        raise InputError(f"{src}: params and fixed: expected tables of parameter -> value")
+    values = {}
+    for k, v in params.items():
+        values[k] = _finite(v.get("value") if isinstance(v, dict) else None, f"{src}: params.{k}.value")
+    for k, v in fixed.items():
+        values[k] = _finite(v, f"{src}: fixed.{k}")
     missing = [n for n in names if n not in values]
     if missing:
         raise InputError(f"{src}: parameters {missing} have no value")
     cov = d["covariance"]
-    C = np.array([[math.nan if v is None else v for v in row] for row in cov["matrix"]], float)
-    return FittedBreakage(names, np.array([values[n] for n in names], float), tuple(cov["names"]), C, spec, src)
+    if not isinstance(cov, dict) or not _strings(cov.get("names")) or not isinstance(cov.get("matrix"), list):
+        raise InputError(f"{src}: covariance: expected a table with 'names' (the varying parameters) and "
+                         "'matrix' (a list of rows), as 'millflow fit --json' writes it")
+    unknown = [n for n in cov["names"] if n not in names]
+    if unknown or len(set(cov["names"])) != len(cov["names"]):
+        raise InputError(f"{src}: covariance.names {cov['names']}: expected distinct names among the model's "
+                         f"parameters {list(names)}")
+    try:
+        C = np.array([[math.nan if v is None else v for v in row] for row in cov["matrix"]], float)
+    except (TypeError, ValueError):
+        raise InputError(f"{src}: covariance.matrix: expected a square list of lists of numbers") from None
+    fitted = FittedBreakage(names, np.array([values[n] for n in names], float), tuple(cov["names"]), C, spec, src)
+    try:
+        inside = bool(fitted.physical(fitted.theta)[0])
+    except KeyError as exc:
+        raise InputError(f"{src}: parameter {exc.args[0]!r} missing for model_spec rate = {spec.get('rate')!r}, "
+                         f"breakage = {spec.get('breakage')!r}") from None
+    if not inside:
+        shown = ", ".join(f"{n} = {v:.4g}" for n, v in zip(names, fitted.theta) if n in ("phi", "gamma", "beta",
+                                                                                       "Lambda"))
+        raise InputError(f"{src}: the fitted breakage parameters ({shown}) are outside eqs. 6/7's domain "
+                         "(0 <= phi <= 1, gamma, beta, Lambda > 0); such a fit cannot be scaled up")
+    return fitted
+
+
+def _strings(v) -> bool:
+    return isinstance(v, list) and all(isinstance(e, str) for e in v)
+
+
+def _finite(v, where: str) -> float:
+    if isinstance(v, bool) or not isinstance(v, (int, float)) or not math.isfinite(v):
+        raise InputError(f"{where} = {v!r}: expected a finite number")
+    return float(v)

@@ -184,7 +184,19 @@ class Circuit:
             return {"product": p, "fresh_kg_s": F_m, "tau_s": tau, "circulating_load": 0.0,
                     "mass_balance": abs(1.0 - p.sum())}
         A = np.eye(feed.size) - c[:, None] * T
-        m = np.linalg.solve(A, feed)
+        try:
+            with np.errstate(all="ignore"):
+                m = np.linalg.solve(A, feed)
+        except np.linalg.LinAlgError:
+            m = np.full(feed.size, np.nan)
+        if not np.all(np.isfinite(m)) or m.min() < -1e-9 * max(float(np.abs(m).max()), 1.0):
+            # I - C T singular: a size the classifier returns (c = 1) that the mill does not
+            # break at this residence time can never leave the circuit
+            stuck = int(np.argmax(c * np.diag(T)))
+            raise SolverError(f"circuit has no steady state at a mill flow of {F_m * 3.6:.4g} t/h (tau "
+                              f"{tau:.3g} s): size class {stuck + 1} is returned by the classifier (c = "
+                              f"{c[stuck]:.6g}) and passes the mill unbroken ({float(T[stuck, stuck]):.6g}); "
+                              "check the classifier's d50 and the mill's size and hold-up")
         s = m.sum()
         p = (1 - c) * (T @ m)
         return {"product": p, "fresh_kg_s": F_m / s, "tau_s": tau, "circulating_load": s - 1.0,

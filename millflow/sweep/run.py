@@ -4,6 +4,7 @@ from __future__ import annotations
 import copy
 import math
 import os
+import re
 import time
 
 import numpy as np
@@ -68,6 +69,7 @@ def run_sweep(path, vary: list[Axis], *, samples: int | None = None, seed: int =
     keys = [a.key for a in vary]
     if len(set(keys)) != len(keys):
         raise InputError(f"sweep: a key is varied twice ({', '.join(keys)})")
+    _check_design(vary, samples, seed, scheduler)
     data = read_toml(path, "flowsheet file")
     source = str(path)
     from_dict(copy.deepcopy(data), source=source)  # the base flowsheet must be valid
@@ -97,11 +99,42 @@ def run_sweep(path, vary: list[Axis], *, samples: int | None = None, seed: int =
     ds.attrs.update(source_file=source, design="grid" if samples is None else f"latin hypercube, seed {seed}",
                     n_cases=n, n_failed=int(np.sum(reason != "")), scheduler=scheduler,
                     varied=", ".join(f"{a.key}={a.start:g}:{a.stop:g}:{a.n}" for a in vary))
+    # a dimension of length 0 (an open circuit has no recycle stream; when every case
+    # fails none is known) is read back by netCDF as the unlimited one and breaks the file,
+    # and it empties the tidy table: such variables are left out and said so
+    for dim in ("recycle_stream", "product"):
+        if ds.sizes[dim] == 0:
+            gone = [v for v in ds.data_vars if dim in ds[v].dims]
+            ds = ds.drop_vars(gone + [dim])
+            ds.attrs[f"no_{dim}"] = f"no {dim.replace('_', ' ')} in the solved cases: {', '.join(gone)} left out"
     if samples is None and len(keys) == 1:  # a grid: one dimension per varied key
         ds = ds.swap_dims(case=keys[0]).drop_vars("case")
     elif samples is None:
         ds = ds.set_index(case=keys).unstack("case")
     return ds
+
+
+#: Most cases a sweep takes: each case is a flowsheet solve (~0.01-1 s) and a row of the
+#: results; beyond this the case list alone would not fit in memory.
+MAX_CASES = 1_000_000
+
+_ADDRESS = re.compile(r"^(?:[a-z][a-z0-9+]*://)?[\w.\-\[\]:]+:\d+$")
+
+
+def _check_design(vary, samples, seed, scheduler) -> None:
+    """Refuse, before anything is built, a sweep that cannot run: too many cases, a seed
+    numpy does not take, a scheduler that is neither a name nor an address."""
+    n = samples if samples is not None else math.prod(a.n for a in vary)
+    if samples is not None and samples < 1:
+        raise InputError(f"--samples {samples}: expected a whole number >= 1")
+    if n > MAX_CASES:
+        raise InputError(f"sweep: {n:.4g} cases; at most {MAX_CASES:,} are run (split the sweep, or use "
+                         "--samples for a Latin hypercube)")
+    if isinstance(seed, bool) or not isinstance(seed, (int, np.integer)) or not 0 <= seed < 2**32:
+        raise InputError(f"--seed {seed}: expected a whole number 0 .. 2**32 - 1")
+    if scheduler not in SCHEDULERS and not (isinstance(scheduler, str) and _ADDRESS.match(scheduler)):
+        raise InputError(f"--scheduler {scheduler!r}: expected 'local', 'serial' or a Dask scheduler address "
+                         "such as tcp://10.0.0.5:8786")
 
 
 def _execute(data, cases, source, scheduler, workers, chunk, progress) -> list[dict]:

@@ -51,10 +51,16 @@ def _cfg(tmp_path, text=BASE, name="c.toml"):
     (("replicates = 2", "replicates = 1"), "replicates = 1"),
     (("kind = \"gaussian\"", "kind = \"gaussian\"\nrho = 0.3"), "noise.rho is only for kind = 'ar1'"),
     (("breakage = \"single\"", "breakage = \"single\"\n[assumed.params.ln_B]\nmin = 0"), "ln_B"),
+    (("seed = 1", "seed = -1"), r"seed = -1: expected a whole number 0 \.\. 2\*\*31 - 1"),
+    (("seed = 1", "seed = 9223372036854775807"), r"2\*\*31 - 1"),
+    (("seed = 1", "seed = 2147483647"), None),
 ])
 def test_config_errors_are_named(edit, match):
     import tomllib
     text = BASE.replace(*edit)
+    if match is None:
+        assert parse_config(tomllib.loads(text), "c.toml").seed == tomllib.loads(text)["seed"]
+        return
     with pytest.raises(InputError, match=match):
         parse_config(tomllib.loads(text), "c.toml")
 
