@@ -102,6 +102,16 @@ def write_plot(result, path: Path, time_unit: str, name: str) -> None:
     fig.savefig(path, dpi=120)
 
 
+def _check_plotting() -> None:
+    """Refuse before fitting when fit.png is asked for and matplotlib is absent (the
+    standalone distribution has it as the optional extra ``plot``)."""
+    import importlib.util
+
+    if importlib.util.find_spec("matplotlib") is None:
+        raise RTDError("--out: the plot fit.png needs matplotlib (python -m pip install 'millflow-rtd[plot]'); "
+                       "or give --no-plots")
+
+
 def _label(result) -> str:
     parts = []
     for key, (value, se) in result.params.items():
@@ -146,6 +156,8 @@ def main(argv=None) -> int:
     p.add_argument("--overwrite", action="store_true", help="replace a folder that holds other files")
     args = parser.parse_args(argv)
     try:
+        if args.out is not None and not args.no_plots:
+            _check_plotting()
         path, curve = load_curve(args.csv, args.kind, args.baseline)
         result = fit_curve(path, curve, args.model, args.cells)
         out = None if args.out is None else Path(args.out)

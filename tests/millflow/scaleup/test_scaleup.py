@@ -13,7 +13,7 @@ from hypothesis import strategies as st
 import numpy as np
 import pytest
 
-from millflow.bench.scaleup import synthetic_lab_fit
+from millflow.synthetic import synthetic_lab_fit
 from millflow.errors import GridError, InputError
 from millflow.grid import SizeGrid
 from millflow.scaleup import (
