@@ -25,7 +25,7 @@ from scipy.interpolate import PchipInterpolator
 from scipy.optimize import brentq
 
 from millflow.errors import GridError
-from millflow.grid import as_sizes, class_label, validate_edges
+from millflow.grid import SizeGrid, as_sizes, class_label, validate_edges
 
 __all__ = [
     "validate_fractions",
@@ -340,22 +340,54 @@ def _handle_top(P_new, x, lump: bool, where: str, tol: float = 1e-12) -> None:
 
 
 # ---------------------------------------------------------------------- percentiles
-def percentile_size(grid, frac, percent: float) -> float:
+def percentile_size(grid, frac, percent: float, *, validate: bool = True) -> float:
     """Size [m] at which ``percent`` % of the mass passes (P80: percent = 80).
 
-    Cumulative passing is known at the upper edges; between them it is interpolated
-    by PCHIP in ln x (the same monotone interpolation as :func:`from_sieves`) and the
-    crossing is found by Brent's method on the one bracketing interval.
+    The one percentile of the library (P80, P50, the scale-up's P80 in its root and
+    Monte Carlo loops). Cumulative passing is known at the upper edges; between them it
+    is interpolated by PCHIP in ln x (the same monotone interpolation as
+    :func:`from_sieves`) and the crossing is found by Brent's method on the one
+    bracketing interval (from that interval's node slopes alone away from the grid
+    ends, the whole interpolant near them: the same curve either way).
+
+    Parameters
+    ----------
+    grid : SizeGrid or array_like
+        The size grid, or its upper edges x [m] (coarse -> fine).
+    frac : array_like
+        Mass fractions per class [-], coarse -> fine, the sink last; summing to 1.
+    percent : float
+        Percent passing, 0 < percent <= 100 [%].
+    validate : bool, optional
+        Check ``grid`` and ``frac`` (default). ``False`` is for loops over the library's
+        own results, which are valid by construction: invalid input is then not caught.
+
+    Returns
+    -------
+    float
+        The size [m].
 
     Raises
     ------
     GridError
         If ``percent`` is not in (0, 100], or the percentile lies inside the sink
         (P(x_N) >= percent/100: the grid has no information below x_N; extend the grid
-        to finer sizes).
+        to finer sizes); with ``validate``, on invalid sizes or fractions.
+
+    Examples
+    --------
+    >>> from millflow.grid import SizeGrid
+    >>> grid = SizeGrid.geometric(1e-3, 2.0, 4)          # edges 1, 0.5, 0.25, 0.125 mm
+    >>> frac = [0.2, 0.3, 0.3, 0.2]                      # passing 1, 0.8, 0.5, 0.2 at the edges
+    >>> percentile_size(grid, frac, 80), percentile_size(grid, frac, 50)
+    (0.0005, 0.00025)
     """
-    x = as_sizes(grid)
-    f = validate_fractions(frac, x)
+    if validate:
+        x = as_sizes(grid)
+        f = validate_fractions(frac, x)
+    else:
+        x = grid.upper_m if isinstance(grid, SizeGrid) else np.asarray(grid, dtype=float)
+        f = np.asarray(frac, dtype=float)
     if not (np.isfinite(percent) and 0 < percent <= 100):
         raise GridError(f"percent = {percent!r}: expected 0 < percent <= 100")
     q = percent / 100.0
@@ -371,10 +403,50 @@ def percentile_size(grid, frac, percent: float) -> float:
     k = int(np.flatnonzero(P >= q)[-1])
     if P[k] == q:
         return float(x[k])
+    if 2 <= k and k + 3 <= x.size - 1:
+        return _crossing_on_interval(x, P, k, q)
     ln_hi, ln_lo = math.log(x[k]), math.log(x[k + 1])
     spline = _pchip_logx(x, P)
     root = brentq(lambda u: float(spline(u)) - q, ln_lo, ln_hi, xtol=1e-14, rtol=4 * np.finfo(float).eps)
     return float(math.exp(root))
+
+
+def _pchip_slope(h0, h1, m0, m1):
+    """Scipy's PCHIP derivative at an interior node.
+
+    Scipy's PCHIP derivative at an interior node: the weighted harmonic mean of the
+    neighbouring secants m0, m1 over intervals h0, h1 (0 at a local extremum).
+    """
+    if m0 * m1 <= 0:
+        return 0.0
+    w1, w2 = 2 * h1 + h0, h1 + 2 * h0
+    with np.errstate(over="ignore", divide="ignore"):  # subnormal secants: slope 0, as scipy's
+        return (w1 + w2) / (w1 / m0 + w2 / m1)
+
+
+def _crossing_on_interval(x, P, k, q) -> float:
+    """Crossing of :func:`percentile_size` on one interval.
+
+    The crossing of :func:`percentile_size` between edges k and k + 1 from the same
+    PCHIP in ln x, built on that one interval only (interior node slopes depend only on
+    the neighbouring secants), so a Monte Carlo loop does not build the whole interpolant.
+    Needs two nodes on either side that are not grid ends (scipy's end slopes differ).
+    """
+    u = np.log(x[k - 1:k + 3][::-1])  # ascending: x_{k+2}, x_{k+1}, x_k, x_{k-1}
+    y = P[k - 1:k + 3][::-1]
+    h = np.diff(u)
+    m = np.diff(y) / h
+    d1 = _pchip_slope(h[0], h[1], m[0], m[1])
+    d2 = _pchip_slope(h[1], h[2], m[1], m[2])
+    H, y1, y2 = h[1], y[1], y[2]
+
+    def herm(t):  # cubic Hermite on [u1, u2], t in [0, 1], minus q
+        t2, t3 = t * t, t * t * t
+        return ((2 * t3 - 3 * t2 + 1) * y1 + (t3 - 2 * t2 + t) * H * d1 + (-2 * t3 + 3 * t2) * y2
+                + (t3 - t2) * H * d2) - q
+
+    t = brentq(herm, 0.0, 1.0, xtol=1e-15, rtol=4 * np.finfo(float).eps)
+    return float(math.exp(u[1] + t * H))
 
 
 def p80(grid, frac) -> float:
@@ -452,6 +524,7 @@ class TailFit:
         return TAIL_RULES[self.rule][0](x, **self.params)
 
     def describe(self) -> str:
+        """One line: the rule, the sieves it was fitted to and its parameters (sizes in um)."""
         p = ", ".join(f"{k} = {v * 1e6:.4g} um" if k in ("x63", "xmax") else f"{k} = {v:.4g}"
                       for k, v in self.params.items())
         return (f"{self.rule} fitted to the {len(self.sizes_m)} finest sieves "

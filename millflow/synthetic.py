@@ -66,11 +66,14 @@ def make_batch_problem(n_times: int = 8, n_sieves: int = 30, n_grid: int = 60, n
 
 
 def synthetic_lab_fit(theta: dict, grid, noise: float, rng, label: str = "synthetic lab fit", as_dict: bool = False):
-    """A local eq. 9 fit to synthetic batch tests (1, 3, 9 min, 12 root-2 sieves from
+    """A local eq. 9 fit to synthetic batch tests made from known parameters.
+
+    A local eq. 9 fit to synthetic batch tests (1, 3, 9 min, 12 root-2 sieves from
     4 mm, feed in the top three sieve intervals) made from ``theta`` (eq. 5 rates, eq. 6
     breakage) on ``grid`` with Gaussian noise of sd ``noise`` on cumulative passing.
     Returns (the fit as :func:`millflow.scaleup.fit_from_dict` reads it, the model); with
-    ``as_dict`` the fit's JSON dict (as ``millflow fit --json`` prints it) instead of the first."""
+    ``as_dict`` the fit's JSON dict (as ``millflow fit --json`` prints it) instead of the first.
+    """
     import pandas as pd
 
     from millflow.fitting.data import psd_data_from_frames

@@ -29,46 +29,10 @@ __all__ = ["ScaleUp", "SCALINGS", "p80_fast"]
 SCALINGS = ("herbst_fuerstenau", "austin")
 
 
-def _pchip_slope(h0, h1, m0, m1):
-    """scipy's PCHIP derivative at an interior node (weighted harmonic mean of the
-    neighbouring secants m0, m1 over intervals h0, h1; 0 at a local extremum)."""
-    if m0 * m1 <= 0:
-        return 0.0
-    w1, w2 = 2 * h1 + h0, h1 + 2 * h0
-    return (w1 + w2) / (w1 / m0 + w2 / m1)
-
-
 def p80_fast(x, frac, percent=80.0):
-    """:func:`millflow.psd.percentile_size` for a valid PSD, without re-validating it and
-    without building the whole interpolant: the same PCHIP in ln x (the two node slopes
-    of the bracketing interval by scipy's formula, which depends only on neighbouring
-    secants), solved on the one interval. Falls back to percentile_size near the grid ends
-    (edge slopes) or for degenerate input. Used inside root and Monte Carlo loops."""
-    q = percent / 100.0
-    f = np.asarray(frac, float)
-    P = np.cumsum(f[::-1])[::-1] / f.sum()
-    P[0] = 1.0
-    n = P.size
-    above = np.flatnonzero(P >= q)
-    k = int(above[-1]) if above.size else -1
-    if k < 2 or k + 3 > n - 1 or P[k] == q or P[-1] >= q:
-        return percentile_size(x, np.clip(f, 0.0, None) / f.sum(), percent)
-    # ascending in u = ln x: nodes a = k+1 (finer, P < q) and b = k (coarser, P >= q)
-    u = np.log(x[k - 1:k + 3][::-1])  # x_{k+2}, x_{k+1}, x_k, x_{k-1}
-    y = P[k - 1:k + 3][::-1]
-    h = np.diff(u)
-    m = np.diff(y) / h
-    d1 = _pchip_slope(h[0], h[1], m[0], m[1])
-    d2 = _pchip_slope(h[1], h[2], m[1], m[2])
-    H, y1, y2 = h[1], y[1], y[2]
-
-    def herm(t):  # cubic Hermite on [u1, u2], t in [0, 1]
-        t2, t3 = t * t, t * t * t
-        return ((2 * t3 - 3 * t2 + 1) * y1 + (t3 - 2 * t2 + t) * H * d1 + (-2 * t3 + 3 * t2) * y2
-                + (t3 - t2) * H * d2) - q
-    from scipy.optimize import brentq
-    t = brentq(herm, 0.0, 1.0, xtol=1e-15, rtol=4 * np.finfo(float).eps)
-    return float(math.exp(u[1] + t * H))
+    """Deprecated alias of :func:`millflow.psd.percentile_size` (the one P80, which now
+    solves on the bracketing interval only, as this function did)."""
+    return percentile_size(x, frac, percent)
 
 
 @dataclass(frozen=True)
@@ -150,7 +114,7 @@ class ScaleUp:
         return self._cached_factors()["plant_power_kW"]
 
     def _p80(self, p):
-        return p80_fast(self.x, p)
+        return percentile_size(self.x, p, 80.0, validate=False)  # the circuit's own product, in a root loop
 
     def operate(self, theta, feed_tph=None) -> dict:
         """Circuit at the fresh feed rate (default ``feed_tph``): product fractions,
