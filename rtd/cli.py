@@ -22,6 +22,7 @@ import numpy as np
 
 from rtd.base import RTDError
 from rtd.fit import MODELS, fit
+from rtd.names import canonical_name
 from rtd.tracer import TracerError, read_tracer_csv, subtract_baseline
 
 
@@ -29,8 +30,8 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     """The arguments of the tracer fit (shared with ``millflow fit-rtd``)."""
     p.add_argument("csv", metavar="TRACER.csv", help="tracer data file")
     p.add_argument("--model", choices=sorted(MODELS), default="tis", help="model to fit (default: tis)")
-    p.add_argument("--cells", type=int, default=3, metavar="N",
-                   help="number of cells for --model cells (default 3)")
+    p.add_argument("--cells", type=int, default=None, metavar="N",
+                   help="number of cells for --model recirculating_cells or cells (default 3)")
     p.add_argument("--kind", choices=["pulse", "step"], default=None,
                    help="pulse (E) or step (F) response; default from the columns")
     p.add_argument("--baseline", default=None, metavar="head|tail|VALUE",
@@ -55,9 +56,17 @@ def load_curve(csv, kind=None, baseline=None):
     return path, curve
 
 
-def fit_curve(path, curve, model: str, cells: int = 3):
-    """Fit ``model`` to the curve; errors name the file (and column)."""
-    fixed = {"n": cells} if model == "cells" else {}
+def fit_curve(path, curve, model: str, cells: int | None = None):
+    """Fit ``model`` to the curve; errors name the file (and column).
+
+    ``cells`` is the fixed number of cells of the recirculating-cells model (under any of
+    its names; default 3) and is refused for a model without cells.
+    """
+    has_cells = canonical_name(model) == "recirculating_cells"
+    if cells is not None and not has_cells:
+        raise RTDError(f"--cells {cells}: model {model!r} has no cells; give --cells only with "
+                       "--model recirculating_cells (or its alias cells)")
+    fixed = {"n": 3 if cells is None else cells} if has_cells else {}
     try:
         return fit(model, curve, **fixed)
     except TracerError as err:

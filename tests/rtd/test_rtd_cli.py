@@ -44,3 +44,34 @@ def test_rtd_tests_import_nothing_from_millflow():
             names = ([a.name for a in node.names] if isinstance(node, ast.Import)
                      else [node.module or ""] if isinstance(node, ast.ImportFrom) else [])
             assert not any(n.split(".")[0] in ("millflow", "tests") for n in names), (path, names)
+
+
+def _cells_curve(tmp_path, n, tau=8.0, r=1.5):
+    import numpy as np
+
+    import rtd
+
+    t = np.linspace(0.0, 6 * tau, 121)[1:]
+    c = rtd.RecirculatingCells(tau, n, r).pdf(t)
+    path = tmp_path / f"cells{n}.csv"
+    path.write_text("time_min,concentration\n" + "".join(f"{float(a)!r},{float(b)!r}\n" for a, b in zip(t, c)))
+    return path
+
+
+def test_cells_option_reaches_the_model_under_every_name(tmp_path, capsys):
+    # a noise-free 5-cell curve: --cells 5 must fix n = 5 under the canonical name as under
+    # the alias, and then the fit recovers tau and r (to the fit's tolerance, 1e-4)
+    path = _cells_curve(tmp_path, 5)
+    for name in ("recirculating_cells", "cells"):
+        assert main(["fit", str(path), "--model", name, "--cells", "5", "--json"]) == 0
+        js = json.loads(capsys.readouterr().out)
+        assert js["params"]["n"] == {"value": 5.0, "se": None}, js  # fixed, not fitted
+        assert abs(js["params"]["tau"]["value"] - 8.0) < 1e-4 * 8.0
+        assert abs(js["params"]["r"]["value"] - 1.5) < 1e-3
+
+
+def test_cells_option_is_refused_for_a_model_without_cells(tmp_path, capsys):
+    path = _cells_curve(tmp_path, 3)
+    assert main(["fit", str(path), "--model", "tis", "--cells", "4"]) == 2
+    err = capsys.readouterr().err.strip()
+    assert err.count("\n") == 0 and "--cells 4" in err and "'tis' has no cells" in err
