@@ -8,7 +8,7 @@ Usage::
 For each case of :func:`millflow.bench.core.core_cases` this solves eq. 4,
 dM/dt = K M, M(0) = feed, for the float64 inputs taken as exact binary numbers, in
 mpmath arithmetic, and writes M at the case's times to
-benchmarks/data/core_<case>.json (rounded to float64, 17 significant digits).
+millflow/bench/data/core_<case>.json (rounded to float64, 17 significant digits).
 
 Method: exponential polynomials, exact also for equal rates (the confluent form of
 Reid's solution). Class i is the sum over distinct rates r of p_{i,r}(t) exp(-r t),
@@ -43,7 +43,7 @@ sys.path.insert(0, str(HERE.parent))  # run from a source checkout without insta
 
 from millflow.bench.core import CASE_NAMES, SIZES_FULL, core_cases, rate_degeneracy  # noqa: E402
 
-DATA = HERE / "data"
+DATA = HERE.parent / "millflow" / "bench" / "data"  # package data: the installed suite reads it
 
 
 def expo_poly_solution(S, b, feed, t, dps: int) -> list[list]:

@@ -53,8 +53,11 @@ def _share(r: float, name: str, where: str) -> float:
 
 
 def dilution(solids_fraction: float) -> float:
-    """Dilution W/S = (1 - C_w)/C_w [t water / t solids] of a slurry with the solids mass
-    fraction C_w in (0, 1]."""
+    """Dilution W/S [t water / t solids] of a slurry.
+
+    Dilution W/S = (1 - C_w)/C_w [t water / t solids] of a slurry with the solids mass
+    fraction C_w in (0, 1].
+    """
     c = _number(solids_fraction, "solids_fraction", "dilution")
     if not (0.0 < c <= 1.0):
         raise InputError(f"dilution: solids_fraction = {solids_fraction!r}; expected a mass fraction in (0, 1]")
@@ -62,9 +65,12 @@ def dilution(solids_fraction: float) -> float:
 
 
 def two_product(feed: float, product: float, other: float) -> float:
-    """Fraction P/F = (f - o)/(p - o) of the feed mass that reports to ``product``, from the
+    """Two-product formula: the fraction of the feed that reports to ``product``.
+
+    Fraction P/F = (f - o)/(p - o) of the feed mass that reports to ``product``, from the
     assays of one component in the feed, that product and the other product (any unit, the
-    same for all three)."""
+    same for all three).
+    """
     where = "two_product"
     f, p, o = (_number(v, n, where) for v, n in ((feed, "feed"), (product, "product"), (other, "other")))
     if p == o:
@@ -73,9 +79,12 @@ def two_product(feed: float, product: float, other: float) -> float:
 
 
 def circulating_load(feed: float, underflow: float, overflow: float) -> float:
-    """Circulating load U/O = (o - f)/(f - u) [-] around a classifier from the assays of one
+    """Circulating load U/O [-] around a classifier, from assays.
+
+    Circulating load U/O = (o - f)/(f - u) [-] around a classifier from the assays of one
     component in its feed, underflow and overflow: dilutions W/S (:func:`dilution`) or
-    the fraction passing one sieve size."""
+    the fraction passing one sieve size.
+    """
     r = two_product(feed, underflow, overflow)
     if r >= 1.0:
         raise InputError("circulating_load: the feed assay equals the underflow's; the overflow carries no solids")
@@ -83,8 +92,11 @@ def circulating_load(feed: float, underflow: float, overflow: float) -> float:
 
 
 def three_product(feed, concentrate_1, concentrate_2, tailing) -> tuple[float, float, float]:
-    """Fractions (C1/F, C2/F, T/F) of the feed in two concentrates and a tailing, from the
-    assays (a, b) of two components in each of the four streams (see the module)."""
+    """Three-product formula: the feed's split into two concentrates and a tailing.
+
+    Fractions (C1/F, C2/F, T/F) of the feed in two concentrates and a tailing, from the
+    assays (a, b) of two components in each of the four streams (see the module).
+    """
     where = "three_product"
     streams = {"feed": feed, "concentrate_1": concentrate_1, "concentrate_2": concentrate_2, "tailing": tailing}
     v = {}

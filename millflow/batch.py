@@ -109,7 +109,9 @@ def batch_solve(S, b, feed, t, method: str = "exact", *, rtol: float = 1e-10, at
 
 
 def _finish(M, feed, t, cancellation):
-    """Last steps of the exact path, in place, for one member (M (T, N), feed (N,),
+    """Finish the exact path in place: sink balance, error, sink rounding.
+
+    Last steps of the exact path, in place, for one member (M (T, N), feed (N,),
     cancellation a float) or a population (M (P, T, N), feed (P, N), cancellation (P,));
     returns (M, error, sink rounding removed).
 
@@ -210,8 +212,11 @@ def batch_grind(S, b, feed, t, method: str = "exact", *, rtol: float = 1e-10, at
 
 
 def _ode_solve(K: np.ndarray, feed: np.ndarray, t: np.ndarray, method: str, rtol: float, atol: float):
-    """exp(K t) feed by solve_ivp; the Jacobian is the constant K (a callable, since
-    scipy's LSODA rejects an array Jacobian)."""
+    """Solve exp(K t) feed by scipy's solve_ivp.
+
+    exp(K t) feed by solve_ivp; the Jacobian is the constant K (a callable, since
+    scipy's LSODA rejects an array Jacobian).
+    """
     order = np.argsort(t)
     t_sorted = t[order]
     out = np.empty((t.size, feed.size))

@@ -26,15 +26,23 @@ class SolverError(MillflowError, RuntimeError):
 
 
 class OutputError(MillflowError, OSError):
-    """Results could not be written (read-only or full disk, a file where a folder is
-    expected, a missing parent folder). Nothing partial is left in the target."""
+    """Results could not be written.
+
+    Results could not be written (read-only or full disk, a file where a folder is
+    expected, a missing parent folder). Nothing partial is left in the target.
+    """
 
 
 class AccuracyWarning(UserWarning):
-    """A result missed its requested tolerance (mass balance or error estimate) and the
-    caller asked for a warning (``on_inaccuracy="warn"``) instead of a SolverError."""
+    """A result missed its requested tolerance.
+
+    A result missed its requested tolerance (mass balance or error estimate) and the
+    caller asked for a warning (``on_inaccuracy="warn"``) instead of a SolverError.
+    """
 
 
 class ModelRangeWarning(UserWarning):
-    """A model was used outside its stated range of validity (or with illustrative constants);
-    the warning names the unit and the quantity."""
+    """A model was used outside its stated range of validity (or with illustrative constants).
+
+    The warning names the unit and the quantity.
+    """

@@ -321,8 +321,11 @@ def memory_budget_bytes() -> float:
 
 
 def check_classes(n: int, how: str = "") -> None:
-    """Refuse, before anything is allocated, a grid whose N x N breakage matrix (every
-    solve forms one) exceeds the memory budget; the message gives the size it would need."""
+    """Refuse a grid whose breakage matrix exceeds the memory budget.
+
+    Refuse, before anything is allocated, a grid whose N x N breakage matrix (every
+    solve forms one) exceeds the memory budget; the message gives the size it would need.
+    """
     need = 8.0 * float(n) * float(n)
     budget = memory_budget_bytes()
     if need > budget:

@@ -25,7 +25,7 @@ from scipy.interpolate import PchipInterpolator
 from scipy.optimize import brentq
 
 from millflow.errors import GridError
-from millflow.grid import as_sizes, class_label, validate_edges
+from millflow.grid import SizeGrid, as_sizes, class_label, validate_edges
 
 __all__ = [
     "validate_fractions",
@@ -341,7 +341,7 @@ def _handle_top(P_new, x, lump: bool, where: str, tol: float = 1e-12) -> None:
 
 
 # ---------------------------------------------------------------------- percentiles
-def percentile_size(grid, frac, percent: float) -> float:
+def percentile_size(grid, frac, percent: float, *, validate: bool = True) -> float:
     """Size [m] at which ``percent`` % of the mass passes (P80: percent = 80).
 
     Cumulative passing is known at the upper edges; between the two edges that bracket
@@ -352,15 +352,44 @@ def percentile_size(grid, frac, percent: float) -> float:
     Where that cubic is not monotone on the interval, or the crossing is in the first or
     last class, P is interpolated by PCHIP in ln x (monotone; as :func:`from_sieves`).
 
+    Parameters
+    ----------
+    grid : SizeGrid or array_like
+        The size grid, or its upper edges x [m] (coarse -> fine).
+    frac : array_like
+        Mass fractions per class [-], coarse -> fine, the sink last; summing to 1.
+    percent : float
+        Percent passing, 0 < percent <= 100 [%].
+    validate : bool, optional
+        Check ``grid`` and ``frac`` (default). ``False`` is for loops over the library's
+        own results, which are valid by construction: invalid input is then not caught.
+
+    Returns
+    -------
+    float
+        The size [m].
+
     Raises
     ------
     GridError
         If ``percent`` is not in (0, 100], or the percentile lies inside the sink
         (P(x_N) >= percent/100: the grid has no information below x_N; extend the grid
-        to finer sizes).
+        to finer sizes); with ``validate``, on invalid sizes or fractions.
+
+    Examples
+    --------
+    >>> from millflow.grid import SizeGrid
+    >>> grid = SizeGrid.geometric(1e-3, 2.0, 4)          # edges 1, 0.5, 0.25, 0.125 mm
+    >>> frac = [0.2, 0.3, 0.3, 0.2]                      # passing 1, 0.8, 0.5, 0.2 at the edges
+    >>> percentile_size(grid, frac, 80), percentile_size(grid, frac, 50)
+    (0.0005, 0.00025)
     """
-    x = as_sizes(grid)
-    f = validate_fractions(frac, x)
+    if validate:
+        x = as_sizes(grid)
+        f = validate_fractions(frac, x)
+    else:
+        x = grid.upper_m if isinstance(grid, SizeGrid) else np.asarray(grid, dtype=float)
+        f = np.asarray(frac, dtype=float)
     if not (np.isfinite(percent) and 0 < percent <= 100):
         raise GridError(f"percent = {percent!r}: expected 0 < percent <= 100")
     q = percent / 100.0
@@ -479,6 +508,7 @@ class TailFit:
         return TAIL_RULES[self.rule][0](x, **self.params)
 
     def describe(self) -> str:
+        """One line: the rule, the sieves it was fitted to and its parameters (sizes in um)."""
         p = ", ".join(f"{k} = {v * 1e6:.4g} um" if k in ("x63", "xmax") else f"{k} = {v:.4g}"
                       for k, v in self.params.items())
         return (f"{self.rule} fitted to the {len(self.sizes_m)} finest sieves "

@@ -307,16 +307,19 @@ class AxialDispersion(RTDModel):
 
     @property
     def mean(self) -> float:
+        """Mean residence time [time]."""
         return self.tau if self.bc == "closed" else self.tau * (1 + 2 / self.pe)
 
     @property
     def variance(self) -> float:
+        """Variance of the residence time [time^2]."""
         if self.bc == "closed":
             return self.tau**2 * closed_variance(self.pe)
         return self.tau**2 * (2 / self.pe + 8 / self.pe / self.pe)
 
     @property
     def analytic_for_re_s_greater_than(self) -> float:
+        """Abscissa [1/time]: ``laplace`` is analytic for Re s above it."""
         if self.bc == "open":
             return -self.pe / (4 * self.tau)
         p, _ = _eigen(self.pe, 16)

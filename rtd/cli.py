@@ -22,6 +22,7 @@ import numpy as np
 
 from rtd.base import RTDError
 from rtd.fit import MODELS, fit
+from rtd.names import canonical_name
 from rtd.tracer import TracerError, read_tracer_csv, subtract_baseline
 
 
@@ -61,16 +62,18 @@ def load_curve(csv, kind=None, baseline=None):
 
 
 def fit_curve(path, curve, model: str, cells: int | None = None):
-    """Fit ``model`` to the curve; errors name the file (and column). ``cells`` is the
-    fixed number of cells of the recirculating-cells model, by any of its names."""
-    from rtd.names import canonical_name
+    """Fit ``model`` to the curve; errors name the file (and column).
 
-    is_cells = canonical_name(model) == "recirculating_cells"
-    if cells is not None and not is_cells:
-        raise RTDError(f"--cells {cells}: applies to --model recirculating_cells (or cells) only, not {model!r}")
+    ``cells`` is the fixed number of cells of the recirculating-cells model (under any of
+    its names; default 3) and is refused for a model without cells.
+    """
+    has_cells = canonical_name(model) == "recirculating_cells"
+    if cells is not None and not has_cells:
+        raise RTDError(f"--cells {cells}: model {model!r} has no cells; give --cells only with "
+                       "--model recirculating_cells (or its alias cells)")
     if cells is not None and cells < 1:
         raise RTDError(f"--cells {cells}: expected a whole number >= 1")
-    fixed = {"n": 3 if cells is None else cells} if is_cells else {}
+    fixed = {"n": 3 if cells is None else cells} if has_cells else {}
     try:
         return fit(model, curve, **fixed)
     except TracerError as err:
@@ -113,6 +116,16 @@ def write_plot(result, path: Path, time_unit: str, name: str) -> None:
     bot.set_xlabel(f"time [{time_unit}]")
     fig.tight_layout()
     fig.savefig(path, dpi=120)
+
+
+def _check_plotting() -> None:
+    """Refuse before fitting when fit.png is asked for and matplotlib is absent (the
+    standalone distribution has it as the optional extra ``plot``)."""
+    import importlib.util
+
+    if importlib.util.find_spec("matplotlib") is None:
+        raise RTDError("--out: the plot fit.png needs matplotlib (python -m pip install 'millflow-rtd[plot]'); "
+                       "or give --no-plots")
 
 
 def _label(result) -> str:
@@ -159,6 +172,8 @@ def main(argv=None) -> int:
     p.add_argument("--overwrite", action="store_true", help="replace a folder that holds other files")
     args = parser.parse_args(argv)
     try:
+        if args.out is not None and not args.no_plots:
+            _check_plotting()
         path, curve = load_curve(args.csv, args.kind, args.baseline)
         result = fit_curve(path, curve, args.model, args.cells)
         out = None if args.out is None else Path(args.out)

@@ -184,9 +184,12 @@ class CompartmentNetwork:
         return np.diag(a, -1).copy(), np.diag(a).copy(), np.diag(a, 1).copy()
 
     def _resolvent(self, s: np.ndarray) -> np.ndarray:
-        """w^T (s I - A)^-1 u for a tridiagonal A at complex s (1-D): the Thomas algorithm,
+        """Transfer function w^T (s I - A)^-1 u of a tridiagonal A at complex s.
+
+        w^T (s I - A)^-1 u for a tridiagonal A at complex s (1-D): the Thomas algorithm,
         vectorised over s, O(n) per s. s I - A is diagonally dominant for Re s >= 0 (each
-        cell's outflow covers its inflow), so no pivoting is needed there."""
+        cell's outflow covers its inflow), so no pivoting is needed there.
+        """
         lo, di, up = self._bands
         n, u, w = self.n, self.inlet, self._w()
         if not np.any(w[:-1]):  # exit from the last cell only: x_n from the forward sweep alone
@@ -215,10 +218,13 @@ class CompartmentNetwork:
         return acc
 
     def _chain_inverse(self, t: np.ndarray, integral: bool) -> np.ndarray:
-        """E(t) or F(t) of a long chain by Fourier inversion of its exact transform
+        """E(t) or F(t) of a long chain by Fourier inversion of its exact transform.
+
+        E(t) or F(t) of a long chain by Fourier inversion of its exact transform
         (:func:`rtd.inversion.fourier_inverse`: aliasing below e^-45, nodes until
         |E_hat| < 1e-17): the eigenvectors of a strongly advective chain are too
-        ill-conditioned for the eigen route, and one expm per time is O(n^3)."""
+        ill-conditioned for the eigen route, and one expm per time is O(n^3).
+        """
         from rtd.inversion import fourier_inverse
 
         flat = t.ravel()
@@ -280,18 +286,23 @@ class CompartmentNetwork:
 
     @property
     def mean(self) -> float:
+        """Mean residence time [time]."""
         return self._moment(1)
 
     @property
     def variance(self) -> float:
+        """Variance of the residence time [time^2]."""
         return self._moment(2) - self.mean**2
 
     @property
     def analytic_for_re_s_greater_than(self) -> float:
-        """Largest real part of the poles (eigenvalues of A). A chain's A has the
+        """Largest real part of the poles (eigenvalues of A).
+
+        Largest real part of the poles (eigenvalues of A). A chain's A has the
         characteristic polynomial of the symmetric tridiagonal matrix with off-diagonals
         sqrt(sub * super) (only those products enter it): real eigenvalues, computed
-        stably by scipy.linalg.eigvalsh_tridiagonal."""
+        stably by scipy.linalg.eigvalsh_tridiagonal.
+        """
         if self._bands is not None:
             from scipy.linalg import eigvalsh_tridiagonal
 
@@ -302,11 +313,12 @@ class CompartmentNetwork:
 
     @property
     def atom_at_zero(self) -> float:
+        """Probability mass leaving at t = 0 (bypass); not part of ``pdf``."""
         return self.bypass
 
     @classmethod
     def tanks_in_series(cls, tau: float, n: int) -> "CompartmentNetwork":
-        """n equal cells in a row, feed flow 1, each of volume tau/n."""
+        """N equal cells in a row, feed flow 1, each of volume tau/n."""
         tau = check_positive("CompartmentNetwork.tanks_in_series", "tau", tau)
         if int(n) != n or n < 1:
             raise ParameterError(f"tanks_in_series: n = {n!r}; expected an integer >= 1")
@@ -385,28 +397,35 @@ class RecirculatingCells(RTDModel):
         return _recirculating_network(self.tau, self.n, self.r, self.dead, self.bypass)
 
     def pdf(self, t):
+        """E(t), the exit-age density [1/time], at times ``t`` (0 before t = 0)."""
         return self.network().pdf(t)
 
     def cdf(self, t):
+        """F(t), the fraction [-] of the tracer that has left by times ``t``."""
         return self.network().cdf(t)
 
     def laplace(self, s):
+        """E_hat(s), the Laplace transform of E, at real or complex ``s`` [1/time]."""
         return self.network().laplace(s)
 
     @property
     def mean(self) -> float:
+        """Mean residence time [time]."""
         return self.tau * (1 - self.dead)
 
     @property
     def variance(self) -> float:
+        """Variance of the residence time [time^2]."""
         return self.network().variance
 
     @property
     def atom_at_zero(self) -> float:
+        """Probability mass leaving at t = 0 (bypass); not part of ``pdf``."""
         return self.bypass
 
     @property
     def analytic_for_re_s_greater_than(self) -> float:
+        """Abscissa [1/time]: ``laplace`` is analytic for Re s above it."""
         return self.network().analytic_for_re_s_greater_than
 
     @classmethod
@@ -428,8 +447,11 @@ class RecirculatingCells(RTDModel):
 
 @functools.lru_cache(maxsize=64)
 def _recirculating_network(tau: float, n: int, r: float, dead: float, bypass: float) -> CompartmentNetwork:
-    """RecirculatingCells' network, cached: networks are immutable (read-only arrays)
-    and building and validating one costs more than a mill's solve with it."""
+    """RecirculatingCells' network, cached.
+
+    RecirculatingCells' network, cached: networks are immutable (read-only arrays)
+    and building and validating one costs more than a mill's solve with it.
+    """
     qc = 1.0 - bypass
     v = np.full(n, tau * (1 - dead) / n)
     return CompartmentNetwork.cells_in_series(v, (1 + r) * qc, r * qc, bypass)

@@ -155,9 +155,11 @@ class Series(RTDModel):
         return self._evaluate(t, "pdf")
 
     def cdf(self, t):
+        """F(t), the fraction [-] of the tracer that has left by times ``t``."""
         return self._evaluate(t, "cdf")
 
     def laplace(self, s):
+        """E_hat(s), the Laplace transform of E, at real or complex ``s`` [1/time]."""
         s, real = as_s(s)
         out = np.ones_like(s, dtype=complex)
         for p in self.parts:
@@ -166,18 +168,22 @@ class Series(RTDModel):
 
     @property
     def mean(self) -> float:
+        """Mean residence time [time]."""
         return float(sum(p.mean for p in self.parts))
 
     @property
     def variance(self) -> float:
+        """Variance of the residence time [time^2]."""
         return float(sum(p.variance for p in self.parts))
 
     @property
     def atom_at_zero(self) -> float:
+        """Probability mass leaving at t = 0 (bypass); not part of ``pdf``."""
         return float(np.prod([p.atom_at_zero for p in self.parts]))
 
     @property
     def analytic_for_re_s_greater_than(self) -> float:
+        """Abscissa [1/time]: ``laplace`` is analytic for Re s above it."""
         return max(p.analytic_for_re_s_greater_than for p in self.parts)
 
 
@@ -208,27 +214,34 @@ class Parallel(RTDModel):
         return sum(w * getattr(p, which)(x) for w, p in zip(self.weights, self.parts))
 
     def pdf(self, t):
+        """E(t), the exit-age density [1/time], at times ``t`` (0 before t = 0)."""
         return self._mix("pdf", as_time(t))
 
     def cdf(self, t):
+        """F(t), the fraction [-] of the tracer that has left by times ``t``."""
         return self._mix("cdf", as_time(t))
 
     def laplace(self, s):
+        """E_hat(s), the Laplace transform of E, at real or complex ``s`` [1/time]."""
         return self._mix("laplace", s)
 
     @property
     def mean(self) -> float:
+        """Mean residence time [time]."""
         return float(sum(w * p.mean for w, p in zip(self.weights, self.parts)))
 
     @property
     def variance(self) -> float:
+        """Variance of the residence time [time^2]."""
         second = sum(w * (p.variance + p.mean**2) for w, p in zip(self.weights, self.parts))
         return float(second - self.mean**2)
 
     @property
     def atom_at_zero(self) -> float:
+        """Probability mass leaving at t = 0 (bypass); not part of ``pdf``."""
         return float(sum(w * p.atom_at_zero for w, p in zip(self.weights, self.parts)))
 
     @property
     def analytic_for_re_s_greater_than(self) -> float:
+        """Abscissa [1/time]: ``laplace`` is analytic for Re s above it."""
         return max(p.analytic_for_re_s_greater_than for p in self.parts)

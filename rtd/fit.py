@@ -75,8 +75,11 @@ class FitResult:
     SECONDS: ClassVar[dict] = {"s": 1.0, "min": 60.0, "h": 3600.0}
 
     def model_in_seconds(self):
-        """The fitted model with its times in seconds (millflow's unit): tau scaled from the
-        data's ``time_unit``; refused when the data's times carried no unit."""
+        """The fitted model with its times in seconds (millflow's unit).
+
+        The fitted model with its times in seconds (millflow's unit): tau scaled from the
+        data's ``time_unit``; refused when the data's times carried no unit.
+        """
         f = self.SECONDS.get(self.time_unit)
         if f is None:
             raise RTDError(f"the fitted times carry no unit (time_unit = {self.time_unit!r}); fit a TracerCurve "
@@ -334,7 +337,7 @@ def _scale0(model, t, c, kind, inlet) -> float:
 
 
 def _jacobian(predict, x, lo, hi) -> np.ndarray:
-    """d model / d parameters (natural units) by central differences, one-sided at bounds."""
+    """D model / d parameters (natural units) by central differences, one-sided at bounds."""
     cols = []
     for i, xi in enumerate(x):
         h = 1e-6 * max(abs(xi), 1e-8)

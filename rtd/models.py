@@ -52,27 +52,33 @@ class PerfectMixing(RTDModel):
         object.__setattr__(self, "tau", check_positive("PerfectMixing", "tau", self.tau))
 
     def pdf(self, t):
+        """E(t), the exit-age density [1/time], at times ``t`` (0 before t = 0)."""
         t = as_time(t)
         return np.where(t >= 0, np.exp(-np.maximum(t, 0) / self.tau) / self.tau, 0.0)
 
     def cdf(self, t):
+        """F(t), the fraction [-] of the tracer that has left by times ``t``."""
         t = as_time(t)
         return np.where(t >= 0, -np.expm1(-np.maximum(t, 0) / self.tau), 0.0)
 
     def laplace(self, s):
+        """E_hat(s), the Laplace transform of E, at real or complex ``s`` [1/time]."""
         s, _ = as_s(s)
         return 1.0 / (1.0 + s * self.tau)
 
     @property
     def mean(self) -> float:
+        """Mean residence time [time]."""
         return self.tau
 
     @property
     def variance(self) -> float:
+        """Variance of the residence time [time^2]."""
         return self.tau**2
 
     @property
     def analytic_for_re_s_greater_than(self) -> float:
+        """Abscissa [1/time]: ``laplace`` is analytic for Re s above it."""
         return -1.0 / self.tau
 
     def network(self):
@@ -100,29 +106,36 @@ class PlugFlow(RTDModel):
         object.__setattr__(self, "tau", check_positive("PlugFlow", "tau", self.tau))
 
     def pdf(self, t):
+        """E(t), the exit-age density [1/time], at times ``t`` (0 before t = 0)."""
         return np.zeros_like(as_time(t))
 
     def cdf(self, t):
+        """F(t), the fraction [-] of the tracer that has left by times ``t``."""
         return np.where(as_time(t) >= self.tau, 1.0, 0.0)
 
     def laplace(self, s):
+        """E_hat(s), the Laplace transform of E, at real or complex ``s`` [1/time]."""
         s, _ = as_s(s)
         return np.exp(-s * self.tau)
 
     @property
     def mean(self) -> float:
+        """Mean residence time [time]."""
         return self.tau
 
     @property
     def variance(self) -> float:
+        """Variance of the residence time [time^2]."""
         return 0.0
 
     @property
     def analytic_for_re_s_greater_than(self) -> float:
+        """Abscissa [1/time]: ``laplace`` is analytic for Re s above it."""
         return -math.inf
 
     @classmethod
     def from_moments(cls, mean: float, variance: float) -> "PlugFlow":
+        """Plug flow with the given mean [time]; the variance is not used (it is 0)."""
         return cls(mean)
 
 
@@ -149,6 +162,7 @@ class TanksInSeries(RTDModel):
         object.__setattr__(self, "n", n)
 
     def pdf(self, t):
+        """E(t), the exit-age density [1/time], at times ``t`` (0 before t = 0)."""
         t = as_time(t)
         x = self.n * np.maximum(t, 0) / self.tau
         # log form: (n/tau) x^(n-1) e^-x / Gamma(n) overflows piecewise for large n
@@ -159,10 +173,12 @@ class TanksInSeries(RTDModel):
         return np.where(t > 0, out, (1.0 / self.tau if self.n == 1 else 0.0) * (t == 0))
 
     def cdf(self, t):
+        """F(t), the fraction [-] of the tracer that has left by times ``t``."""
         t = as_time(t)
         return special.gammainc(self.n, self.n * np.maximum(t, 0) / self.tau)
 
     def laplace(self, s):
+        """E_hat(s), the Laplace transform of E, at real or complex ``s`` [1/time]."""
         s, real = as_s(s)
         x = s * self.tau / self.n
         if real:
@@ -174,14 +190,17 @@ class TanksInSeries(RTDModel):
 
     @property
     def mean(self) -> float:
+        """Mean residence time [time]."""
         return self.tau
 
     @property
     def variance(self) -> float:
+        """Variance of the residence time [time^2]."""
         return self.tau**2 / self.n
 
     @property
     def analytic_for_re_s_greater_than(self) -> float:
+        """Abscissa [1/time]: ``laplace`` is analytic for Re s above it."""
         return -self.n / self.tau
 
     def network(self):
@@ -198,8 +217,11 @@ class TanksInSeries(RTDModel):
 
 @functools.lru_cache(maxsize=64)
 def _tanks_network(tau: float, n: int):
-    """n equal cells in a row as a CompartmentNetwork, cached: networks are immutable
-    and validating one costs more than the mill's solve with it."""
+    """N equal cells in a row as a CompartmentNetwork, cached.
+
+    N equal cells in a row as a CompartmentNetwork, cached: networks are immutable
+    and validating one costs more than the mill's solve with it.
+    """
     net = CompartmentNetwork.tanks_in_series(tau, n)
     for value in vars(net).values():  # shared between callers: nobody may write into it
         if isinstance(value, np.ndarray):

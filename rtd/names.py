@@ -20,8 +20,11 @@ __all__ = ["Transport", "TRANSPORTS", "ALIASES", "canonical_name", "transport", 
 
 @dataclass(frozen=True)
 class Transport:
-    """One entry: the model class, fixed constructor keywords, the parameters besides
-    ``tau`` that must be given and those that may be."""
+    """One entry of the table of transport names.
+
+    One entry: the model class, fixed constructor keywords, the parameters besides
+    ``tau`` that must be given and those that may be.
+    """
 
     name: str
     cls: type

@@ -64,6 +64,7 @@ class TracerCurve:
     notes: tuple = field(default_factory=tuple)
 
     def with_notes(self, *notes: str, **changes) -> "TracerCurve":
+        """A copy with ``notes`` appended and the fields in ``changes`` replaced."""
         from dataclasses import replace
         return replace(self, notes=self.notes + tuple(notes), **changes)
 
@@ -130,8 +131,11 @@ def check_tracer(t, c, kind: str = "pulse", column: str = "concentration",
 
 
 def _utf8_text(path: Path) -> str:
-    """The file's text as UTF-8 (a byte-order mark is dropped); otherwise a TracerError
-    naming the file and the byte offset of the first byte that is not UTF-8."""
+    """The file's text as UTF-8.
+
+    The file's text as UTF-8 (a byte-order mark is dropped); otherwise a TracerError
+    naming the file and the byte offset of the first byte that is not UTF-8.
+    """
     try:
         raw = path.read_bytes()
     except FileNotFoundError:

@@ -24,7 +24,7 @@ LAYERS = [
     ("mill", ("millflow.mill",)),
     ("circuits", ("millflow.flowsheet", "millflow.fitting", "millflow.scaleup",
                   "millflow.sweep")),  # sweep: where issue 14's sweeps land
-    ("studies", ("millflow.falsify",)),
+    ("studies", ("millflow.falsify", "millflow.synthetic")),  # synthetic: problems with known truths
     ("commands", ("millflow.bench", "millflow.commands", "millflow.cli", "millflow.__main__")),
 ]
 
@@ -148,3 +148,63 @@ def test_every_module_has_a_layer():
 def test_the_graph_sees_the_package(pkg):
     graph = import_graph()
     assert any(m.startswith(pkg) for m in graph) and sum(len(v) for v in graph.values()) > 20
+
+
+def _third_party_imports(folder: Path, own: str) -> set[str]:
+    """Top-level names imported by the modules of ``folder`` that are neither the package
+    itself nor the standard library."""
+    import sys
+
+    names = set()
+    for path in folder.rglob("*.py"):
+        for node in ast.walk(ast.parse(path.read_text(encoding="utf-8"))):
+            if isinstance(node, ast.Import):
+                names |= {a.name.split(".")[0] for a in node.names}
+            elif isinstance(node, ast.ImportFrom) and not node.level and node.module:
+                names.add(node.module.split(".")[0])
+    return {n for n in names if n != own and n not in sys.stdlib_module_names}
+
+
+def test_rtd_stands_alone_as_a_distribution():
+    # rtd/pyproject.toml installs the folder as the package rtd (pip install ./rtd) and
+    # declares every third-party package rtd imports (as a dependency or in an extra)
+    import re
+    import tomllib
+
+    meta = tomllib.loads((ROOT / "rtd" / "pyproject.toml").read_text(encoding="utf-8"))
+    assert meta["project"]["name"] != "rtd"  # that name on PyPI is another package
+    assert meta["tool"]["setuptools"]["package-dir"] == {"rtd": "."}
+    assert meta["tool"]["setuptools"]["packages"] == ["rtd"]
+    declared = [*meta["project"]["dependencies"], *sum(meta["project"]["optional-dependencies"].values(), [])]
+    declared = {re.split(r"[<>=!~\[ ;]", d, maxsplit=1)[0].lower() for d in declared}
+    assert _third_party_imports(ROOT / "rtd", "rtd") <= declared
+    # millflow's own build ships the same package, so one install of the checkout has both
+    root = tomllib.loads((ROOT / "pyproject.toml").read_text(encoding="utf-8"))
+    assert "rtd*" in root["tool"]["setuptools"]["packages"]["find"]["include"]
+
+
+def test_tests_take_no_fixtures_from_the_benchmark_suites():
+    # the bench suites are tools of the command line; synthetic problems shared with the
+    # tests live in millflow.synthetic. Outside the suites' own tests a test may run a
+    # suite (its entry points) but take nothing else from it.
+    entry = {"run", "format_table", "DESCRIPTION"}
+    offenders = []
+    for path in (ROOT / "tests").rglob("*.py"):
+        if (ROOT / "tests" / "millflow" / "bench") in path.parents:
+            continue
+        tree = ast.parse(path.read_text(encoding="utf-8"))
+        suites = set()  # local names bound to a suite module
+        for node in ast.walk(tree):
+            if isinstance(node, ast.Import) and any(a.name.startswith("millflow.bench") for a in node.names):
+                offenders.append(f"{path.relative_to(ROOT)}:{node.lineno}: import of the bench package")
+            elif isinstance(node, ast.ImportFrom) and node.module == "millflow.bench":
+                suites |= {a.asname or a.name for a in node.names}
+            elif isinstance(node, ast.ImportFrom) and (node.module or "").startswith("millflow.bench."):
+                taken = {a.name for a in node.names} - entry
+                if taken:
+                    offenders.append(f"{path.relative_to(ROOT)}:{node.lineno}: {sorted(taken)}")
+        for node in ast.walk(tree):
+            if (isinstance(node, ast.Attribute) and isinstance(node.value, ast.Name) and node.value.id in suites
+                    and node.attr not in entry):
+                offenders.append(f"{path.relative_to(ROOT)}:{node.lineno}: {node.value.id}.{node.attr}")
+    assert offenders == []

@@ -15,7 +15,7 @@ Three cases, defined once in :func:`core_cases` and shared by the benchmark, the
 For each case and N = 25, 50, 100, 200 classes (N = 25, 100 with ``quick``) the
 work-precision table gives, per method and tolerance, the max absolute error over all
 classes and times against a 60-digit mpmath reference (cached in
-benchmarks/data/core_<case>.json), the minimum value, the mass-balance error and the
+millflow/bench/data/core_<case>.json), the minimum value, the mass-balance error and the
 median wall time of :func:`millflow.batch.batch_solve`, with the ratio to a plain
 ``scipy.integrate.solve_ivp(method="BDF", rtol=1e-6, atol=1e-9, jac=K)`` timed in the
 same run (ODE rows at rtol 1e-6, 1e-8, 1e-10 with atol = 1e-3 rtol; only 1e-6 with
@@ -61,9 +61,9 @@ ATOL_FACTOR = 1e-3
 #: The plain baseline every row is timed against: what a user would write first.
 BASELINE = {"method": "BDF", "rtol": 1e-6, "atol": 1e-9}
 
-#: Cached references: benchmarks/data beside the package (source checkout), or
-#: the directory named by MILLFLOW_BENCH_DATA.
-REFERENCE_DIR = Path(os.environ.get("MILLFLOW_BENCH_DATA", Path(__file__).resolve().parents[2] / "benchmarks" / "data"))
+#: Cached references: package data (millflow/bench/data, installed with the package, so the
+#: suite runs without the repository), or the directory named by MILLFLOW_BENCH_DATA.
+REFERENCE_DIR = Path(os.environ.get("MILLFLOW_BENCH_DATA", Path(__file__).resolve().parent / "data"))
 
 # Targets for the exact path at N = 100, 10 output times.
 TARGET_MS = {"baseline": 1.0, "stiff": 5.0, "degenerate": 5.0}
@@ -221,14 +221,15 @@ def load_reference(name: str, n: int, case: CoreCase | None = None, directory: P
 
 
 def make_references(sizes=SIZES_FULL) -> None:
-    """Run benchmarks/reference_core.py (needs mpmath and a source checkout; about
-    three minutes for all sizes) to (re)make the cached references."""
+    """Run benchmarks/reference_core.py (needs mpmath and a source checkout, run from its
+    root; about three minutes for all sizes) to (re)make the cached references."""
     import subprocess
     import sys
 
-    script = REFERENCE_DIR.parent / "reference_core.py"
+    script = Path("benchmarks") / "reference_core.py"  # the checkout in the working folder, not beside the package
     if not script.exists():
-        raise FileNotFoundError(f"{script} not found: references can only be made from a source checkout")
+        raise FileNotFoundError(f"{script.resolve()} not found: references can only be made from the root of a "
+                                "source checkout")
     cmd = [sys.executable, str(script), "--out", str(REFERENCE_DIR), "--sizes", *map(str, sizes)]
     subprocess.run(cmd, check=True)
 

@@ -11,7 +11,7 @@ evolution with vectorised population evaluation, then 20 local least-squares sta
 Case ``knife_mill_loo_12fold`` (full run only, when the SPRITE knife-mill data are found:
 not part of this repository, they are the measurements published with the open-source SPRITE
 suite (Idaho National Laboratory, MIT licence; Lu et al. 2024, Powder Technology 441, 119830),
-looked for at ``../shared/data/sprite-knife-mill`` beside the repository or ``$MILLFLOW_KNIFE_DATA``):
+looked for from the working folder, at ``../shared/data/sprite-knife-mill`` or ``$MILLFLOW_KNIFE_DATA``):
 the knife-mill example's 12-fold leave-one-run-out prediction with the global search in
 every fold (examples/knife_mill/knife_mill.toml: 8 parameters, 151-class grid, DE popsize
 10, maxiter 150, 8 starts). ``ratio_vs_baseline`` is the run time over the 20 s target
@@ -22,57 +22,10 @@ from __future__ import annotations
 import os
 import time
 
-import numpy as np
-import pandas as pd
+# the synthetic problem lives in millflow.synthetic (the tests use it too); kept here by its old names
+from millflow.synthetic import BOUNDS, TRUTH, make_batch_problem  # noqa: F401
 
 DESCRIPTION = "global 5-parameter fit (DE + 20 local starts) to 8 times x 30 sieves, 60-class grid"
-
-#: Parameters of the synthetic batch problems (ln_A0 is ln of A [1/s] at x0 = 1 mm).
-TRUTH = {"ln_A0": np.log(1.0 / 60.0), "alpha": 1.0, "phi": 0.4, "gamma": 0.8, "beta": 3.5}
-#: Bounds that separate the two branches of eq. 6 (gamma < beta), so the truth is unique.
-BOUNDS = {"ln_mu": (-3.0, 6.0), "Lambda": (1.0, 6.0), "ln_A0": (-9.0, 0.0), "alpha": (0.2, 2.5), "phi": (0.0, 1.0),
-          "gamma": (0.1, 2.0), "beta": (2.2, 8.0)}
-
-
-def make_batch_problem(n_times: int = 8, n_sieves: int = 30, n_grid: int = 60, noise: float = 0.01,
-                       seed: int = 0, truth: dict | None = None, rate: str = "power", bounds: dict | None = None):
-    """Synthetic batch data from known parameters; returns (model, params, truth).
-
-    Sieves: root-2 series down from 4 mm; the numerical grid has the same top and a
-    finer ratio chosen so that it has ``n_grid`` classes over the same range (the
-    sieve sizes are then generally not grid edges: the model is interpolated, as with
-    real data). Feed: all mass in the top sieve interval. Times: geometric 0.5 to
-    ``0.5 * 2^(n_times-1)`` min. Noise: N(0, noise^2) added to cumulative passing.
-    """
-    from millflow.fitting.data import psd_data_from_frames
-    from millflow.fitting.models import ForwardModel, ModelSpec, Parameter
-    from millflow.grid import SizeGrid
-
-    truth = dict(TRUTH if truth is None else truth)
-    sieves = 4e-3 * 2 ** (-0.5 * np.arange(n_sieves))
-    times = 30.0 * 2.0 ** np.arange(n_times)
-    ratio = (sieves[0] / sieves[-1]) ** (1.0 / (n_grid - 1))
-    grid = SizeGrid.geometric(sieves[0], ratio, n_grid)
-    feed = pd.DataFrame({"condition": "c1", "location": "feed", "time_s": 0.0, "size_m": sieves[:2],
-                         "passing": [1.0, 0.0]})
-    rows = []
-    for t in times:
-        rows.append(pd.DataFrame({"condition": "c1", "location": "mill", "time_s": t, "size_m": sieves,
-                                  "passing": np.linspace(1, 0, n_sieves)}))
-    placeholder = psd_data_from_frames(pd.concat([feed] + rows, ignore_index=True))
-    spec = ModelSpec(mode="batch", rate=rate, breakage="normalized", x0_m=1e-3)
-    model = ForwardModel(spec, placeholder, grid)
-    theta = np.array([truth[n] for n in model.param_names])
-    clean = model.predict(theta)
-    rng = np.random.default_rng(seed)
-    noisy = clean + noise * rng.standard_normal(clean.size)
-    rows = [feed] + [r.assign(passing=noisy[k * n_sieves:(k + 1) * n_sieves]) for k, r in enumerate(rows)]
-    data = psd_data_from_frames(pd.concat(rows, ignore_index=True), strict=False)
-    model = ForwardModel(spec, data, grid)
-    bounds = {**BOUNDS, **(bounds or {})}
-    params = {n: Parameter(n, truth[n], *bounds[n]) for n in model.param_names}
-    return model, params, truth
-
 
 def run(quick: bool = False, knife: bool = True) -> list[dict]:
     """The cases; ``knife=False`` leaves out the knife-mill leave-one-run-out (~30 s)."""
@@ -94,13 +47,20 @@ def _knife_rows(quick: bool) -> list[dict]:
     return [] if data_dir is None else [run_knife_loo(data_dir)]
 
 
+#: The knife-mill example's fit configuration, relative to the working folder (the root of
+#: a source checkout); the installed package never looks beside itself for it.
+KNIFE_CONFIG = os.path.join("examples", "knife_mill", "knife_mill.toml")
+
+
 def knife_data_dir() -> str | None:
-    """The SPRITE knife-mill folder if present (read in place, never copied)."""
-    here = os.path.dirname(os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
-    for path in (os.environ.get("MILLFLOW_KNIFE_DATA"), os.path.join(here, "..", "shared", "data", "sprite-knife-mill"),
-                 "/work/shared/data/sprite-knife-mill"):
+    """The SPRITE knife-mill folder if present (read in place, never copied), with its
+    example configuration: ``$MILLFLOW_KNIFE_DATA`` or ``../shared/data/sprite-knife-mill``
+    from the working folder; None when either is missing (the case is then left out)."""
+    if not os.path.isfile(KNIFE_CONFIG):
+        return None
+    for path in (os.environ.get("MILLFLOW_KNIFE_DATA"), os.path.join("..", "shared", "data", "sprite-knife-mill")):
         if path and os.path.isdir(path):
-            return os.path.normpath(path)
+            return os.path.normpath(os.path.abspath(path))
     return None
 
 
@@ -109,8 +69,7 @@ def run_knife_loo(data_dir: str) -> dict:
     from millflow.fitting.config import load_config
     from millflow.fitting.validate import leave_out
 
-    here = os.path.dirname(os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
-    cfg = load_config(os.path.join(here, "examples", "knife_mill", "knife_mill.toml"), data_dir=data_dir)
+    cfg = load_config(KNIFE_CONFIG, data_dir=data_dir)
     model = cfg.model()
     start, cpu = time.perf_counter(), time.process_time()
     loo = leave_out(model, cfg.params, "each", quiet=True, **dict(cfg.optimizer))

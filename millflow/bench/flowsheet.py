@@ -28,8 +28,9 @@ __all__ = ["DESCRIPTION", "run", "format_table", "closed_circuit_case", "FLOWSHE
 
 DESCRIPTION = "flowsheet solve: closed-circuit ball mill N = 100, 10 cells (target < 20 ms); examples"
 
-#: Example flowsheets shipped with the repository.
-FLOWSHEET_DIR = Path(__file__).resolve().parents[2] / "flowsheets"
+#: Example flowsheets of a source checkout, relative to the working folder (run from the
+#: checkout's root; the installed package never looks beside itself for them).
+FLOWSHEET_DIR = Path("flowsheets")
 TARGET_S = 0.020
 
 
@@ -128,7 +129,7 @@ def run(quick: bool = False) -> list[dict]:
                  "runtime_s": t_base, "max_abs_error": err, "ratio_vs_baseline": 1.0})
     from millflow.flowsheet import load
 
-    for path in sorted(FLOWSHEET_DIR.glob("*.toml")):  # examples, when run from the repository
+    for path in sorted(FLOWSHEET_DIR.glob("*.toml")):  # examples, when run from a checkout's root
         fsx = load(path)
         solve(fsx)
         t, s = _median_time(lambda: solve(fsx), repeats)

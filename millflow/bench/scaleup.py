@@ -16,41 +16,12 @@ import time
 
 import numpy as np
 
+# the synthetic lab fit lives in millflow.synthetic (the tests use it too); kept here by its old name
+from millflow.synthetic import synthetic_lab_fit
+
 DESCRIPTION = "closed-circuit scale-up with bands: delta method and 1,000-draw Monte Carlo (budgets)"
 
 TRUTH = {"ln_A0": math.log(1 / 240), "alpha": 1.0, "phi": 0.4, "gamma": 0.8, "beta": 3.5}
-
-
-def synthetic_lab_fit(theta: dict, grid, noise: float, rng, label: str = "synthetic lab fit", as_dict: bool = False):
-    """A local eq. 9 fit to synthetic batch tests (1, 3, 9 min, 12 root-2 sieves from
-    4 mm, feed in the top three sieve intervals) made from ``theta`` (eq. 5 rates, eq. 6
-    breakage) on ``grid`` with Gaussian noise of sd ``noise`` on cumulative passing.
-    Returns (the fit as :func:`millflow.scaleup.fit_from_dict` reads it, the model); with
-    ``as_dict`` the fit's JSON dict (as ``millflow fit --json`` prints it) instead of the first."""
-    import pandas as pd
-
-    from millflow.fitting.data import psd_data_from_frames
-    from millflow.fitting.estimate import fit
-    from millflow.fitting.models import ForwardModel, ModelSpec, default_parameters
-    from millflow.scaleup import fit_from_dict
-
-    sieves = 4.0 * 2 ** (-0.5 * np.arange(12))
-    rows = [pd.DataFrame({"condition": "*", "location": "feed", "time_min": 0.0, "size_mm": sieves[:4],
-                          "passing": [1.0, 2 / 3, 1 / 3, 0.0]})]
-    for t in (1.0, 3.0, 9.0):
-        rows.append(pd.DataFrame({"condition": "lab", "location": "mill", "time_min": t, "size_mm": sieves,
-                                  "passing": np.linspace(1, 0, 12)}))
-    spec = ModelSpec(mode="batch", breakage="normalized")
-    model = ForwardModel(spec, psd_data_from_frames(pd.concat(rows), strict=False), grid)
-    y = model.predict(np.array([theta[n] for n in model.param_names])) + rng.normal(0.0, noise, model.n_data)
-    k = 0
-    for r in rows[1:]:
-        r["passing"] = y[k:k + 12]
-        k += 12
-    model = ForwardModel(spec, psd_data_from_frames(pd.concat(rows), strict=False), grid)
-    params = default_parameters(spec, {n: {"value": float(v)} for n, v in theta.items()})
-    res = fit(model, params, global_search=False, starts=1, grid_check=False, quiet=True)
-    return (res.to_dict() if as_dict else fit_from_dict(res.to_dict(), label)), model
 
 
 def make_case():

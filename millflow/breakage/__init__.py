@@ -36,6 +36,7 @@ from millflow.breakage.rates import (
     evaluate_rates,
     power_law_rates,
     power_law_rates_population,
+    ln_process_power_law,
     process_power_law,
     validate_rates,
 )
@@ -47,6 +48,7 @@ __all__ = [
     "austin_rates_population",
     "X0_DEFAULT",
     "process_power_law",
+    "ln_process_power_law",
     "validate_rates",
     "evaluate_rates",
     "PowerLawRate",

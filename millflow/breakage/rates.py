@@ -12,6 +12,7 @@ A user's own function plugs in exactly like the built-in ones; pass any model th
 """
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 from typing import Mapping
 
@@ -27,6 +28,7 @@ __all__ = [
     "austin_rates_population",
     "X0_DEFAULT",
     "process_power_law",
+    "ln_process_power_law",
     "validate_rates",
     "evaluate_rates",
     "PowerLawRate",
@@ -251,8 +253,63 @@ def austin_rates(x, A: float, alpha: float, mu0: float, Lambda: float, *, xi: fl
     return validate_rates(S, xs)
 
 
+def ln_process_power_law(ln_A0, params, exponents, reference=None):
+    """Eq. 10 in logarithms: ln A = ln A0 + sum_k a_k ln(p_k / p_ref,k).
+
+    The one implementation of eq. 10: :func:`process_power_law`, the fit's forward model
+    (:mod:`millflow.fitting.models`, A and any parameter made condition-dependent) and the
+    scale-up's fitted material (:mod:`millflow.scaleup.fitted`) all evaluate it here.
+    Arrays broadcast, so one call covers a population of parameter sets times a set of
+    conditions (shape (P, 1) exponents against (C,) process values gives (P, C)).
+
+    Parameters
+    ----------
+    ln_A0 : float or array_like
+        ln of the prefactor A0 [ln(1/s)] at the reference process values.
+    params : mapping name -> float or array_like
+        Process or design values p_k (speed fraction, ball size, ...), finite and > 0, in
+        the units of ``reference``.
+    exponents : mapping name -> float or array_like
+        Exponents a_k [-], the same keys as ``params``.
+    reference : mapping name -> float, optional
+        Reference values p_ref,k (> 0; the fit uses the geometric mean over its
+        conditions, which decorrelates ln A0 from the a_k). Default 1 for every k.
+
+    Returns
+    -------
+    float or numpy.ndarray
+        ln A [ln(1/s)], broadcast over the inputs.
+
+    Raises
+    ------
+    BreakageError
+        If the keys differ, or a process or reference value is not finite and > 0.
+
+    Examples
+    --------
+    >>> float(ln_process_power_law(0.0, {"speed": 2.0}, {"speed": 1.5}, {"speed": 0.5}))  # 1.5 ln 4
+    2.0794415416798357
+    """
+    if set(params) != set(exponents) or (reference is not None and set(reference) != set(params)):
+        raise BreakageError(f"exponents: keys {sorted(exponents)} (and reference keys) must match params keys "
+                            f"{sorted(params)}")
+    ln_A = ln_A0
+    for name in params:
+        pk = np.asarray(params[name], dtype=float)
+        ref = 1.0 if reference is None else float(reference[name])
+        if not (np.all(np.isfinite(pk)) and np.all(pk > 0)):
+            bad = pk if pk.ndim == 0 else pk[~(np.isfinite(pk) & (pk > 0))][0]
+            raise BreakageError(f"process parameter {name} = {float(bad)!r}: expected a finite number > 0")
+        if not (math.isfinite(ref) and ref > 0):
+            raise BreakageError(f"reference of {name} = {ref!r}: expected a finite number > 0")
+        ln_A = ln_A + np.asarray(exponents[name], dtype=float) * np.log(pk / ref)
+    return ln_A
+
+
 def process_power_law(A0: float, params, exponents) -> float:
     """Rate prefactor from process or design parameters, eq. 10: A = A0 prod p_k^a_k.
+
+    Checked scalar form of :func:`ln_process_power_law` (reference values 1).
 
     Parameters
     ----------
@@ -288,12 +345,10 @@ def process_power_law(A0: float, params, exponents) -> float:
         if len(p) != len(a):
             raise BreakageError(f"params has {len(p)} values but exponents has {len(a)}")
         names = [f"params[{k}]" for k in range(len(p))]
+    p = {name: _finite(pk, f"process parameter {name}", positive=True) for name, pk in zip(names, p)}
+    a = {name: _finite(ak, f"exponent of {name}") for name, ak in zip(names, a)}
     log_A = np.log(A0) if A0 > 0 else -np.inf
-    for name, pk, ak in zip(names, p, a):
-        pk = _finite(pk, f"process parameter {name}", positive=True)
-        ak = _finite(ak, f"exponent of {name}")
-        log_A += ak * np.log(pk)
-    return float(np.exp(log_A))
+    return float(np.exp(ln_process_power_law(log_A, p, a)))
 
 
 # ------------------------------------------------------------------------ dataclasses

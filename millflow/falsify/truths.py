@@ -27,16 +27,14 @@ Built-in truths, all exact (linear algebra of the linear core, no ODE):
 from __future__ import annotations
 
 import math
-import warnings
 from dataclasses import dataclass, field
 from typing import Callable, Protocol, runtime_checkable
 
 import numpy as np
-from scipy.integrate import quad
 
-from millflow.batch import batch_grind
 from millflow.errors import InputError, SolverError
 from millflow.fitting.models import ForwardModel, ModelSpec
+from millflow.nonlinear.kinetics import slowing_down, theta_of
 from millflow.psd import from_sieves
 
 __all__ = ["Truth", "LinearTruth", "SlowingDownTruth", "CallableTruth", "rtd_truth", "classification_truth",
@@ -140,16 +138,7 @@ class SlowingDownTruth:
         """Transformed time theta(t) = int_0^t kappa [s]."""
         t = np.asarray(t, float)
         if self.kappa is not None:
-            out = []
-            for tk in t:
-                with warnings.catch_warnings():  # a failed integral is checked and raised just below
-                    warnings.simplefilter("ignore")
-                    val, err = quad(self.kappa, 0.0, float(tk), epsabs=0.0, epsrel=1e-12, limit=200)
-                if not (np.isfinite(val) and val >= 0 and err <= 1e-10 * max(abs(val), 1e-300)):
-                    raise SolverError(f"slowing-down truth: int_0^{float(tk)!r} kappa = {val!r} "
-                                      f"(error estimate {err!r}); expected a finite positive integral")
-                out.append(val)
-            return np.array(out)
+            return theta_of(t, self.kappa)
         s = self.strength / t_ref
         return t.copy() if s == 0 else np.log1p(s * t) / s
 
@@ -169,7 +158,7 @@ class SlowingDownTruth:
         t = np.asarray(design.times_s)
         theta = self.theta(t, self.t_ref_s or float(t[-1]))
         S, b, feed = self.linear_parts(design)
-        per_cond = batch_grind(S[0], b, feed, theta)  # same rates for every condition
+        per_cond = slowing_down(S[0], b, feed, t, theta=theta).M  # same rates for every condition
         return np.concatenate([per_cond for _ in sorted(design.conditions)])
 
 

@@ -65,7 +65,8 @@ import numpy as np
 
 from millflow.batch import batch_grind_population
 from millflow.breakage.distributions import breakage_population
-from millflow.breakage.rates import X0_DEFAULT, austin_rates_population, power_law_rates_population
+from millflow.breakage.rates import (X0_DEFAULT, austin_rates_population, ln_process_power_law,
+                                     power_law_rates_population)
 from millflow.classifiers import screen_discharge, screen_power_discharge
 from millflow.errors import InputError, SolverError
 from millflow.fitting.data import PSDData
@@ -631,7 +632,8 @@ class ForwardModel:
         v = np.repeat(p[name][:, None], len(self.conditions), axis=1)
         for par, col in self.spec.param_process:
             if par == name:
-                v = v * np.exp(p[f"{name}_{col}"][:, None] * np.log(self._proc[col] / self._ref[col])[None, :])
+                v = v * np.exp(ln_process_power_law(0.0, {col: self._proc[col]}, {col: p[f"{name}_{col}"][:, None]},
+                                                    {col: self._ref[col]}))  # eq. 10 for any parameter
         return v
 
     def _depends(self, name) -> bool:
@@ -640,9 +642,9 @@ class ForwardModel:
     def rates(self, p):
         """S (P, C, N) [1/s] (or tau*S if no tau column): eq. 5 or 7 with A (and
         exponents) per condition by eq. 10, from :mod:`millflow.breakage.rates`."""
-        lnA = p["ln_A0"][:, None].copy()
-        for col in self.spec.rate_process:
-            lnA = lnA + self.cond_param(p, f"a_{col}") * np.log(self._proc[col] / self._ref[col])[None, :]
+        cols = self.spec.rate_process  # eq. 10: A per condition, exponents (P, C), process values (C,)
+        lnA = ln_process_power_law(p["ln_A0"][:, None], {c: self._proc[c] for c in cols},
+                                   {c: self.cond_param(p, f"a_{c}") for c in cols}, {c: self._ref[c] for c in cols})
         A = np.exp(np.minimum(lnA, 600.0))
         alpha = self.cond_param(p, "alpha")
         x0 = self.spec.x0_m

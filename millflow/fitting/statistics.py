@@ -87,9 +87,12 @@ def cluster_robust_covariance(J, r, clusters, n_params: int):
 
 
 def residual_structure(r, clusters) -> dict:
-    """Per sample: lag-1 autocorrelation of the residuals and a Wald-Wolfowitz runs test of
+    """Structure of the residuals: lag-1 autocorrelation and a runs test, per sample.
+
+    Per sample: lag-1 autocorrelation of the residuals and a Wald-Wolfowitz runs test of
     their signs (few runs: same-sign stretches the model misses). Summary: the mean lag-1
-    autocorrelation and the fraction of samples whose runs test rejects at p < 0.05."""
+    autocorrelation and the fraction of samples whose runs test rejects at p < 0.05.
+    """
     r = np.asarray(r, float)
     ids = np.asarray(clusters)
     per = []
@@ -214,16 +217,22 @@ def parameter_statistics(names, theta, J, ssr, n_data, lower=None, upper=None, r
 
 
 def information_criteria(ssr: float, n: int, p: int) -> dict:
-    """AIC and BIC of a least-squares fit with Gaussian errors (constants dropped):
-    AIC = n ln(SSR/n) + 2p, BIC = n ln(SSR/n) + p ln n; AICc adds 2p(p+1)/(n-p-1)."""
+    """AIC, AICc and BIC of a least-squares fit with Gaussian errors.
+
+    AIC and BIC of a least-squares fit with Gaussian errors (constants dropped):
+    AIC = n ln(SSR/n) + 2p, BIC = n ln(SSR/n) + p ln n; AICc adds 2p(p+1)/(n-p-1).
+    """
     base = n * math.log(max(ssr, 1e-300) / n)
     aicc = base + 2 * p + (2 * p * (p + 1) / (n - p - 1) if n - p - 1 > 0 else math.inf)
     return {"aic": base + 2 * p, "aicc": aicc, "bic": base + p * math.log(n)}
 
 
 def f_test(ssr_small: float, p_small: int, ssr_big: float, p_big: int, n: int) -> dict:
-    """F test of a nested pair: does the bigger model reduce SSR more than chance?
-    F = ((SSR_s - SSR_b)/(p_b - p_s)) / (SSR_b/(n - p_b)); p from F(p_b - p_s, n - p_b)."""
+    """F test of a nested pair of models.
+
+    F test of a nested pair: does the bigger model reduce SSR more than chance?
+    F = ((SSR_s - SSR_b)/(p_b - p_s)) / (SSR_b/(n - p_b)); p from F(p_b - p_s, n - p_b).
+    """
     d1, d2 = p_big - p_small, n - p_big
     if d1 <= 0 or d2 <= 0:
         return {"F": math.nan, "p_value": math.nan}

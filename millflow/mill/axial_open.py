@@ -71,8 +71,11 @@ _gttrs = lapack.get_lapack_funcs("gttrs", dtype=np.float64)
 
 
 def _tail(length: float, m: int) -> np.ndarray:
-    """Node distances (m,) from the mill's end: uniform 1/m up to ``length`` <= 1, else
-    geometric with the first volume 1/m and the last node at ``length``."""
+    """Node distances (m,) from the mill's end.
+
+    Node distances (m,) from the mill's end: uniform 1/m up to ``length`` <= 1, else
+    geometric with the first volume 1/m and the last node at ``length``.
+    """
     if length <= 1.0:
         k = max(1, math.ceil(length * m - 1e-9))
         return np.arange(1, k + 1) / m
@@ -119,8 +122,11 @@ def _solve_class(alpha_i, beta_i, piv_i, rhs):
 
 
 def _sweep_classes(alpha, beta, piv, gain, weights, source) -> np.ndarray:
-    """c (N, n[, m]) class by class, coarse to fine: class i's tridiagonal M-matrix (GTH
-    pivots ``piv``) with right-hand side sum_(j<i) gain_ij w_k c_jk + source(i) (n[, m])."""
+    """Solve the open vessel's finite-volume system class by class, coarse to fine.
+
+    C (N, n[, m]) class by class, coarse to fine: class i's tridiagonal M-matrix (GTH
+    pivots ``piv``) with right-hand side sum_(j<i) gain_ij w_k c_jk + source(i) (n[, m]).
+    """
     n_cls, n = piv.shape
     first = source(0)
     cols = first.shape[1:]
@@ -172,8 +178,11 @@ def open_grid(pe: float, m_cells: int, v, w, tail: float) -> OpenGrid:
 
 
 def back_layer_matrix(S, b, tau: float, grid: OpenGrid, v) -> np.ndarray:
-    """(N, N) map from c(1) to int_(-inf)^1 c^ dz (the sampled discharge's back-dispersion
-    layer, module docstring): lower triangular, linear in c(1)."""
+    """Map (N, N) from c(1) to the back-dispersion layer of the sampled discharge.
+
+    (N, N) map from c(1) to int_(-inf)^1 c^ dz (the sampled discharge's back-dispersion
+    layer, module docstring): lower triangular, linear in c(1).
+    """
     S = np.asarray(S, dtype=float)
     loss = tau * S[:, None] * grid.weights[None, :]
     loss[:, -1] += np.asarray(v, float)
@@ -266,7 +275,9 @@ def check_discharge(discharge, v, w) -> str:
 def solve_axial_open(S, b, feed, tau: float, pe: float, d=None, w=None, *, discharge: str = "sampled",
                      tol: float = 1e-8, m_start: int = 16, m_max: int = 16384,
                      m_cells: int | None = None) -> AxialSolution:
-    """Steady open-vessel axial-dispersion mill (module docstring), refined until the
+    """Steady open-vessel axial-dispersion mill.
+
+    Steady open-vessel axial-dispersion mill (module docstring), refined until the
     error estimate of the product and of the hold-up / (tau (1 + 2/Pe)) is below ``tol`` (or on
     the one grid ``m_cells``): ``error_estimate`` bounds both (the hold-up's error in units
     of the open density's mean residence time).

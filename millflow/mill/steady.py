@@ -31,7 +31,8 @@ well-mixed cell with classification M_i H / F = tau p_i / d_i*; the fractions su
 by construction, the hold-up per feed rate equals tau only when d* is consistent with
 tau (sum tau p_i / d_i* = tau).
 
-Results are xarray Datasets: dimension ``size`` (coordinate ``x`` [m] when given),
+Results are xarray Datasets: dimension ``size`` (coordinate ``size``, the upper class
+sizes [m], when x is given, as in every millflow Dataset; ``size_class`` the class number),
 ``cell``, ``position``, ``location``; attributes ``method``, ``error_estimate``,
 ``runtime_s``, ``mass_balance_error``.
 """
@@ -56,9 +57,12 @@ from millflow.mill.well_mixed import solve_well_mixed
 __all__ = ["METHODS", "steady_mill", "transfer_matrix", "choose_method", "WHERE"]
 
 def _solve_composed(sc: _Scene, feed, *, tol: float, holdup: bool, cache: dict | None = None):
-    """Series: each part grinds the previous part's product (first-order breakage:
+    """Series and parallel compositions of transports.
+
+    Series: each part grinds the previous part's product (first-order breakage:
     E_hat of a series is the product of the parts' E_hat, applied in turn); Parallel:
-    the feed split by the weights. Hold-ups add."""
+    the feed split by the weights. Hold-ups add.
+    """
     parts = sc.transport.parts
     weights = getattr(sc.transport, "weights", None)
     product, hold, error, methods = 0.0, 0.0, 0.0, []
@@ -182,11 +186,14 @@ SOLVERS = {"well_mixed": _well_mixed, "cells": _cells, "plug_flow": _plug_flow, 
 
 
 def _solve(sc: _Scene, feed, *, tol: float, holdup: bool = True, cache: dict | None = None):
-    """Dispatch to the method (:data:`SOLVERS`). Returns dict with product, holdup,
+    """Dispatch to the method (:data:`SOLVERS`).
+
+    Dispatch to the method (:data:`SOLVERS`). Returns dict with product, holdup,
     error, extras, method.
 
     ``cache`` (a Mill's) keeps the spectral decomposition of the breakage matrix
-    between calls of the plug-flow and segregated paths."""
+    between calls of the plug-flow and segregated paths.
+    """
     out = {"extras": {}}
     nxt = SOLVERS[sc.method](sc, feed, out, tol=tol, holdup=holdup, cache=cache)
     while nxt.method != sc.method:  # a fallback (segregated -> axial_fv)
@@ -237,12 +244,21 @@ def transfer_matrix(S, b, transport, d=None, *, where=None, dispersion=None, dis
 
 # ------------------------------------------------------------------------ results
 def _size_coords(n: int, x) -> dict:
-    coords = {"size": ("size", np.arange(1, n + 1), {"long_name": "size class (1 = coarsest)"})}
+    """Coordinates of the ``size`` dimension.
+
+    Coordinates of the ``size`` dimension. ``size`` means one thing in every millflow
+    Dataset: the upper class sizes [m] (:meth:`millflow.grid.SizeGrid.size_coord`);
+    ``size_class`` is the class number (1 = coarsest). Without ``x`` the dimension has
+    class numbers only. ``x`` holds the sizes under their old name.
+    """
+    coords = {"size_class": ("size", np.arange(1, n + 1), {"long_name": "size class (1 = coarsest)"})}
     if x is not None:
         xs = np.asarray(x, dtype=float) if not hasattr(x, "upper_m") else x.upper_m
         if xs.shape != (n,):
             raise InputError(f"x has shape {xs.shape}; expected ({n},) upper class sizes [m]")
-        coords["x"] = ("size", xs, {"units": "m", "long_name": "upper size of the class"})
+        attrs = {"units": "m", "long_name": "upper size of class (Austin convention)"}
+        coords["size"] = ("size", xs, attrs)
+        coords["x"] = ("size", xs, dict(attrs))
     return coords
 
 
@@ -276,8 +292,11 @@ def _profile(sc: _Scene, feed, solved, positions):
 
 
 def _samples(ds: xr.Dataset, locations) -> xr.DataArray:
-    """Mass fractions at named sampling locations: 'discharge', 'feed', 'holdup',
-    'cell:K' (1-based), 'z:0.5' (needs ``positions`` containing 0.5)."""
+    """Mass fractions at named sampling locations.
+
+    Mass fractions at named sampling locations: 'discharge', 'feed', 'holdup',
+    'cell:K' (1-based), 'z:0.5' (needs ``positions`` containing 0.5).
+    """
     if isinstance(locations, dict):
         names, specs = list(locations), list(locations.values())
     else:
@@ -339,7 +358,7 @@ def steady_mill(S, b, feed, transport, d=None, *, where=None, dispersion=None, d
         :mod:`millflow.mill.axial_open`.
     method : one of :data:`METHODS` to force a method (e.g. for cross-checks); None
         picks the cheapest exact one.
-    x : (N,) upper class sizes [m] or a SizeGrid, for the ``x`` coordinate.
+    x : (N,) upper class sizes [m] or a SizeGrid, for the ``size`` coordinate (also under its old name ``x``).
     positions : fractional axial positions in [0, 1] for profiles (plug, axial).
     locations : sampling locations ('discharge', 'feed', 'holdup', 'cell:K', 'z:Y'),
         a list or a dict name -> spec; gives variable ``sample`` (location, size).

@@ -58,9 +58,12 @@ def _cells_system(sc, n_cls):
 
 
 def _fv_jacobian(sc, alpha, beta, v, tau_weights, n_cls):
-    """J of the method of lines on a finite-volume grid: per class the tridiagonal transport
+    """Jacobian of the method of lines on a finite-volume grid.
+
+    J of the method of lines on a finite-volume grid: per class the tridiagonal transport
     (face fluxes alpha_k c_k - beta_k c_(k+1), per class and face; outflow v_i at the last
-    node) divided by the volumes tau w_k, plus breakage K (x) I."""
+    node) divided by the volumes tau w_k, plus breakage K (x) I.
+    """
     n = tau_weights.size
     scale = sp.diags(1.0 / tau_weights)
     blocks = []
@@ -101,7 +104,9 @@ def _axial_system(sc, n_cls, m_cells):
 
 
 def _axial_open_system(sc, n_cls, m_cells):
-    """Method of lines for the open vessel's FV scheme on the whole line
+    """Method of lines for the open vessel's finite-volume scheme.
+
+    Method of lines for the open vessel's FV scheme on the whole line
     (:mod:`millflow.mill.axial_open`); state c (class-major, N n).
 
     Returns (J, B_in, C, D, hold, M): product = C y + D f, hold-up = hold y. Sampled

@@ -1,5 +1,7 @@
-"""Non-linear grinding kinetics (Principle I): aggregation by fixed pivots,
-population-dependent and slowing-down breakage rates, the batch solve, exact solutions.
+"""Non-linear grinding kinetics (Principle I).
+
+Aggregation by fixed pivots, population-dependent and slowing-down breakage rates, the
+batch solve, exact solutions.
 
 - :mod:`.kernels`: aggregation kernels (constant, sum, product, shear, user);
 - :mod:`.aggregation`: fixed-pivot aggregation on any size grid, with overflow;

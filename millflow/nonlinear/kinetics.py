@@ -211,13 +211,17 @@ def theta_of(t, kappa) -> np.ndarray:
     return np.array(out)
 
 
-def slowing_down(S0, b, feed, t, kappa) -> BatchResult:
+def slowing_down(S0, b, feed, t, kappa=None, *, theta=None) -> BatchResult:
     """Batch grinding with S(t) = S0 kappa(t): the exact linear solution at theta(t).
 
-    ``kappa`` a callable of t [s] (kappa >= 0); the result's ``info`` holds theta.
+    ``kappa`` a callable of t [s] (kappa >= 0), integrated by :func:`theta_of`; or
+    ``theta``, the transformed times theta(t) = int_0^t kappa [s] when they are known in
+    closed form (one of the two). The result's ``info`` holds theta.
     """
+    if (kappa is None) == (theta is None):
+        raise InputError("slowing_down: give kappa (a callable of t) or theta (the transformed times), not both")
     start = time.perf_counter()
-    th = theta_of(t, kappa)
+    th = theta_of(t, kappa) if theta is None else np.atleast_1d(np.asarray(theta, float))
     res = batch_solve(S0, b, feed, th)
     info = {**res.info, "theta_s": th, "equation": "M(t) = exp(K theta(t)) feed, theta = int_0^t kappa"}
     return BatchResult(res.M, np.atleast_1d(np.asarray(t, float)), "exact (theta)", res.error_estimate,

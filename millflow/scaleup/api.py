@@ -91,8 +91,10 @@ def predict_plant(su, target_p80_m=None, methods=("delta", "mc"), n_draws: int =
         timing[m] = time.perf_counter() - t
     N = su.x.size
     mlist = list(res)
-    ds = xr.Dataset(coords={"size": ("size", np.arange(1, N + 1), {"long_name": "size class (1 = coarsest)"}),
-                            "x": ("size", su.x, {"units": "m", "long_name": "upper size of the class"}),
+    # "size" is the upper class size [m], as in every millflow Dataset; "x" its old name
+    size_attrs = {"units": "m", "long_name": "upper size of class (Austin convention)"}
+    ds = xr.Dataset(coords={"size": ("size", su.x, size_attrs), "x": ("size", su.x, dict(size_attrs)),
+                            "size_class": ("size", np.arange(1, N + 1), {"long_name": "size class (1 = coarsest)"}),
                             "estimator": ("estimator", mlist,
                                           {"long_name": "band method (delta method or Monte Carlo)"})})
     # (the dimension is not named "method": DataArray.sel has an argument of that name)

@@ -18,7 +18,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from millflow.breakage.distributions import breakage_population
-from millflow.breakage.rates import austin_rates_population, power_law_rates_population
+from millflow.breakage.rates import austin_rates_population, ln_process_power_law, power_law_rates_population
 from millflow.errors import InputError
 from millflow.inputs import read_text
 
@@ -125,9 +125,10 @@ class FittedBreakage:
         and mu multiplied by the given scale-up factors."""
         t = np.atleast_2d(np.asarray(theta, float))
         p = {n: t[:, k] for k, n in enumerate(self.names)}
-        lnA = p["ln_A0"] + math.log(A_factor)
-        for c in self.spec.get("rate_process", []):
-            lnA = lnA + p[f"a_{c}"] * math.log(float(process[c]) / float(self.spec["process_ref"][c]))
+        cols = self.spec.get("rate_process", [])  # eq. 10 at the plant's process values
+        lnA = ln_process_power_law(p["ln_A0"] + math.log(A_factor), {c: float(process[c]) for c in cols},
+                                   {c: p[f"a_{c}"] for c in cols},
+                                   {c: float(self.spec["process_ref"][c]) for c in cols})
         x0 = float(self.spec["x0_m"])
         A = np.exp(np.minimum(lnA, 600.0))
         if self.spec["rate"] == "austin":  # eq. 7 (mu scaled by the scale-up factor)

@@ -30,18 +30,9 @@ SCALINGS = ("herbst_fuerstenau", "austin")
 
 
 def p80_fast(x, frac, percent=80.0):
-    """:func:`millflow.psd.percentile_size` for a valid PSD without re-validating it (the
-    same reading, :func:`millflow.psd.percentile_from_cum`); degenerate input (no mass, the
-    percentile in the sink) goes through percentile_size for its error. Used inside root
-    and Monte Carlo loops."""
-    q = percent / 100.0
-    f = np.asarray(frac, float)
-    total = f.sum()
-    P = np.cumsum(f[::-1])[::-1] / total if total > 0 else np.full(f.size, np.nan)
-    if not (np.all(np.isfinite(P)) and P[-1] < q and np.all(f >= 0)):
-        return percentile_size(x, np.clip(f, 0.0, None) / total, percent)
-    P[0] = 1.0
-    return percentile_from_cum(np.asarray(x, float), P, q)
+    """Deprecated alias of :func:`millflow.psd.percentile_size` (the one P80, which now
+    solves on the bracketing interval only, as this function did)."""
+    return percentile_size(x, frac, percent)
 
 
 @dataclass(frozen=True)
@@ -123,7 +114,7 @@ class ScaleUp:
         return self._cached_factors()["plant_power_kW"]
 
     def _p80(self, p):
-        return p80_fast(self.x, p)
+        return percentile_size(self.x, p, 80.0, validate=False)  # the circuit's own product, in a root loop
 
     def operate(self, theta, feed_tph=None) -> dict:
         """Circuit at the fresh feed rate (default ``feed_tph``): product fractions,

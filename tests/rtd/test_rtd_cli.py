@@ -85,3 +85,4 @@ def test_duplicated_column_is_refused(tmp_path, capsys):
     assert main(["fit", str(bad)]) == 2
     err = capsys.readouterr().err
     assert err.count("\n") == 1 and "'concentration' appears twice" in err
+

@@ -10,6 +10,7 @@ import json
 import os
 import subprocess
 import sys
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -84,10 +85,32 @@ def test_reference_algorithm_is_exact_for_equal_rates():
         assert abs(sum(M) - 1) < 1e-35
 
 
-def test_bench_command_quick_json_rows():
-    env = dict(os.environ, OPENBLAS_NUM_THREADS="1", OMP_NUM_THREADS="1", MKL_NUM_THREADS="1")
+def _installed_copy(tmp_path):
+    """The packages millflow and rtd copied alone into a folder (as an install puts them,
+    with their package data), and an empty working folder: the repository is neither on
+    the path nor the working folder."""
+    import shutil
+
+    import millflow
+    import rtd
+
+    site = tmp_path / "site"
+    for pkg in (millflow, rtd):
+        src = Path(pkg.__file__).parent
+        shutil.copytree(src, site / src.name, ignore=shutil.ignore_patterns("__pycache__", "build", "*.egg-info"))
+    work = tmp_path / "work"
+    work.mkdir()
+    return site, work
+
+
+def test_bench_command_quick_json_rows(tmp_path):
+    # run from a copy of the package, outside the repository: the suite reads its
+    # references from package data, never from the checkout
+    site, work = _installed_copy(tmp_path)
+    env = dict(os.environ, OPENBLAS_NUM_THREADS="1", OMP_NUM_THREADS="1", MKL_NUM_THREADS="1", PYTHONPATH=str(site))
+    env.pop("MILLFLOW_BENCH_DATA", None)
     out = subprocess.run([sys.executable, "-m", "millflow", "bench", "core", "--quick", "--json"],
-                         capture_output=True, text=True, env=env, timeout=120, cwd=ROOT)
+                         capture_output=True, text=True, env=env, timeout=300, cwd=work)
     assert out.returncode == 0, out.stderr
     rows = json.loads(out.stdout)
     assert rows and all({"case", "method", "runtime_s"} <= r.keys() for r in rows)
@@ -105,3 +128,24 @@ def test_bench_command_quick_json_rows():
 def test_unknown_suite_lists_the_valid_ones(capsys):
     assert main(["bench", "no-such-suite"]) == 2
     assert "core" in capsys.readouterr().err
+
+
+def test_no_library_module_reads_beside_the_package():
+    # an installed package has no repository around it: a module may find files inside
+    # its own package (package data) but never climb out of it through __file__
+    import ast
+    import re
+
+    import millflow
+
+    pkg = Path(millflow.__file__).parent
+    bad = []
+    for path in pkg.rglob("*.py"):
+        tree = ast.parse(path.read_text(encoding="utf-8"))
+        for node in ast.walk(tree):
+            if isinstance(node, ast.Name) and node.id == "__file__":
+                line = path.read_text(encoding="utf-8").splitlines()[node.lineno - 1]
+                climbs = len(re.findall(r"\.parent\b", line)) >= 2 or "parents[" in line or line.count("dirname") >= 2
+                if climbs:
+                    bad.append(f"{path.relative_to(pkg)}:{node.lineno}: {line.strip()}")
+    assert not bad, bad

@@ -1,6 +1,6 @@
 """Tests of millflow.fitting: data checks, forward models, global estimation, eq. 9 statistics.
 
-Synthetic problems come from millflow.bench.fit.make_batch_problem (batch grinding, eq. 5
+Synthetic problems come from millflow.synthetic.make_batch_problem (batch grinding, eq. 5
 rates, eq. 6 breakage, known parameters, 1 % noise on cumulative passing).
 """
 import json
@@ -11,7 +11,7 @@ import pandas as pd
 import pytest
 
 from millflow.batch import batch_grind
-from millflow.bench.fit import BOUNDS, TRUTH, make_batch_problem
+from millflow.synthetic import BOUNDS, TRUTH, make_batch_problem
 from millflow.breakage import b_from_B, normalized_B, power_law_rates
 from millflow.errors import InputError
 from millflow.fitting.data import psd_data_from_frames, read_psd_table

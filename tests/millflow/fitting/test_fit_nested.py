@@ -8,7 +8,7 @@ import numpy as np
 import pandas as pd
 import pytest
 
-from millflow.bench.fit import BOUNDS, TRUTH
+from millflow.synthetic import BOUNDS, TRUTH
 from millflow.errors import InputError
 from millflow.fitting.data import psd_data_from_frames
 from millflow.fitting.models import ForwardModel, ModelSpec, Parameter, default_parameters

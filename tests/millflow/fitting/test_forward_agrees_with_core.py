@@ -26,7 +26,7 @@ from hypothesis import strategies as st
 import rtd
 from millflow import classifiers
 from millflow.batch import batch_grind, batch_grind_population
-from millflow.bench.fit import make_batch_problem
+from millflow.synthetic import make_batch_problem
 from millflow.breakage import AustinRate, NormalizedBreakage, PowerLawRate
 from millflow.fitting.data import psd_data_from_frames
 from millflow.fitting.models import ForwardModel, ModelSpec

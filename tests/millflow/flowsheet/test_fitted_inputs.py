@@ -9,7 +9,7 @@ import sys
 import numpy as np
 import pytest
 
-from millflow.bench.scaleup import synthetic_lab_fit
+from millflow.synthetic import synthetic_lab_fit
 from millflow.errors import InputError
 from millflow.flowsheet import load
 from millflow.grid import SizeGrid

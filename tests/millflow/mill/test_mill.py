@@ -330,6 +330,27 @@ def test_dataset_layout_and_locations():
     np.testing.assert_allclose(ax["sample"].sum("size"), 1.0)
 
 
+
+def test_size_coordinate_means_the_same_in_every_dataset():
+    # "size" is the upper class size [m] with units, as the grid's own coordinate and the
+    # batch and flowsheet Datasets have it; the class number is "size_class"
+    from millflow.mill import transient_mill
+
+    grid, S, b, f = kernel()
+    want = grid.size_coord()
+    steady = steady_mill(S, b, f, rtd.TanksInSeries(TAU, 3), x=grid)
+    moving = transient_mill(S, b, rtd.TanksInSeries(TAU, 3), np.array([0.0, TAU]), feed=f, x=grid.x)
+    for ds in (steady, moving):
+        np.testing.assert_array_equal(ds["size"].values, want.values)
+        assert ds["size"].attrs["units"] == "m" == want.attrs["units"]
+        np.testing.assert_array_equal(ds["size_class"].values, np.arange(1, grid.n + 1))
+        np.testing.assert_array_equal(ds["x"].values, want.values)  # the old name, kept
+        # selecting by a size in metres works as on the grid's coordinate
+        assert float(ds["size"].sel(size=grid.x[2])) == grid.x[2]
+    bare = steady_mill(S, b, f, rtd.TanksInSeries(TAU, 3))  # no sizes given: class numbers only
+    assert "size" not in bare.coords and bare["size_class"].values[0] == 1
+
+
 def test_mill_object():
     grid, S, b, f = kernel()
     mill = Mill(S, b, rtd.TanksInSeries(TAU, 3), d=np.full(S.size, 0.8))
