@@ -5,7 +5,7 @@ import copy
 import numpy as np
 import pytest
 
-from millflow.bench.scaleup import synthetic_lab_fit
+from millflow.synthetic import synthetic_lab_fit
 from millflow.errors import InputError, SolverError
 from millflow.grid import SizeGrid
 from millflow.scaleup import Circuit, MillDesign, ScaleUp, fit_from_dict
