@@ -12,6 +12,7 @@ from __future__ import annotations
 
 import json
 import math
+import sys
 from pathlib import Path
 
 from millflow.commands.output import add_output_flags
@@ -24,6 +25,7 @@ def add_parser(subparsers) -> None:
     add_output_flags(p, out="output folder (default: <file stem>-balance)",
                      json="print one JSON object (the summary) instead of the table",
                      plots="do not write the PNG plots", quiet="print nothing but errors (and --json output)")
+    p.add_argument("--no-fit", action="store_true", help="skip the circuit fit of the survey's [fit] table")
     p.set_defaults(func=run)
 
 
@@ -69,6 +71,23 @@ def format_summary(s: dict) -> str:
     return "\n".join(lines)
 
 
+def format_fit(f: dict) -> str:
+    lines = ["", f"circuit fit: SSR {f['ssr']:.4g} on {f['dof']} degrees of freedom (weights: {f['weights']}), "
+                 f"{f['starts']} starts, spread {f['spread']:.2g}"]
+    w = max(len(n) for n in f["parameters"])
+    for n, p in f["parameters"].items():
+        lo, hi = p["ci95"]
+        lines.append(f"  {n:<{w}}  {p['value']:.5g} +- {p['se']:.3g}  95 % [{lo:.4g}, {hi:.4g}]  "
+                     + ("; ".join(p["flags"]) or "ok"))
+    loo = f.get("leave_one_stream_out") or {}
+    if loo:
+        lines.append("leave-one-stream-out prediction (RMS whitened error; about 1 = within its errors): " + ", ".join(
+            f"{n} {v['rms_normalised_error']:.2f}" if "rms_normalised_error" in v else f"{n} skipped"
+            for n, v in loo.items()))
+    lines.append("the fitted circuit is fitted_circuit.toml in the output folder: millflow run reproduces it")
+    return "\n".join(lines)
+
+
 def run(args) -> int:
     from millflow.commands.output import check_target, relocate, staged_folder
     from millflow.survey import read_survey, reconcile
@@ -77,15 +96,36 @@ def run(args) -> int:
     path = Path(args.file)
     out = Path(args.out) if args.out else Path.cwd() / f"{path.stem}-balance"
     check_target(out, overwrite=args.overwrite, input_path=path)
-    bal = reconcile(read_survey(path))
+    survey = read_survey(path)
+    bal = reconcile(survey)
     s = summary(bal)
+    cf = None
+    if survey.fit and not args.no_fit:
+        from millflow.survey.fit import fit_circuit
+
+        f = survey.fit
+        if not args.quiet and not args.json:
+            print(f"fitting {len(f['names'])} circuit parameters to the reconciled survey ...", file=sys.stderr)
+        cf = fit_circuit(bal, f["names"], f["bounds"], starts=f["starts"], global_search=f["global_search"],
+                         leave_one_out=f["leave_one_out"], quiet=args.quiet or args.json)
+        s["fit"] = cf.to_dict()
     with staged_folder(out, overwrite=args.overwrite, input_path=path, command="balance") as tmp:
         files = relocate(save(bal, tmp, plots=not args.no_plots).values(), tmp, out)
+        if cf is not None:
+            from millflow.survey.fit import to_toml
+
+            (tmp / "fitted_circuit.toml").write_text(
+                f"# {survey.flowsheet.title or 'circuit'}: parameters fitted to the survey {path.name} "
+                "by millflow balance\n" + to_toml(cf.document()), encoding="utf-8")
+            (tmp / "fit.json").write_text(json.dumps(s["fit"], indent=2, default=float), encoding="utf-8")
+            files += relocate([tmp / "fitted_circuit.toml", tmp / "fit.json"], tmp, out)
     s["output_dir"] = str(out)
     s["files_written"] = [Path(f).name for f in files]
     if args.json:
         print(json.dumps(s))
     elif not args.quiet:
         print(format_summary(s))
+        if cf is not None:
+            print(format_fit(s["fit"]))
         print(f"results written to {out}/ ({', '.join(s['files_written'])})")
     return 0

@@ -114,6 +114,7 @@ class Survey:
     errors: ErrorModel = field(default_factory=ErrorModel)
     title: str = ""
     source: str = "<survey>"
+    fit: dict | None = None     # the [fit] table (millflow.survey.fit.read_fit_table), if any
 
     @property
     def wet(self) -> bool:
@@ -260,7 +261,7 @@ def survey_from_dict(data: dict, *, source: str = "<dict>", base_dir=None, flows
 
     base = Path(base_dir) if base_dir is not None else (
         Path(source).resolve().parent if not source.startswith("<") else Path.cwd())
-    check_keys(data, {"title", "flowsheet", "errors", "streams", "water_additions"}, "survey")
+    check_keys(data, {"title", "flowsheet", "errors", "streams", "water_additions", "fit"}, "survey")
     title = data.get("title", "")
     if not isinstance(title, str):
         raise InputError(f"title = {title!r}: expected a string")
@@ -301,7 +302,18 @@ def survey_from_dict(data: dict, *, source: str = "<dict>", base_dir=None, flows
         if v is None and sd is not None:
             raise InputError(f"{where}: water_sd is given without water_tph")
         additions[unit] = (v, None if v is None else (errors.water_rel * v if sd is None else sd))
-    return Survey(flowsheet, streams, additions, errors, title, source)
+    fit = None
+    if "fit" in data:
+        from millflow.survey.fit import read_fit_table
+
+        names, bounds, options = read_fit_table(data["fit"])
+        doc = flowsheet.meta.get("document", {})
+        from millflow.survey.fit import _get
+
+        for n in names:
+            _get(doc, n)  # a key the flowsheet does not hold is named now, not after the balance
+        fit = {"names": names, "bounds": bounds, **options}
+    return Survey(flowsheet, streams, additions, errors, title, source, fit)
 
 
 def _bad_table(key, v):

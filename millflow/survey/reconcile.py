@@ -358,7 +358,7 @@ def reconcile(survey, *, max_nfev: int = 200, reweight: int = 2) -> Balance:
     flows = np.abs(z[: st.S * st.K]).sum() or 1.0
     bal = Balance(survey, st, z, N, z_p, cov_t, null_t, h, adjusted_sd, leverage, rank, chi, threshold, nfev,
                   time.perf_counter() - t0, float(np.max(np.abs(resid_bal), initial=0.0) / flows),
-                  {"sd_at_measured": sd_measured, "reweight_passes": reweight})
+                  {"sd_at_measured": sd_measured, "reweight_passes": reweight, "J": J})
     measured_flows = [n for n in st.streams if bal.solids(n)[2]]
     if not measured_flows:
         raise InputError(f"{survey.source}: unobservable system: no stream's solids flow is determined by the "
