@@ -243,6 +243,18 @@ class CircuitFit:
     leave_one_out: dict
 
     @property
+    def cov_scale(self) -> float:
+        """Factor on the eq. 9 covariance: the residuals are whitened by the stated covariance, so
+        SER^2 = 1 is known; eq. 9 rescales by the observed SER^2. The larger of the two is used
+        (a reported SE is never below either estimate)."""
+        ser2 = float(self.result.ser) ** 2
+        return max(1.0, 1.0 / ser2) if ser2 > 0 and math.isfinite(ser2) else 1.0
+
+    @property
+    def covariance(self) -> np.ndarray:
+        return np.asarray(self.result.stats["covariance"]) * self.cov_scale
+
+    @property
     def values(self) -> dict:
         return {n: self.result.params[n].value for n in self.model.names}
 
@@ -259,7 +271,7 @@ class CircuitFit:
             edit(doc)
             return float(quantity(self.model.solve(t, doc)))
 
-        cov = np.asarray(self.result.stats["covariance"])
+        cov = self.covariance
         g = np.zeros(th.size)
         for k in range(th.size):
             h = step * max(abs(th[k]), 1e-3)
@@ -271,14 +283,19 @@ class CircuitFit:
 
     def to_dict(self) -> dict:
         out = {}
+        k = math.sqrt(self.cov_scale)
         for n in self.model.names:
             s = self.result.stats["params"][n]
-            out[n] = {"value": s["value"], "se": s["se"], "ci95": list(s["ci95"]),
+            lo, hi = s["ci95"]
+            v = s["value"]
+            out[n] = {"value": v, "se": s["se"] * k, "se_eq9": s["se"],
+                      "ci95": [v - (v - lo) * k, v + (hi - v) * k],
                       "flags": list(s.get("flags", s.get("reasons", [])))}
         return {"parameters": out, "ssr": self.result.ssr, "n_data": self.result.n_data,
                 "dof": self.result.n_data - self.result.n_params, "spread": self.result.spread,
                 "starts": self.result.starts, "runtime_s": self.result.runtime_s,
                 "weights": "reconciled covariance (whitened, pseudo-inverse)",
+                "se_rule": "the larger of eq. 9 (scaled by SER^2) and the known-variance covariance (SER^2 = 1)",
                 "leave_one_stream_out": self.leave_one_out}
 
 
