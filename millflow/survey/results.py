@@ -132,7 +132,7 @@ def to_dataset(bal):
                                             "reconciled solids mass fraction")
     ds.attrs.update({"title": bal.survey.title, "source_file": bal.survey.source,
                      "method": "weighted least squares, node balances exact (null-space elimination), "
-                               "Gauss-Newton/Levenberg-Marquardt on the bilinear terms",
+                               "Gauss-Newton on the bilinear terms",
                      "chi_square": json.dumps(_clean(bal.chi_square)),
                      "balance_error": bal.balance_error})
     return ds
@@ -161,7 +161,7 @@ def summary(bal) -> dict:
         "title": bal.survey.title, "source_file": bal.survey.source,
         "method": ("weighted least squares; node balances (solids per size class, total solids across mills, "
                    "water) held exactly by null-space elimination; bilinear flow x fraction terms by "
-                   "Gauss-Newton with Levenberg-Marquardt damping; error-model SDs re-evaluated at the "
+                   "Gauss-Newton with step halving; error-model SDs re-evaluated at the "
                    f"reconciled values ({bal.meta.get('reweight_passes', 0)} passes); linearised covariances"),
         "chi_square": chi,
         "chi_square_verdict": (None if chi["dof"] <= 0 else

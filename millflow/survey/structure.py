@@ -90,10 +90,16 @@ class Structure:
         g[self.m_index(s)] = 1.0
         return g
 
-    def measure(self, z) -> tuple[np.ndarray, np.ndarray]:
-        """Measurement functions h(z) and their Jacobian dh/dz."""
+    def measure(self, z, sparse: bool = False):
+        """Measurement functions h(z) and their Jacobian dh/dz (a CSR matrix with ``sparse``:
+        each row touches one stream's classes, so J N costs a tenth of the dense product)."""
+        from scipy.sparse import coo_matrix
+
+        if not hasattr(self, "_L_coo"):
+            c = coo_matrix(self.L)
+            self._L_coo = (c.row, c.col, c.data)
         h = self.L @ z
-        J = self.L.copy()
+        rows, cols, vals = [self._L_coo[0]], [self._L_coo[1]], [self._L_coo[2]]
         S, K = self.S, self.K
         m = z[:S * K].reshape(S, K)
         M = m.sum(axis=1)
@@ -104,8 +110,9 @@ class Structure:
                 f = (self.frac_mask * m[si]).sum(axis=1) / Ms
                 h[self.frac_rows] = f
                 block = (self.frac_mask - f[:, None]) / Ms[:, None]
-            cols = si[:, None] * K + np.arange(K)[None, :]
-            J[self.frac_rows[:, None], cols] = block
+            rows.append(np.repeat(self.frac_rows, K))
+            cols.append((si[:, None] * K + np.arange(K)[None, :]).ravel())
+            vals.append(block.ravel())
         if self.content_rows.size:
             si = self.content_stream
             W = z[S * K + si]
@@ -113,10 +120,12 @@ class Structure:
             with np.errstate(divide="ignore", invalid="ignore"):
                 h[self.content_rows] = M[si] / T
                 dm, dw = W / T ** 2, -M[si] / T ** 2
-            for r, s, a, c in zip(self.content_rows, si, dm, dw):
-                J[r, self.m_index(s)] = a
-                J[r, self.w_index(s)] = c
-        return h, J
+            rows += [np.repeat(self.content_rows, K), self.content_rows]
+            cols += [(si[:, None] * K + np.arange(K)[None, :]).ravel(), S * K + si]
+            vals += [np.repeat(dm, K), dw]
+        J = coo_matrix((np.concatenate(vals), (np.concatenate(rows), np.concatenate(cols))),
+                       shape=(len(self.rows), self.n_z)).tocsr()
+        return h, (J if sparse else J.toarray())
 
 
 def _common_sieves(survey) -> tuple[np.ndarray, dict]:
