@@ -23,7 +23,7 @@ LAYERS = [
     ("mill", ("millflow.mill",)),
     ("circuits", ("millflow.flowsheet", "millflow.fitting", "millflow.scaleup",
                   "millflow.sweep")),  # sweep: where issue 14's sweeps land
-    ("studies", ("millflow.falsify",)),
+    ("studies", ("millflow.falsify", "millflow.survey")),
     ("commands", ("millflow.bench", "millflow.commands", "millflow.cli", "millflow.__main__")),
 ]
 

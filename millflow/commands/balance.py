@@ -44,7 +44,8 @@ def format_summary(s: dict) -> str:
                     + ([_f(v.get("solids_content_pct")), _f(v.get("water_tph"))] if wet else []))
     width = [max(len(str(r[k])) for r in [head] + rows) for k in range(len(head))]
     for r in [head] + rows:
-        lines.append("  ".join(str(c).ljust(w) if k == 0 else str(c).rjust(w) for k, (c, w) in enumerate(zip(r, width))))
+        lines.append("  ".join(str(c).ljust(w) if k == 0 else str(c).rjust(w)
+                               for k, (c, w) in enumerate(zip(r, width))))
         if r is head:
             lines.append("  ".join("-" * w for w in width))
     lines.append("")
@@ -52,7 +53,8 @@ def format_summary(s: dict) -> str:
     if chi["dof"] > 0:
         lines.append(f"weighted SSR {chi['ssr']:.4g} on {chi['dof']} degrees of freedom ({chi['n_measured']} measured, "
                      f"rank {chi['rank']}): chi-square 95 % point {chi['critical_95']:.4g}, p = {chi['p_value']:.3g}: "
-                     + ("consistent with the stated errors" if chi["passed"] else "LARGER than the stated errors allow"))
+                     + ("consistent with the stated errors" if chi["passed"]
+                        else "LARGER than the stated errors allow"))
     else:
         lines.append("no redundancy (0 degrees of freedom): nothing to test; every value is as measured")
     cand = s["gross_error_candidates"]

@@ -154,7 +154,7 @@ class CircuitModel:
                 W, _, wok = bal.water(n)
                 if wok:
                     u["water_tph"] = float(W * TPH)
-        for k, unit in enumerate(bal.structure.additions):
+        for unit in bal.structure.additions:
             v, _, ok = bal.addition(unit)
             if ok:
                 tbl = self.doc["units"][unit]

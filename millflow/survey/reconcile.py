@@ -210,7 +210,7 @@ class Balance:
 
 def _start(st: Structure, survey) -> np.ndarray:
     """A starting point: measured flows and fractions where given, typical ones elsewhere."""
-    S, K = st.S, st.K
+    K = st.K
     fr = {}
     for r, s, mask in zip(st.frac_rows, st.frac_stream, st.frac_mask):
         fr.setdefault(int(s), []).append((st.y[r], mask))

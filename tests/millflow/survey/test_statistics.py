@@ -54,7 +54,7 @@ def test_reconciliation_statistics(name):
                 v, sd, ok = bal.solids(n)
                 assert ok
                 covered.append(abs(v - truth["solids"][n]) <= 1.959964 * sd)
-        for n, (v, sd, ok) in bal.circulating_loads().items():
+        for n, (v, sd, _ok) in bal.circulating_loads().items():
             cl_covered.append(abs(v - truth["circulating_load"][n]) <= 1.959964 * sd)
         t = _truth_rows(bal, truth)
         closer.append((np.sum(((bal.adjusted - t) / bal.sd) ** 2), np.sum(((bal.measured - t) / bal.sd) ** 2)))
