@@ -52,6 +52,7 @@ EXAMPLES = {
     "scaleup": "millflow scaleup lab_fit.json --to examples/scaleup/plant.toml --target-p80-um 150",
     "falsify": "millflow falsify docs/examples/falsify/tanks.toml --out study",
     "bench": "millflow bench core --quick",
+    "balance": "millflow balance examples/survey/survey.toml --out survey-balance",
 }
 
 

@@ -24,7 +24,7 @@ LAYERS = [
     ("mill", ("millflow.mill",)),
     ("circuits", ("millflow.flowsheet", "millflow.fitting", "millflow.scaleup",
                   "millflow.sweep")),  # sweep: where issue 14's sweeps land
-    ("studies", ("millflow.falsify", "millflow.synthetic")),  # synthetic: problems with known truths
+    ("studies", ("millflow.falsify", "millflow.synthetic", "millflow.survey")),  # synthetic: problems with known truths
     ("commands", ("millflow.bench", "millflow.commands", "millflow.cli", "millflow.__main__")),
 ]
 

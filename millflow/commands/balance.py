@@ -1,0 +1,133 @@
+"""`millflow balance SURVEY.toml [--out DIR] [--json] [--no-plots] [--overwrite] [--quiet]`: mass-balance a survey.
+
+Reads the survey (measurements per stream on a flowsheet's topology, docs/survey.md),
+reconciles it by weighted least squares with the node balances held exactly, and
+prints the adjusted stream flows with their SDs, the chi-square test of the weighted
+sum of squares, the gross-error candidates, the circulating loads and what the survey
+leaves undetermined. Writes results.nc, measurements.csv, streams.csv, passing.csv,
+summary.json and one plot per stream to the output folder (default
+``<file stem>-balance/``), whole or not at all.
+"""
+from __future__ import annotations
+
+import json
+import math
+import sys
+from pathlib import Path
+
+from millflow.commands.output import add_output_flags
+
+
+def add_parser(subparsers) -> None:
+    p = subparsers.add_parser("balance", help="mass-balance (reconcile) a plant survey",
+                              description=__doc__.split("\n\n")[1] if __doc__ else None)
+    p.add_argument("file", help="survey file (TOML), e.g. examples/survey/survey.toml")
+    add_output_flags(p, out="output folder (default: <file stem>-balance)",
+                     json="print one JSON object (the summary) instead of the table",
+                     plots="do not write the PNG plots", quiet="print nothing but errors (and --json output)")
+    p.add_argument("--no-fit", action="store_true", help="skip the circuit fit of the survey's [fit] table")
+    p.set_defaults(func=run)
+
+
+def _f(v, fmt="{:.1f}") -> str:
+    return "-" if v is None or (isinstance(v, float) and not math.isfinite(v)) else fmt.format(v)
+
+
+def format_summary(s: dict) -> str:
+    lines = [s["title"] or s["source_file"], ""]
+    wet = any("water_tph" in v for v in s["streams"].values())
+    head = ["stream", "measured t/h", "adjusted t/h", "SD t/h"] + (["% solids", "water t/h"] if wet else [])
+    rows = []
+    for n, v in s["streams"].items():
+        adj = _f(v["solids_tph"]) if v["solids_observable"] else "unobservable"
+        rows.append([n, _f(v["solids_measured_tph"]), adj, _f(v["solids_sd_tph"], "{:.2f}")]
+                    + ([_f(v.get("solids_content_pct")), _f(v.get("water_tph"))] if wet else []))
+    width = [max(len(str(r[k])) for r in [head] + rows) for k in range(len(head))]
+    for r in [head] + rows:
+        lines.append("  ".join(str(c).ljust(w) if k == 0 else str(c).rjust(w)
+                               for k, (c, w) in enumerate(zip(r, width))))
+        if r is head:
+            lines.append("  ".join("-" * w for w in width))
+    lines.append("")
+    chi = s["chi_square"]
+    if chi["dof"] > 0:
+        lines.append(f"weighted SSR {chi['ssr']:.4g} on {chi['dof']} degrees of freedom ({chi['n_measured']} measured, "
+                     f"rank {chi['rank']}): chi-square 95 % point {chi['critical_95']:.4g}, p = {chi['p_value']:.3g}: "
+                     + ("consistent with the stated errors" if chi["passed"]
+                        else "LARGER than the stated errors allow"))
+    else:
+        lines.append("no redundancy (0 degrees of freedom): nothing to test; every value is as measured")
+    cand = s["gross_error_candidates"]
+    lines.append(f"gross-error candidates (|normalised adjustment| > {s['gross_error_threshold']:.2f}): "
+                 + (", ".join(f"{c['measurement']} ({c['normalised_adjustment']:+.1f})" for c in cand) or "none"))
+    if not cand and s["largest_normalised_adjustments"]:
+        c = s["largest_normalised_adjustments"][0]
+        lines.append(f"largest normalised adjustment: {c['measurement']} ({c['normalised_adjustment']:+.2f})")
+    for n, c in s["circulating_load"].items():
+        lines.append(f"circulating load {n}: " + (f"{c['value_pct']:.1f} +- {c['sd_pct']:.1f} %"
+                                                  if c["observable"] else "unobservable"))
+    bad = s["observability"]["unobservable"]
+    lines.append("unobservable (not determined by the survey; no value is given): " + (", ".join(bad) or "none"))
+    lines.append(f"balances close to {s['balance_error']:.1e} (relative); {s['iterations']} evaluations, "
+                 f"{1e3 * s['runtime_s']:.0f} ms")
+    return "\n".join(lines)
+
+
+def format_fit(f: dict) -> str:
+    lines = ["", f"circuit fit: SSR {f['ssr']:.4g} on {f['dof']} degrees of freedom (weights: {f['weights']}), "
+                 f"{f['starts']} starts, spread {f['spread']:.2g}"]
+    w = max(len(n) for n in f["parameters"])
+    for n, p in f["parameters"].items():
+        lo, hi = p["ci95"]
+        lines.append(f"  {n:<{w}}  {p['value']:.5g} +- {p['se']:.3g}  95 % [{lo:.4g}, {hi:.4g}]  "
+                     + ("; ".join(p["flags"]) or "ok"))
+    loo = f.get("leave_one_stream_out") or {}
+    if loo:
+        lines.append("leave-one-stream-out prediction (RMS whitened error; about 1 = within its errors): " + ", ".join(
+            f"{n} {v['rms_normalised_error']:.2f}" if "rms_normalised_error" in v else f"{n} skipped"
+            for n, v in loo.items()))
+    lines.append("the fitted circuit is fitted_circuit.toml in the output folder: millflow run reproduces it")
+    return "\n".join(lines)
+
+
+def run(args) -> int:
+    from millflow.commands.output import check_target, relocate, staged_folder
+    from millflow.survey import read_survey, reconcile
+    from millflow.survey.results import save, summary
+
+    path = Path(args.file)
+    out = Path(args.out) if args.out else Path.cwd() / f"{path.stem}-balance"
+    check_target(out, overwrite=args.overwrite, input_path=path)
+    survey = read_survey(path)
+    bal = reconcile(survey)
+    s = summary(bal)
+    cf = None
+    if survey.fit and not args.no_fit:
+        from millflow.survey.fit import fit_circuit
+
+        f = survey.fit
+        if not args.quiet and not args.json:
+            print(f"fitting {len(f['names'])} circuit parameters to the reconciled survey ...", file=sys.stderr)
+        cf = fit_circuit(bal, f["names"], f["bounds"], starts=f["starts"], global_search=f["global_search"],
+                         leave_one_out=f["leave_one_out"], quiet=args.quiet or args.json)
+        s["fit"] = cf.to_dict()
+    with staged_folder(out, overwrite=args.overwrite, input_path=path, command="balance") as tmp:
+        files = relocate(save(bal, tmp, plots=not args.no_plots).values(), tmp, out)
+        if cf is not None:
+            from millflow.survey.fit import to_toml
+
+            (tmp / "fitted_circuit.toml").write_text(
+                f"# {survey.flowsheet.title or 'circuit'}: parameters fitted to the survey {path.name} "
+                "by millflow balance\n" + to_toml(cf.document()), encoding="utf-8")
+            (tmp / "fit.json").write_text(json.dumps(s["fit"], indent=2, default=float), encoding="utf-8")
+            files += relocate([tmp / "fitted_circuit.toml", tmp / "fit.json"], tmp, out)
+    s["output_dir"] = str(out)
+    s["files_written"] = [Path(f).name for f in files]
+    if args.json:
+        print(json.dumps(s))
+    elif not args.quiet:
+        print(format_summary(s))
+        if cf is not None:
+            print(format_fit(s["fit"]))
+        print(f"results written to {out}/ ({', '.join(s['files_written'])})")
+    return 0

@@ -1,0 +1,388 @@
+"""Fitting a circuit to a reconciled survey: named flowsheet parameters against every stream at once.
+
+The parameters are keys of the flowsheet document by their dotted path, in the units
+their keys state (``materials.ore.rate.A_per_min``, ``units.cyclones.d50c_um``,
+``units.cyclones.bypass``, ``units.ball_mill.tau_min``, a predicted cyclone's ``F1``):
+any number the flowsheet reader accepts, so mill breakage forms (eqs. 5-8, 10),
+transport, classifier curves and predicted-cyclone calibration are all fitted the same
+way. The feeds are set to the reconciled feed streams (solids, sieve analysis, water)
+and measured water additions to their reconciled values: the survey's inputs are
+inputs, not data.
+
+Data and weights: the reconciled measurements of every other stream, whose covariance
+C = sd J cov(t) J^T sd is singular (the balances hold exactly). The residuals are
+whitened by C^{+1/2} (eigen-decomposition, the zero eigenvalues dropped), so that the
+SSR is sum (model - reconciled)^T C^+ (model - reconciled): to first order the same as
+fitting the raw measurements with their own SDs, because a flowsheet's predictions
+satisfy the balances. The fit is :func:`millflow.fitting.estimate.fit` (global search or
+multi-start, eq. 9 SEs, non-uniqueness spread) on a forward model that solves the
+flowsheet for each parameter vector.
+"""
+from __future__ import annotations
+
+import copy
+import json
+import math
+from dataclasses import dataclass
+
+import numpy as np
+
+from millflow.errors import InputError, MillflowError
+from millflow.fitting.models import Parameter
+
+__all__ = ["CircuitModel", "fit_circuit", "read_fit_table", "to_toml", "leave_one_stream_out"]
+
+TPH = 3.6
+
+
+def _get(doc: dict, path: str):
+    node = doc
+    for part in path.split("."):
+        if not isinstance(node, dict) or part not in node:
+            raise InputError(f"fit.parameters.{path}: not a key of the flowsheet (at {part!r})")
+        node = node[part]
+    if isinstance(node, bool) or not isinstance(node, (int, float)):
+        raise InputError(f"fit.parameters.{path}: the flowsheet holds {node!r} there; expected a number")
+    return float(node)
+
+
+def _set(doc: dict, path: str, value: float) -> None:
+    parts = path.split(".")
+    node = doc
+    for part in parts[:-1]:
+        node = node[part]
+    node[parts[-1]] = float(value)
+
+
+class _Spec:
+    def __init__(self, names):
+        self.names = names
+
+    def label(self) -> str:
+        return "circuit fit of " + ", ".join(self.names)
+
+
+class _Data:
+    source = "reconciled survey"
+
+
+class CircuitModel:
+    """A forward model for :func:`millflow.fitting.estimate.fit`: flowsheet parameters -> whitened
+    predictions of the reconciled measurements (rows ``rows`` of the balance)."""
+
+    def __init__(self, balance, names, rows=None):
+        st = balance.structure
+        fs = balance.survey.flowsheet
+        self.balance, self.names = balance, list(names)
+        self.doc = copy.deepcopy(fs.meta["document"])
+        self.base_dir = fs.meta.get("base_dir")
+        self._feeds_from_survey()
+        feed_streams = {n for n, s in fs.streams.items() if fs.units[s.source].type == "feed"}
+        inputs = [i for i, r in enumerate(st.rows) if r["kind"] == "addition" or r["stream"] in feed_streams]
+        if rows is None:
+            rows = [i for i in range(len(st.rows)) if i not in inputs]
+        self.rows = np.asarray(rows, int)
+        if self.rows.size == 0:
+            raise InputError("fit: no measured stream other than the feeds; there is nothing to fit")
+        Jw = balance.meta["J"]
+        G = Jw @ balance.cov_t @ Jw.T
+        Cfull = st.sd[:, None] * G * st.sd[None, :]
+        # the model takes the reconciled feeds as inputs, so it shares their errors: weight by the
+        # covariance of the other streams given the feeds, C_II - C_IF C_FF^+ C_FI
+        C = Cfull[np.ix_(self.rows, self.rows)]
+        if inputs:
+            CIF = Cfull[np.ix_(self.rows, inputs)]
+            C = C - CIF @ np.linalg.pinv(Cfull[np.ix_(inputs, inputs)], rcond=1e-10, hermitian=True) @ CIF.T
+            C = 0.5 * (C + C.T)
+        lam, Q = np.linalg.eigh(C)
+        keep = lam > 1e-10 * lam.max()
+        self.W = (Q[:, keep] / np.sqrt(lam[keep])).T
+        self.y = self.W @ balance.adjusted[self.rows]
+        self.weights = np.ones(self.y.size)
+        self.spec = _Spec(self.names)
+        self.data = _Data()
+        self.start = {n: _get(self.doc, n) for n in self.names}
+
+    # ---------------------------------------------------------------- fit's interface
+    @property
+    def param_names(self):
+        return tuple(self.names)
+
+    @property
+    def n_data(self) -> int:
+        return int(self.y.size)
+
+    def sample_ids(self):
+        return None
+
+    def describe(self) -> dict:
+        return {"parameters": self.names, "rows": self.rows.tolist()}
+
+    def predict(self, theta):
+        th = np.atleast_2d(theta)
+        out = np.empty((th.shape[0], self.y.size))
+        for k, row in enumerate(th):
+            try:
+                out[k] = self.W @ self.measurements(row)[self.rows]
+            except (MillflowError, FloatingPointError, ValueError, np.linalg.LinAlgError):
+                out[k] = np.nan
+        return out
+
+    # ------------------------------------------------------------------- the circuit
+    def _feeds_from_survey(self) -> None:
+        bal = self.balance
+        fs = bal.survey.flowsheet
+        for n, s in fs.streams.items():
+            if fs.units[s.source].type != "feed":
+                continue
+            M, _, ok = bal.solids(n)
+            p, _, pok = bal.passing(n)
+            if not (ok and pok.all()):
+                raise InputError(f"fit: the feed stream {n} is not determined by the survey (unobservable)")
+            u = self.doc["units"][s.source]
+            u["solids_tph"] = float(M * TPH)
+            sizes = [float(x) for x in bal.structure.sieves * 1e6]
+            passing = [float(x) for x in np.clip(p, 0.0, 1.0) * 100]
+            top = fs.grid.x[0] * 1e6
+            if passing[0] < 100.0 - 1e-9 and sizes[0] < top * (1 - 1e-9):
+                sizes, passing = [top] + sizes, [100.0] + passing
+            passing = [float(x) for x in np.minimum.accumulate(passing)]  # reconciled passing is monotone to rounding
+            u["psd"] = {"form": "sieves", "size_um": sizes, "passing_pct": passing}
+            for k in [k for k in u if k.startswith(("water_", "solids_content_"))]:
+                del u[k]
+            if bal.structure.wet:
+                W, _, wok = bal.water(n)
+                if wok:
+                    u["water_tph"] = float(W * TPH)
+        for unit in bal.structure.additions:
+            v, _, ok = bal.addition(unit)
+            if ok:
+                tbl = self.doc["units"][unit]
+                for key in [key for key in tbl if key.startswith("add_water_")]:
+                    del tbl[key]
+                tbl["add_water_tph"] = float(v * TPH)
+
+    def document(self, theta) -> dict:
+        doc = copy.deepcopy(self.doc)
+        for n, v in zip(self.names, theta):
+            _set(doc, n, v)
+        return doc
+
+    def solve(self, theta, doc=None):
+        from millflow.flowsheet import from_dict, solve
+
+        fs = from_dict(self.document(theta) if doc is None else doc, source="<fitted circuit>",
+                       base_dir=self.base_dir)
+        return solve(fs)
+
+    def measurements(self, theta, sol=None) -> np.ndarray:
+        """The model's value of every measurement row of the balance (SI fractions and kg/s)."""
+        return predicted_measurements(self.balance, sol if sol is not None else self.solve(theta))
+
+
+def predicted_measurements(balance, sol) -> np.ndarray:
+    """The measurement functions of ``balance`` evaluated on a solved flowsheet."""
+    from millflow.psd import cum_passing_at
+
+    st = balance.structure
+    fs = sol.flowsheet
+    z = np.zeros(st.n_z)
+    for s, n in enumerate(st.streams):
+        f = np.maximum(sol.flow(n), 0.0)
+        M = f.sum()
+        P = np.concatenate([[1.0], cum_passing_at(fs.grid, f / M, st.sieves), [0.0]]) if M > 0 else None
+        cls = -np.diff(P) if P is not None else np.zeros(st.sieves.size + 1)
+        z[st.m_index(s)] = M * cls[st.live]
+        if st.wet:
+            z[st.w_index(s)] = sol.water_flow(n)
+    for k, u in enumerate(st.additions):
+        z[st.a_index(k)] = fs.water_added.get(u, 0.0)
+    return st.measure(z)[0]
+
+
+def read_fit_table(t, where: str = "fit") -> tuple[list, dict, dict]:
+    """Parameter names, {name: (min, max)} and optimizer options of a survey's ``[fit]`` table."""
+    from millflow.inputs import check_keys
+
+    if not isinstance(t, dict):
+        raise InputError(f"{where}: expected a table [fit]")
+    check_keys(t, {"parameters", "starts", "global_search", "leave_one_out"}, where)
+    pt = t.get("parameters")
+    if not isinstance(pt, dict) or not pt:
+        raise InputError(f"{where}.parameters: expected a table of flowsheet keys, e.g. "
+                         "\"units.cyclones.d50c_um\" = {min = 50, max = 300}")
+    bounds = {}
+    for name, b in pt.items():
+        w = f"{where}.parameters.{name}"
+        if not isinstance(b, dict):
+            raise InputError(f"{w}: expected {{min = ..., max = ...}}")
+        check_keys(b, {"min", "max"}, w)
+        lo, hi = b.get("min"), b.get("max")
+        if not all(isinstance(v, (int, float)) and not isinstance(v, bool) and math.isfinite(v) for v in (lo, hi)):
+            raise InputError(f"{w}: expected numbers min and max")
+        if not lo < hi:
+            raise InputError(f"{w}: min = {lo} is not below max = {hi}")
+        bounds[name] = (float(lo), float(hi))
+    starts = t.get("starts", 3)
+    if isinstance(starts, bool) or not isinstance(starts, int) or starts < 1:
+        raise InputError(f"{where}.starts = {starts!r}: expected a whole number >= 1")
+    gs = t.get("global_search", False)
+    loo = t.get("leave_one_out", True)
+    for k, v in (("global_search", gs), ("leave_one_out", loo)):
+        if not isinstance(v, bool):
+            raise InputError(f"{where}.{k} = {v!r}: expected true or false")
+    return list(bounds), bounds, {"starts": starts, "global_search": gs, "leave_one_out": loo}
+
+
+@dataclass
+class CircuitFit:
+    """A fitted circuit: the estimate (:class:`~millflow.fitting.estimate.FitResult`) and its model."""
+
+    model: CircuitModel
+    result: object
+    leave_one_out: dict
+
+    @property
+    def cov_scale(self) -> float:
+        """Factor on the eq. 9 covariance: the residuals are whitened by the stated covariance, so
+        SER^2 = 1 is known; eq. 9 rescales by the observed SER^2. The larger of the two is used
+        (a reported SE is never below either estimate)."""
+        ser2 = float(self.result.ser) ** 2
+        return max(1.0, 1.0 / ser2) if ser2 > 0 and math.isfinite(ser2) else 1.0
+
+    @property
+    def covariance(self) -> np.ndarray:
+        return np.asarray(self.result.stats["covariance"]) * self.cov_scale
+
+    @property
+    def values(self) -> dict:
+        return {n: self.result.params[n].value for n in self.model.names}
+
+    def document(self) -> dict:
+        return self.model.document([self.values[n] for n in self.model.names])
+
+    def prediction_band(self, edit, quantity, step: float = 1e-4) -> tuple[float, float]:
+        """(value, SD) of ``quantity(solution)`` at an operating point ``edit(document)`` (in place),
+        the SD propagated from the parameter covariance (eq. 9) by central differences."""
+        th = np.array([self.values[n] for n in self.model.names])
+
+        def q(t):
+            doc = self.model.document(t)
+            edit(doc)
+            return float(quantity(self.model.solve(t, doc)))
+
+        cov = self.covariance
+        g = np.zeros(th.size)
+        for k in range(th.size):
+            h = step * max(abs(th[k]), 1e-3)
+            tp, tm = th.copy(), th.copy()
+            tp[k] += h
+            tm[k] -= h
+            g[k] = (q(tp) - q(tm)) / (2 * h)
+        return q(th), float(math.sqrt(max(g @ cov @ g, 0.0)))
+
+    def to_dict(self) -> dict:
+        out = {}
+        k = math.sqrt(self.cov_scale)
+        for n in self.model.names:
+            s = self.result.stats["params"][n]
+            lo, hi = s["ci95"]
+            v = s["value"]
+            out[n] = {"value": v, "se": s["se"] * k, "se_eq9": s["se"],
+                      "ci95": [v - (v - lo) * k, v + (hi - v) * k],
+                      "flags": list(s.get("flags", s.get("reasons", [])))}
+        return {"parameters": out, "ssr": self.result.ssr, "n_data": self.result.n_data,
+                "dof": self.result.n_data - self.result.n_params, "spread": self.result.spread,
+                "starts": self.result.starts, "runtime_s": self.result.runtime_s,
+                "weights": "reconciled covariance (whitened, pseudo-inverse)",
+                "se_rule": "the larger of eq. 9 (scaled by SER^2) and the known-variance covariance (SER^2 = 1)",
+                "leave_one_stream_out": self.leave_one_out}
+
+
+def fit_circuit(balance, names, bounds: dict, *, starts: int = 3, global_search: bool = False,
+                leave_one_out: bool = True, quiet: bool = True, seed: int = 0) -> CircuitFit:
+    """Fit flowsheet parameters ``names`` (dotted document paths, bounds {name: (min, max)}) to ``balance``."""
+    from millflow.fitting.estimate import fit
+
+    model = CircuitModel(balance, names)
+    params = {n: Parameter(n, min(max(model.start[n], bounds[n][0]), bounds[n][1]), bounds[n][0], bounds[n][1])
+              for n in names}
+    res = fit(model, params, global_search=global_search, starts=starts, grid_check=False, quiet=quiet,
+              seed=seed, popsize=6, maxiter=30)
+    loo = leave_one_stream_out(balance, names, params, res) if leave_one_out else {}
+    return CircuitFit(model, res, loo)
+
+
+def leave_one_stream_out(balance, names, params, res) -> dict:
+    """Refit without each measured stream in turn and predict it: per stream the RMS of the
+    whitened prediction error (about 1 when the model predicts it within its errors)."""
+    from millflow.fitting.estimate import fit
+
+    full = CircuitModel(balance, names)
+    st = balance.structure
+    out = {}
+    best = {n: Parameter(n, res.params[n].value, params[n].min, params[n].max) for n in names}
+    for stream in dict.fromkeys(st.rows[i]["stream"] for i in full.rows):
+        keep = [i for i in full.rows if st.rows[i]["stream"] != stream]
+        held = [i for i in full.rows if st.rows[i]["stream"] == stream]
+        try:
+            sub = CircuitModel(balance, names, rows=keep)
+            r = fit(sub, best, global_search=False, starts=1, grid_check=False, quiet=True, profile=False)
+        except InputError as exc:
+            out[stream] = {"skipped": str(exc)}
+            continue
+        pred = sub.measurements([r.params[n].value for n in names])[held]
+        one = CircuitModel(balance, names, rows=held)
+        e = one.W @ (pred - balance.adjusted[held])
+        out[stream] = {"rms_normalised_error": float(np.sqrt(np.mean(e ** 2))), "n": len(held)}
+    return out
+
+
+# ----------------------------------------------------------------------- TOML out
+def _key(k: str) -> str:
+    import re
+
+    return k if re.fullmatch(r"[A-Za-z0-9_-]+", k) else json.dumps(k)
+
+
+def _value(v) -> str:
+    if isinstance(v, np.generic):
+        v = v.item()
+    if isinstance(v, bool):
+        return "true" if v else "false"
+    if isinstance(v, int):
+        return str(v)
+    if isinstance(v, float):
+        return repr(v) if math.isfinite(v) else ("nan" if math.isnan(v) else ("inf" if v > 0 else "-inf"))
+    if isinstance(v, str):
+        return json.dumps(v)
+    if isinstance(v, (list, tuple)):
+        return "[" + ", ".join(_value(x) for x in v) + "]"
+    if isinstance(v, dict):
+        return "{" + ", ".join(f"{_key(k)} = {_value(x)}" for k, x in v.items()) + "}"
+    raise InputError(f"cannot write {v!r} to TOML")
+
+
+def to_toml(doc: dict) -> str:
+    """A flowsheet document as TOML text (tables as [sections], small tables inline)."""
+    lines = []
+
+    def table(d: dict, path: list):
+        scalars = {k: v for k, v in d.items() if not isinstance(v, dict)}
+        subs = {k: v for k, v in d.items() if isinstance(v, dict)}
+        inline = {k: v for k, v in subs.items() if not any(isinstance(x, dict) for x in v.values())
+                  and len(_value(v)) <= 100 and path}
+        if path and (scalars or inline):
+            lines.append("[" + ".".join(_key(p) for p in path) + "]")
+        for k, v in scalars.items():
+            lines.append(f"{_key(k)} = {_value(v)}")
+        for k, v in inline.items():
+            lines.append(f"{_key(k)} = {_value(v)}")
+        if path and (scalars or inline):
+            lines.append("")
+        for k, v in subs.items():
+            if k not in inline:
+                table(v, path + [k])
+
+    table(doc, [])
+    return "\n".join(lines) + "\n"

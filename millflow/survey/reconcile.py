@@ -1,0 +1,380 @@
+"""Data reconciliation of a survey: weighted least squares with exact node balances.
+
+Minimise the weighted sum of squared adjustments
+
+    SSR = sum_i ((h_i(z) - y_i) / sd_i)^2
+
+over the component flows z (solids per stream and sieve class, water, water additions:
+:mod:`millflow.survey.structure`) subject to the node balances A z = b, exactly. The
+balances are linear in z, so they are eliminated exactly, not penalised: z = z_p + N t
+with z_p the least-squares solution of A z = b (a residual means the exact values
+contradict the balances: an error) and N an orthonormal basis of the null space of A.
+What remains is the bilinear flow x fraction problem as an unconstrained non-linear
+least-squares problem in t, solved by Gauss-Newton (analytic Jacobian, minimum-norm
+steps, step halving). This is the Lagrangian
+formulation of JKMBal-style reconciliation with the constraint linearisation made
+exact by the choice of variables (component flows), so no outer iteration on the
+constraints is needed and every balance closes to rounding.
+
+Statistics at the solution, with J the whitened Jacobian dh/dt / sd (linearised
+covariance, exact for the linear part):
+
+- the rank r of J; the SSR is compared with chi-square on n_measured - r degrees of
+  freedom (the redundancy);
+- cov(t) = (J^T J)^+ on the observable subspace; a derived quantity q(z) (an unmeasured
+  flow, a circulating load) is *observable* when its gradient has no component in the
+  null space of J, and only then gets a value and an SD; otherwise it is reported as
+  unobservable (NaN), never invented;
+- adjusted measurements h(z) with covariance sd J cov J^T sd; leverage H_ii; the
+  adjustment e_i has variance sd_i^2 (1 - H_ii), so the normalised adjustment is
+  e_i / (sd_i sqrt(1 - H_ii)) (measurement test; a measurement with H_ii = 1 is not
+  redundant: its adjustment is zero and it cannot be tested). Gross-error candidates
+  exceed the two-sided Bonferroni threshold z_{1 - 0.05 / (2 n_redundant)}.
+"""
+from __future__ import annotations
+
+import math
+import time
+from dataclasses import dataclass, field
+
+import numpy as np
+from scipy import linalg, stats
+
+from millflow.errors import InputError, SolverError
+from millflow.survey.structure import Structure, build_structure
+
+__all__ = ["Balance", "reconcile", "GROSS_ERROR_ALPHA"]
+
+#: Family-wise significance of the gross-error (measurement) test, Bonferroni-corrected.
+GROSS_ERROR_ALPHA = 0.05
+#: Singular values of the whitened Jacobian below this fraction of the largest are zero.
+RANK_RTOL = 1e-9
+#: A derived quantity is unobservable when its gradient's null-space part exceeds this fraction.
+OBSERVABLE_RTOL = 1e-6
+
+
+@dataclass
+class Balance:
+    """A reconciled survey: adjusted values, covariances and the statistics.
+
+    z : adjusted variables (see :class:`~millflow.survey.structure.Structure`) [kg/s].
+    adjusted, adjusted_sd : adjusted measurements h(z) and their SDs (rows of ``structure.rows``).
+    leverage : H_ii of each measurement (1: not redundant).
+    chi_square : dict ssr, dof, critical_95, p_value, passed.
+    gross_errors : the measurements whose normalised adjustment exceeds ``threshold``, largest first.
+    """
+
+    survey: object
+    structure: Structure
+    z: np.ndarray
+    N: np.ndarray
+    z_p: np.ndarray
+    cov_t: np.ndarray
+    null_t: np.ndarray
+    adjusted: np.ndarray
+    adjusted_sd: np.ndarray
+    leverage: np.ndarray
+    rank: int
+    chi_square: dict
+    threshold: float
+    nfev: int
+    runtime_s: float
+    balance_error: float
+    meta: dict = field(default_factory=dict)
+
+    # ------------------------------------------------------------------ measurements
+    @property
+    def measured(self) -> np.ndarray:
+        return self.structure.y
+
+    @property
+    def sd(self) -> np.ndarray:
+        return self.structure.sd
+
+    @property
+    def adjustment(self) -> np.ndarray:
+        return self.adjusted - self.structure.y
+
+    @property
+    def redundant(self) -> np.ndarray:
+        return 1.0 - self.leverage > 1e-8
+
+    @property
+    def normalised(self) -> np.ndarray:
+        """Normalised adjustments (NaN where a measurement is not redundant)."""
+        v = np.clip(1.0 - self.leverage, 0.0, None)
+        with np.errstate(divide="ignore", invalid="ignore"):
+            out = self.adjustment / (self.sd * np.sqrt(v))
+        return np.where(self.redundant, out, np.nan)
+
+    @property
+    def gross_errors(self) -> list:
+        n = self.normalised
+        order = [int(i) for i in np.argsort(-np.nan_to_num(np.abs(n), nan=-1.0)) if np.isfinite(n[i])]
+        return [self._describe(i) for i in order if abs(n[i]) > self.threshold]
+
+    def ranked(self, count: int = 5) -> list:
+        """The ``count`` measurements with the largest |normalised adjustment|, largest first."""
+        n = self.normalised
+        order = [int(i) for i in np.argsort(-np.nan_to_num(np.abs(n), nan=-1.0)) if np.isfinite(n[i])]
+        return [self._describe(i) for i in order[:count]]
+
+    def _describe(self, i: int) -> dict:
+        r = self.structure.rows[i]
+        return {"measurement": r["key"] + (f" {r['label']}" if "label" in r else ""), "row": i,
+                "normalised_adjustment": float(self.normalised[i]),
+                "adjustment_in_sd": float(self.adjustment[i] / self.sd[i])}
+
+    # --------------------------------------------------------------- derived quantities
+    def derived(self, gz: np.ndarray, value: float) -> tuple[float, float, bool]:
+        """(value, SD, observable) of a quantity with gradient ``gz`` (dq/dz at the solution)."""
+        gt = gz @ self.N
+        norm = float(np.linalg.norm(gt))
+        if norm == 0.0:
+            return float(value), 0.0, True  # fixed by the exact values and balances alone
+        leak = float(np.linalg.norm(self.null_t.T @ gt)) if self.null_t.size else 0.0
+        if leak > OBSERVABLE_RTOL * norm:
+            return math.nan, math.nan, False
+        return float(value), float(math.sqrt(max(gt @ self.cov_t @ gt, 0.0))), True
+
+    def solids(self, stream: str) -> tuple[float, float, bool]:
+        s = self.structure.streams.index(stream)
+        g = self.structure.solids_gradient(s)
+        return self.derived(g, float(g @ self.z))
+
+    def water(self, stream: str) -> tuple[float, float, bool]:
+        st = self.structure
+        if not st.wet:
+            return math.nan, math.nan, False
+        g = np.zeros(st.n_z)
+        g[st.w_index(st.streams.index(stream))] = 1.0
+        return self.derived(g, float(self.z[st.w_index(st.streams.index(stream))]))
+
+    def addition(self, unit: str) -> tuple[float, float, bool]:
+        st = self.structure
+        g = np.zeros(st.n_z)
+        g[st.a_index(st.additions.index(unit))] = 1.0
+        return self.derived(g, float(g @ self.z))
+
+    def passing(self, stream: str) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """Cumulative passing at every sieve of the common series: values, SDs, observable."""
+        st = self.structure
+        s = st.streams.index(stream)
+        m = self.z[st.m_index(s)]
+        M = m.sum()
+        vals, sds, obs = [], [], []
+        for j in range(st.sieves.size):
+            below = (st.live > j).astype(float)  # classes j + 1 .. n pass sieve j
+            q = below @ m / M if M != 0 else math.nan
+            g = np.zeros(st.n_z)
+            g[st.m_index(s)] = (below - q) / M if M != 0 else 0.0
+            v, sd, ok = self.derived(g, q)
+            vals.append(v), sds.append(sd), obs.append(ok)
+        return np.array(vals), np.array(sds), np.array(obs)
+
+    def circulating_loads(self) -> dict:
+        """Circulating load of each recycle stream (its solids over its loop's new feed), with SD."""
+        from millflow.flowsheet.results import recycle_streams
+
+        fs = self.survey.flowsheet
+        st = self.structure
+        lab = dict(zip(fs.units, fs.components()))
+        out = {}
+        for n in recycle_streams(fs):
+            loop = lab[fs.streams[n].source]
+            g_new = np.zeros(st.n_z)
+            for m, s in fs.streams.items():
+                if lab[s.source] != lab[s.target] and lab[s.target] == loop:
+                    g_new += st.solids_gradient(st.streams.index(m))
+            g_rec = st.solids_gradient(st.streams.index(n))
+            F, R = g_new @ self.z, g_rec @ self.z
+            if F <= 0:
+                out[n] = (math.nan, math.nan, False)
+                continue
+            cl = R / F
+            out[n] = self.derived((g_rec - cl * g_new) / F, cl)
+        return out
+
+    def observability(self) -> dict:
+        """Which stream quantities the survey determines: lists of observable and unobservable keys."""
+        st = self.structure
+        ok, bad = [], []
+        for n in st.streams:
+            for key, res in (("solids_tph", self.solids(n)),) + ((("water_tph", self.water(n)),) if st.wet else ()):
+                (ok if res[2] else bad).append(f"streams.{n}.{key}")
+            (ok if self.passing(n)[2].all() else bad).append(f"streams.{n}.psd")
+        for u in st.additions:
+            (ok if self.addition(u)[2] else bad).append(f"water_additions.{u}.water_tph")
+        return {"observable": ok, "unobservable": bad}
+
+
+def _start(st: Structure, survey) -> np.ndarray:
+    """A starting point: measured flows and fractions where given, typical ones elsewhere."""
+    K = st.K
+    fr = {}
+    for r, s, mask in zip(st.frac_rows, st.frac_stream, st.frac_mask):
+        fr.setdefault(int(s), []).append((st.y[r], mask))
+    full = [s for s, v in fr.items() if len(v) >= K - 1]
+    shape = np.full(K, 1.0 / K)
+    if full:
+        acc = []
+        for s in full:
+            f = np.zeros(K)
+            for val, mask in fr[s]:
+                f[mask > 0] = max(val, 0.0) / mask.sum()
+            f[-1] = max(1.0 - f[:-1].sum(), 0.0)
+            acc.append(f)
+        shape = np.mean(acc, axis=0) + 1e-6
+        shape /= shape.sum()
+    measured = [m.solids for m in survey.streams.values() if m.solids]
+    typical = float(np.median(measured)) if measured else 1.0
+    z0 = np.zeros(st.n_z)
+    for s, name in enumerate(st.streams):
+        m = survey.streams.get(name)
+        M = m.solids if m is not None and m.solids is not None else typical
+        f = shape.copy()
+        if s in fr:
+            covered = np.zeros(K, bool)
+            for val, mask in fr[s]:
+                sel = mask > 0
+                f[sel] = max(val, 1e-6) * shape[sel] / shape[sel].sum()
+                covered |= sel
+            rest = ~covered  # the pan of the stream's own series
+            f[rest] = max(1.0 - f[covered].sum(), 1e-6) * shape[rest] / max(shape[rest].sum(), 1e-300)
+        z0[st.m_index(s)] = M * f / f.sum()
+        if st.wet:
+            W = M
+            if m is not None and m.water is not None:
+                W = m.water
+            elif m is not None and m.solids_content is not None:
+                W = M * (1 - m.solids_content) / m.solids_content
+            z0[st.w_index(s)] = W
+    for k, u in enumerate(st.additions):
+        v = survey.water_additions[u][0]
+        z0[st.a_index(k)] = typical if v is None else v
+    return z0
+
+
+def _particular(st: Structure) -> tuple[np.ndarray, np.ndarray]:
+    """z_p with A z_p = b and the null-space basis N of A; contradictory exact values raise."""
+    A, b = st.A, st.b
+    if A.shape[0] == 0:
+        return np.zeros(st.n_z), np.eye(st.n_z)
+    U, s, Vt = linalg.svd(A, full_matrices=True)
+    tol = max(A.shape) * np.finfo(float).eps * (s[0] if s.size else 1.0) * 10
+    r = int(np.sum(s > tol))
+    z_p = Vt[:r].T @ ((U[:, :r].T @ b) / s[:r])
+    resid = A @ z_p - b
+    scale = max(float(np.max(np.abs(b))), 1e-300)
+    if np.max(np.abs(resid), initial=0.0) > 1e-9 * scale:
+        keys = ", ".join(k for k, _ in st.exact)
+        worst = st.constraint_names[int(np.argmax(np.abs(resid)))]
+        raise InputError(f"survey: the exact values (SD 0) {keys} contradict the balances (they cannot all hold: "
+                         f"{worst} is off by {abs(resid).max() * 3.6:.4g} t/h); give them SDs > 0")
+    return z_p, Vt[r:].T
+
+
+def _solve(st: Structure, z_p, N, t_start, max_iter: int, source: str, tol: float = 1e-6):
+    """Gauss-Newton on the balance-eliminated problem, each step the minimum-norm least-squares
+    solution of the linearised problem (LAPACK, so directions the data leave undetermined are
+    not moved), halved until the SSR does not rise; (t, evaluations)."""
+    w = 1.0 / st.sd
+
+    def resid(t):
+        h, J = st.measure(z_p + N @ t, sparse=True)
+        return (h - st.y) * w, J
+
+    with np.errstate(divide="ignore", invalid="ignore"):
+        r, Jz = resid(t_start)
+    if not np.all(np.isfinite(r)):
+        raise InputError(f"{source}: a stream with a measured analysis or % solids starts with no solids "
+                         "flow; give it a solids_tph")
+    if N.shape[1] == 0:
+        return np.zeros(0), 1
+    t, ssr, nfev = np.asarray(t_start, float), float(r @ r), 1
+    for _ in range(max_iter):
+        J = np.asarray(Jz @ N) * w[:, None]
+        step = linalg.lstsq(J, -r, lapack_driver="gelsy", cond=RANK_RTOL)[0]
+        lam = 1.0
+        while True:
+            with np.errstate(divide="ignore", invalid="ignore", over="ignore"):
+                r_new, Jz_new = resid(t + lam * step)
+            nfev += 1
+            s_new = float(r_new @ r_new)
+            if np.isfinite(s_new) and s_new <= ssr * (1 + 1e-12) + 1e-300:
+                break
+            lam *= 0.5
+            if lam < 1e-10:
+                raise SolverError(f"{source}: the reconciliation does not converge (no step lowers the weighted "
+                                  "sum of squares); check for a stream whose solids flow goes to zero")
+        moved = lam * float(np.linalg.norm(step))
+        t, r, Jz, old, ssr = t + lam * step, r_new, Jz_new, ssr, s_new
+        # converged when the SSR no longer moves (1e-9 relative) and the variables move less than
+        # 1e-6 of their size: far below any measurement's precision (SDs of 0.1 % and more); the
+        # balances hold exactly at every step whatever the tolerance
+        if old - ssr <= 1e-3 * tol * max(ssr, 1.0) and moved <= tol * (float(np.linalg.norm(t)) + 1e-12):
+            return t, nfev
+    raise SolverError(f"{source}: the reconciliation did not converge in {max_iter} Gauss-Newton steps")
+
+
+def reconcile(survey, *, max_iter: int = 100, reweight: int = 2) -> Balance:
+    """Reconcile ``survey`` (a :class:`~millflow.survey.reader.Survey`); see the module docstring.
+
+    Raises InputError for a survey that cannot be balanced: exact values that contradict
+    the balances, or solids flows that no measurement determines (unobservable system).
+    Partly unobservable surveys are reconciled; :meth:`Balance.observability` lists what
+    the data leave undetermined.
+
+    reweight : passes in which the SDs that come from the error model (relative flow
+        SDs, the sqrt(p(1-p)) rule of sieve fractions) are re-evaluated at the reconciled
+        values before solving again (0: SDs at the measured values, as given). At the
+        measured values a gross error inflates its own SD and hides; at the reconciled
+        values it does not.
+    """
+    t0 = time.perf_counter()
+    st = build_structure(survey)
+    if st.y.size == 0:
+        raise InputError(f"{survey.source}: nothing is measured with an SD > 0; there is nothing to reconcile")
+    z_p, N = _particular(st)
+    z0 = _start(st, survey)
+    t_start = N.T @ (z0 - z_p)
+    sd_measured = st.sd.copy()
+    t, nfev = t_start, 0
+    for k in range(1 + reweight):  # the passes before the last only set the weights: 1e-3 is enough
+        t, n = _solve(st, z_p, N, t, max_iter, survey.source, 1e-6 if k == reweight else 1e-3)
+        nfev += n
+        if reweight:  # the error model at the reconciled values: a gross error does not inflate its own SD
+            st.sd = st.model_sd(st.measure(z_p + N @ t)[0])
+    w = 1.0 / st.sd
+    z = z_p + N @ t
+    h, Jz = st.measure(z)
+    J = (Jz @ N) * w[:, None]
+    ssr = float(np.sum(((h - st.y) * w) ** 2))
+    if J.size:
+        U, s, Vt = linalg.svd(J, full_matrices=True)
+        rank = int(np.sum(s > RANK_RTOL * s[0])) if s.size and s[0] > 0 else 0
+        Ur, sr, Vr = U[:, :rank], s[:rank], Vt[:rank].T
+        cov_t = (Vr / sr ** 2) @ Vr.T
+        null_t = Vt[rank:].T
+    else:
+        rank, Ur = 0, np.zeros((st.y.size, 0))
+        cov_t, null_t = np.zeros((0, 0)), np.zeros((0, 0))
+    leverage = np.sum(Ur ** 2, axis=1)
+    adjusted_sd = st.sd * np.sqrt(np.clip(leverage, 0.0, None))
+    dof = st.y.size - rank
+    chi = {"ssr": ssr, "dof": dof, "n_measured": int(st.y.size), "rank": rank,
+           "critical_95": float(stats.chi2.ppf(0.95, dof)) if dof > 0 else math.nan,
+           "p_value": float(stats.chi2.sf(ssr, dof)) if dof > 0 else math.nan}
+    chi["passed"] = bool(ssr <= chi["critical_95"]) if dof > 0 else None
+    n_red = int(np.sum(1.0 - leverage > 1e-8))
+    threshold = float(stats.norm.ppf(1 - GROSS_ERROR_ALPHA / (2 * max(n_red, 1))))
+    resid_bal = st.A @ z - st.b if st.A.size else np.zeros(0)
+    flows = np.abs(z[: st.S * st.K]).sum() or 1.0
+    bal = Balance(survey, st, z, N, z_p, cov_t, null_t, h, adjusted_sd, leverage, rank, chi, threshold, nfev,
+                  time.perf_counter() - t0, float(np.max(np.abs(resid_bal), initial=0.0) / flows),
+                  {"sd_at_measured": sd_measured, "reweight_passes": reweight, "J": J})
+    measured_flows = [n for n in st.streams if bal.solids(n)[2]]
+    if not measured_flows:
+        raise InputError(f"{survey.source}: unobservable system: no stream's solids flow is determined by the "
+                         "survey (give at least one solids_tph, e.g. the fresh feed's weightometer)")
+    return bal

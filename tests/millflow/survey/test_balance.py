@@ -1,0 +1,196 @@
+"""Reconciliation of plant surveys: exact cases, observability, bad inputs, outputs.
+
+The statistical properties over replicates (chi-square, coverage, gross errors) are in
+test_statistics.py (marked slow).
+"""
+import json
+import math
+from functools import lru_cache
+
+import numpy as np
+import pytest
+
+from millflow.cli import main
+from millflow.errors import InputError
+from millflow.flowsheet import load, solve
+from millflow.survey import read_survey, reconcile
+from millflow.survey.reader import ErrorModel, class_fractions
+from millflow.survey.synthetic import grid_sieves, synthetic_survey
+from tests import paths
+
+EXAMPLE = paths.REPO / "examples" / "survey"
+
+
+@lru_cache(maxsize=None)
+def solved(name):
+    return solve(load(paths.REPO / name))
+
+
+def _noise_free(sol, sieves, **kw):
+    """A survey whose measurements are the truth (error model SDs, zero noise)."""
+    class Zero:
+        def standard_normal(self, size=None):
+            return 0.0 if size is None else np.zeros(size)
+    return synthetic_survey(sol, sieves, Zero(), **kw)
+
+
+def test_noise_free_survey_is_returned_exactly():
+    """Measurements that already close every balance are not adjusted, SSR is 0 and the
+    derived flows and circulating load equal the truth (to the solver's 1e-9 tolerance)."""
+    sol = solved("examples/survey/circuit.toml")
+    sieves = grid_sieves(sol.flowsheet.grid, 2, bottom=40e-6)
+    survey, truth = _noise_free(sol, sieves, additions=["sump"])
+    bal = reconcile(survey)
+    assert bal.chi_square["ssr"] < 1e-12
+    assert bal.balance_error < 1e-12
+    np.testing.assert_allclose(bal.adjusted, bal.measured, atol=1e-9)
+    for n in sol.flowsheet.stream_names:
+        M, sd, ok = bal.solids(n)
+        assert ok and sd > 0
+        assert M == pytest.approx(truth["solids"][n], rel=1e-9)
+        W, _, wok = bal.water(n)
+        assert wok and W == pytest.approx(truth["water"][n], rel=1e-8)
+        p, _, pok = bal.passing(n)
+        np.testing.assert_allclose(p, truth["passing"][n], atol=1e-9)
+    cl = bal.circulating_loads()["underflow"]
+    assert cl[0] == pytest.approx(truth["circulating_load"]["underflow"], rel=1e-9)
+    assert bal.addition("ball_mill")[0] == pytest.approx(sol.flowsheet.water_added["ball_mill"], rel=1e-8)
+
+
+def test_adjusted_values_close_every_balance():
+    sol = solved("flowsheets/closed_circuit_ball_mill.toml")
+    sieves = grid_sieves(sol.flowsheet.grid, 8, bottom=20e-6)
+    survey, _ = synthetic_survey(sol, sieves, np.random.default_rng(3))
+    bal = reconcile(survey)
+    st = bal.structure
+    # the balances are eliminated exactly: what is left is rounding of flows ~100 kg/s
+    assert np.max(np.abs(st.A @ bal.z - st.b)) < 1e-10 * np.abs(bal.z).max()
+    assert bal.chi_square["dof"] == st.y.size - bal.rank > 0
+    # adjusted fractions of a stream's analysis sum to at most 1 (the pan takes the rest)
+    assert bal.solids("fresh")[2] and bal.solids("underflow")[2]
+
+
+def test_partly_unobservable_survey_says_so():
+    """Without the overflow's % solids and the sump's water meter, the cyclone feed's and the
+    overflow's water and the sump's addition are unobservable: reported, and given no value."""
+    sol = solved("examples/survey/circuit.toml")
+    sieves = grid_sieves(sol.flowsheet.grid, 2, bottom=40e-6)
+    water = [n for n in sol.flowsheet.stream_names if n not in ("overflow", "cyclone_feed")]
+    survey, truth = synthetic_survey(sol, sieves, np.random.default_rng(0), water=water)
+    bal = reconcile(survey)
+    bad = set(bal.observability()["unobservable"])
+    assert {"streams.overflow.water_tph", "streams.cyclone_feed.water_tph", "water_additions.sump.water_tph"} <= bad
+    assert "streams.underflow.water_tph" not in bad
+    assert math.isnan(bal.water("overflow")[0]) and not bal.water("overflow")[2]
+    assert bal.solids("overflow")[2]
+
+
+def _write(tmp_path, text, name="survey.toml"):
+    (tmp_path / "circuit.toml").write_text((EXAMPLE / "circuit.toml").read_text())
+    p = tmp_path / name
+    p.write_text('flowsheet = "circuit.toml"\n' + text)
+    return p
+
+
+PSD = "size_um = [2000, 1000, 500, 250, 125]\npassing_pct = [100, 80, 55, 30, 15]\n"
+
+
+@pytest.mark.parametrize("text, message", [
+    ("[streams.nowhere]\nsolids_tph = 10\n", "streams.nowhere: not a stream of the flowsheet"),
+    ("[streams.fresh]\nsolids_tph = 250\nsolids_sd_tph = -2\n[streams.fresh.psd]\n" + PSD,
+     "streams.fresh.solids_sd_tph = -2: expected a value >= 0"),
+    ("[streams.fresh]\nsolids_tph = 250\n[streams.fresh.psd]\n" + PSD
+     + "[streams.overflow.psd]\nsize_um = [2000, 710, 500]\npassing_pct = [100, 90, 80]\n",
+     "sieves do not nest"),
+    ("[streams.fresh.psd]\n" + PSD + "[streams.overflow.psd]\n" + PSD, "unobservable system"),
+    ("[streams.fresh]\nsolids_tph = 250\nsolids_sd_tph = 0\n[streams.fresh.psd]\n" + PSD
+     + "[streams.overflow]\nsolids_tph = 240\nsolids_sd_tph = 0\n[streams.overflow.psd]\n" + PSD,
+     "contradict the balances"),
+    ("[streams.fresh]\nsolids = 250\n", "streams.fresh: unknown key solids"),
+    ("[streams.fresh.psd]\nsize_um = [2000, 1000]\npassing_pct = [50, 80]\n", "passing rises"),
+])
+def test_bad_surveys_give_one_line_and_exit_2(tmp_path, capsys, text, message):
+    p = _write(tmp_path, text)
+    assert main(["balance", str(p), "--out", str(tmp_path / "out")]) == 2
+    err = capsys.readouterr().err.strip()
+    assert "\n" not in err and message in err, err
+    assert not (tmp_path / "out").exists()
+
+
+def test_balance_command_writes_everything_or_nothing(tmp_path, capsys):
+    out = tmp_path / "bal"
+    assert main(["balance", str(EXAMPLE / "survey.toml"), "--out", str(out), "--no-fit", "--json"]) == 0
+    s = json.loads(capsys.readouterr().out)
+    for f in ("results.nc", "measurements.csv", "streams.csv", "passing.csv", "summary.json",
+              "stream_overflow.png"):
+        assert (out / f).is_file(), f
+    assert s["chi_square"]["dof"] > 0 and s["observability"]["unobservable"] == []
+    # the example plants an 8-point error in the underflow's % solids: it is the first candidate
+    assert s["gross_error_candidates"][0]["measurement"] == "streams.underflow.solids_content_pct"
+    import xarray as xr
+
+    ds = xr.open_dataset(out / "results.nc", engine="scipy")
+    assert set(ds["passing_adjusted"].dims) == {"stream", "size"}
+    assert {"passing_measured", "passing_sd", "solids_adjusted", "solids_sd"} <= set(ds.data_vars)
+    ds.close()
+    user = tmp_path / "mine"
+    user.mkdir()
+    (user / "notes.txt").write_text("mine")
+    assert main(["balance", str(EXAMPLE / "survey.toml"), "--out", str(user), "--no-fit"]) == 2
+    assert sorted(p.name for p in user.iterdir()) == ["notes.txt"]
+
+
+def test_error_model_fraction_sd():
+    e = ErrorModel(psd_sd=0.02, psd_floor=0.001)
+    assert e.fraction_sd(0.5) == pytest.approx(0.021)
+    assert e.fraction_sd(0.0) == pytest.approx(0.001)
+    np.testing.assert_allclose(class_fractions([0.9, 0.5, 0.1]), [0.1, 0.4, 0.4, 0.1])
+
+
+def test_reader_reads_the_example():
+    s = read_survey(EXAMPLE / "survey.toml")
+    assert s.streams["fresh"].solids == pytest.approx(s.streams["fresh"].solids)  # read, in kg/s
+    assert s.streams["fresh"].solids * 3.6 > 200
+    assert s.fit and "units.cyclones.d50c_um" in s.fit["names"]
+    with pytest.raises(InputError, match="fit.parameters.units.cyclones.nothing"):
+        from millflow.survey.fit import _get
+        _get(s.flowsheet.meta["document"], "units.cyclones.nothing")
+
+
+def test_agrees_with_a_direct_constrained_minimisation():
+    """An independent solution of the same problem: scipy's SLSQP on the component flows with
+    the balances as equality constraints (no elimination, no Gauss-Newton) reaches the same
+    minimum. Tolerance 1e-6 relative on the SSR and 1e-4 of an SD on the adjusted values:
+    SLSQP stops at ftol 1e-12 of an SSR ~ 10-50."""
+    from scipy.optimize import minimize
+
+    sol = solved("flowsheets/closed_circuit_ball_mill.toml")
+    sieves = grid_sieves(sol.flowsheet.grid, 32, bottom=100e-6)  # 2, 4 ... sieves: a small problem
+    survey, _ = synthetic_survey(sol, sieves, np.random.default_rng(4))
+    bal = reconcile(survey, reweight=0)
+    st = bal.structure
+
+    def ssr(z):
+        return float(np.sum(((st.measure(z)[0] - st.y) / st.sd) ** 2))
+
+    def grad(z):
+        h, J = st.measure(z)
+        return 2 * J.T @ ((h - st.y) / st.sd ** 2)
+
+    z0 = bal.z * (1 + 0.02 * np.random.default_rng(0).standard_normal(bal.z.size))
+    res = minimize(ssr, z0, jac=grad, method="SLSQP", options={"ftol": 1e-12, "maxiter": 2000},
+                   constraints=[{"type": "eq", "fun": lambda z: st.A @ z - st.b, "jac": lambda z: st.A}])
+    assert res.success, res.message
+    assert res.fun == pytest.approx(bal.chi_square["ssr"], rel=1e-6)
+    np.testing.assert_allclose(st.measure(res.x)[0], bal.adjusted, atol=1e-4 * st.sd.min())
+
+
+def test_psd_from_a_feed_style_csv_equals_the_inline_one(tmp_path):
+    """A sieve analysis as a CSV (retained_pct with a pan row, as feed CSVs) reads to the same
+    cumulative passing as the inline passing_pct table."""
+    (tmp_path / "of.csv").write_text("size_um,retained_pct\n2000,0\n1000,20\n500,25\n250,25\n125,15\n0,15\n")
+    inline = _write(tmp_path, "[streams.fresh]\nsolids_tph = 250\n[streams.fresh.psd]\n" + PSD, "a.toml")
+    csv = _write(tmp_path, "[streams.fresh]\nsolids_tph = 250\n[streams.fresh.psd]\nfile = \"of.csv\"\n", "b.toml")
+    a, b = read_survey(inline).streams["fresh"].psd, read_survey(csv).streams["fresh"].psd
+    np.testing.assert_allclose(a.sizes, b.sizes)
+    np.testing.assert_allclose(a.passing, b.passing, atol=1e-12)

@@ -1,0 +1,91 @@
+"""Statistical properties of the reconciliation and the circuit fit over synthetic replicates.
+
+Surveys of known circuits (the closed-circuit example and the wet cyclone circuit) with
+noise drawn from the stated error model (millflow.survey.synthetic). Slow: run with
+``python -m pytest -m slow tests/millflow/survey``.
+"""
+from functools import lru_cache
+
+import numpy as np
+import pytest
+
+from millflow.flowsheet import load, solve
+from millflow.survey import reconcile
+from millflow.survey.reader import class_fractions
+from millflow.survey.synthetic import grid_sieves, synthetic_survey
+from tests import paths
+
+CASES = {"closed_circuit": ("flowsheets/closed_circuit_ball_mill.toml", 8),
+         "wet_cyclones": ("flowsheets/closed_circuit_wet_cyclones.toml", 10)}
+#: Replicates: the 5 % test's rejection rate has a binomial SE of 1.1 % at 400, so the
+#: 3-8 % window is 1.8 SE below and 2.7 SE above 5 %.
+REPLICATES = 400
+
+
+@lru_cache(maxsize=None)
+def case(name):
+    path, every = CASES[name]
+    sol = solve(load(paths.REPO / path))
+    return sol, grid_sieves(sol.flowsheet.grid, every, bottom=20e-6)
+
+
+def _truth_rows(bal, truth):
+    out = []
+    for row in bal.structure.rows:
+        n = row["stream"]
+        out.append({"solids": lambda: truth["solids"][n], "water": lambda: truth["water"][n],
+                    "solids_content": lambda: truth["solids_content"][n],
+                    "fraction": lambda: class_fractions(truth["passing"][n])[row["class"]]}[row["kind"]]())
+    return np.array(out)
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("name", list(CASES))
+def test_reconciliation_statistics(name):
+    sol, sieves = case(name)
+    rng = np.random.default_rng(20261125)
+    rejected, covered, cl_covered, closer = 0, [], [], []
+    for _ in range(REPLICATES):
+        survey, truth = synthetic_survey(sol, sieves, rng)
+        bal = reconcile(survey)
+        rejected += not bal.chi_square["passed"]
+        for n in sol.flowsheet.stream_names:
+            if survey.streams[n].solids is None:  # derived (unmeasured) flows
+                v, sd, ok = bal.solids(n)
+                assert ok
+                covered.append(abs(v - truth["solids"][n]) <= 1.959964 * sd)
+        for n, (v, sd, _ok) in bal.circulating_loads().items():
+            cl_covered.append(abs(v - truth["circulating_load"][n]) <= 1.959964 * sd)
+        t = _truth_rows(bal, truth)
+        closer.append((np.sum(((bal.adjusted - t) / bal.sd) ** 2), np.sum(((bal.measured - t) / bal.sd) ** 2)))
+    rate = rejected / REPLICATES
+    assert 0.03 <= rate <= 0.08, rate
+    assert 0.90 <= np.mean(covered) <= 0.98, np.mean(covered)
+    assert 0.90 <= np.mean(cl_covered) <= 0.98, np.mean(cl_covered)
+    adj, meas = np.mean(closer, axis=0)
+    assert adj < meas  # adjusted values are closer to the truth than the measurements on average
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("name, stream, cls", [("closed_circuit", "underflow", 4), ("wet_cyclones", "cyclone_feed", 9),
+                                               ("wet_cyclones", "mill_feed", 6)])
+def test_planted_gross_error_is_named_first(name, stream, cls):
+    """A 10-SD error in one size fraction of one sample: the largest normalised adjustment
+    names that measurement in >= 90 % of replicates.
+
+    Not every measurement can be singled out so often: where a class balance ties a
+    measurement to others with as much leverage (the wet circuit's underflow, -707 +500 um,
+    is named first in about 75 % of replicates), their normalised adjustments are nearly
+    equal and the test names one of the group; that is the measurement test's known limit
+    (equal-leverage measurements are not separable), not a defect of the reconciliation."""
+    sol, sieves = case(name)
+    rng = np.random.default_rng(7)
+    sample, exact, R = 0, 0, 150
+    for _ in range(R):
+        survey, _ = synthetic_survey(sol, sieves, rng, gross={"stream": stream, "class": cls, "sd": 10.0})
+        bal = reconcile(survey)
+        top = bal.ranked(1)[0]
+        row = bal.structure.rows[top["row"]]
+        sample += row["stream"] == stream and row["kind"] == "fraction"
+        exact += row["stream"] == stream and row.get("class") == cls
+    assert exact / R >= 0.90, (exact / R, sample / R)
