@@ -137,8 +137,9 @@ class FitResult:
                      + (f" ({self.stats['clusters']} samples)" if self.stats.get("clusters") else "")
                      + "; p omitted for ln_X parameters (X > 0 by construction: no meaningful null)")
         if self.stats.get("se_ratio_flag"):
-            lines.append(f"flag: cluster-robust and eq. 9 SEs differ by up to {self.stats['se_ratio_max']:.2g}x: "
-                         "residuals are correlated within samples; eq. 9 alone would overstate the precision")
+            lines.append(f"flag: cluster-robust SEs up to {self.stats['se_ratio_max']:.2g}x eq. 9's, from "
+                         f"{self.stats['clusters']} samples: residuals are correlated within samples; eq. 9 alone "
+                         "would overstate the precision")
         rs = self.stats.get("residuals")
         if rs:
             lines.append(f"residuals: mean lag-1 autocorrelation within samples {rs['mean_lag1']:.2f}; runs test "
