@@ -17,7 +17,10 @@ then the local mass fraction everywhere.
   dM/dlambda = -R(M) + h(lambda) (M - f), h = E/(1 - F), integrated from large lambda
   (where M solves the same equation with dM/dlambda = 0) down to lambda = 0, product M(0).
   For first-order kinetics the two coincide (the RTD fixes the product, segregated flow
-  is exact); then one linear answer is returned and the result says so.
+  is exact); then one linear answer is returned and the result says so. Otherwise they
+  are the extremes of mixing, not bounds: Zwietering's ordering of the conversion holds
+  for one species with a rate of one convexity, not class by class for a population
+  whose rates couple (four tanks in series with nipping rates lie outside both).
 
 A linear scene (nothing non-linear declared) takes the exact linear path of
 :mod:`millflow.linalg` / :mod:`millflow.mill` with nothing added. A steady solve that
@@ -446,6 +449,8 @@ def micromixing_bounds(kin: Kinetics, feed, model, *, rtol: float = 1e-9, atol: 
     err = float(seg_err + rtol * np.abs(mm).max() * 10 + atol + h_err * np.abs(mm - y0).max())
     return MicromixingBounds(seg[:-1], mm[:-1], spread, False,
                              "non-linear kinetics: the product depends on micromixing, which the RTD cannot tell; "
-                             "every real mill lies between these two limits", err, time.perf_counter() - start,
+                             "these are the two extremes of mixing, not bounds: a mill of intermediate mixing (e.g. "
+                             "tanks in series) can lie outside them class by class (Zwietering's ordering holds only "
+                             "for one species with a rate of one convexity)", err, time.perf_counter() - start,
                              {"overflow": (float(seg[-1]), float(mm[-1])), "lambda_max_s": lam_max,
                               "kinetics": kin.describe(), "hazard_interpolation_error": h_err})

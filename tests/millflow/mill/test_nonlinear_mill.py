@@ -167,3 +167,22 @@ def test_a_converged_answer_at_the_rounding_level_is_accepted():
     far = y_star + 1e-6
     with pytest.raises(SolverError, match=r"test: .*residual .* > tol 1e-11 x scale"):
         nl._newton_cell(kin, y_in, TAU, far, tol=nl.NEWTON_RTOL, max_iter=0, unit="test")
+
+
+@pytest.mark.parametrize("lam, outside", [(1.0, 5e-4), (-1.0, 5e-5)])
+def test_micromixing_limits_are_not_bounds_class_by_class(lam, outside):
+    """Four tanks in series share the RTD of rtd.TanksInSeries(tau, 4) and are a state of
+    intermediate micromixing; with coupled non-linear rates (nipping lam > 0, cushioning
+    lam < 0) their product lies outside both limits in some class, by far more than the
+    error estimates of either solve: the limits are extremes, not bounds (as documented)."""
+    grid, S, b, feed = _scene()
+    w = np.zeros((S.size, S.size))
+    w[:, S.size // 2:] = 3.0
+    kin = kinetics(S, b, w=w, lam=lam)
+    four = nl.tanks_in_series(kin, feed, TAU, 4)
+    mm = nl.micromixing_bounds(kin, feed, rtd.TanksInSeries(TAU, 4))
+    lo = np.minimum(mm.segregated, mm.max_mixedness)
+    hi = np.maximum(mm.segregated, mm.max_mixedness)
+    beyond = float(np.maximum(lo - four.product, four.product - hi).max())
+    assert beyond > outside > 1e3 * (mm.error_estimate + four.error_estimate)
+    assert "not bounds" in mm.note
