@@ -26,6 +26,7 @@ import numpy as np
 
 from millflow.errors import InputError, SolverError
 from millflow.falsify.truths import BREAKAGE_TRUTH, SlowingDownTruth
+from millflow.fitting.kinetics import fines_mask
 from millflow.mill.nonlinear import tanks_in_series, well_mixed
 from millflow.nonlinear import KERNELS, Aggregation, batch_nonlinear, kinetics
 
@@ -109,7 +110,7 @@ class PopulationTruth:
         fines = self.fines_m or float(sieves[len(sieves) // 2])
         n = design.grid.n
         w = np.zeros((n, n))
-        w[:, design.grid.x <= fines] = 1.0  # classes whose upper size is at or below the fines size
+        w[:, fines_mask(design.grid, fines) > 0] = 1.0  # classes at or below the fines size (the fit's mask)
         kin = kinetics(S[0], b, w=w, lam=-self.strength)
         M, _ = _solve(kin, design, feed, self.n_tanks)
         return M

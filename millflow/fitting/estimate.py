@@ -205,7 +205,7 @@ class _Problem:
         return np.where(np.isfinite(out), out, 1e300)
 
     def jac(self, z):
-        return jacobian(self.resid_pop, z, self.lower, self.upper)
+        return jacobian(self.resid_pop, z, self.lower, self.upper, getattr(self.model, "fd_noise", None))
 
 
 def check_problem(model: ForwardModel, params: dict) -> _Problem:

@@ -28,13 +28,19 @@ CORR_LIMIT = 0.95
 _EPS3 = np.finfo(float).eps ** (1.0 / 3.0)
 
 
-def jacobian(resid_pop, theta, lower, upper):
-    """Central-difference Jacobian (n_res, p) of ``resid_pop`` ((P, p) -> (P, n_res)) at theta."""
+def jacobian(resid_pop, theta, lower, upper, noise: float | None = None):
+    """Central-difference Jacobian (n_res, p) of ``resid_pop`` ((P, p) -> (P, n_res)) at theta.
+
+    Step h = noise^(1/3) x max(|theta|, 0.1 x width, 1e-3): the optimum of a central
+    difference whose function values carry relative noise ``noise`` (machine epsilon by
+    default, exact solves; an adaptive ODE solve's tolerance otherwise, since its error
+    is not smooth in the parameters)."""
     theta = np.asarray(theta, dtype=float)
     p = theta.size
     lower, upper = np.asarray(lower, float), np.asarray(upper, float)
     width = np.where(np.isfinite(upper - lower), upper - lower, 1.0)
-    h = _EPS3 * np.maximum.reduce([np.abs(theta), 0.1 * width, np.full(p, 1e-3)])
+    step = _EPS3 if noise is None else float(noise) ** (1.0 / 3.0)
+    h = step * np.maximum.reduce([np.abs(theta), 0.1 * width, np.full(p, 1e-3)])
     pts, kind = [theta], []
     for k in range(p):
         e = np.zeros(p)
