@@ -80,6 +80,12 @@ class AggregationTruth:
         if self.kernel not in KERNELS:
             raise InputError(f"truth.kernel = {self.kernel!r}: expected one of {sorted(KERNELS)}")
 
+    @property
+    def kinetic_truth(self) -> dict:
+        """The fit's parameter of this truth (``beta0`` of :mod:`millflow.fitting.kinetics`;
+        meaningful when the fit uses the same kernel and x_ref)."""
+        return {"beta0": self.strength}
+
     def mass_fractions(self, design) -> np.ndarray:
         S, b, feed = SlowingDownTruth(0.0, self.params).linear_parts(design)
         x_ref = self.x_ref_m or float(design.sieves_m[-1])
@@ -103,6 +109,12 @@ class PopulationTruth:
         _check_tanks(self.n_tanks)
         if not (math.isfinite(self.strength) and self.strength >= 0):
             raise InputError(f"truth.strength = {self.strength!r}: expected a cushioning exponent >= 0")
+
+    @property
+    def kinetic_truth(self) -> dict:
+        """The fit's parameter of this truth (``lam_pop`` = -strength, with w = 1 and the same
+        fines size)."""
+        return {"lam_pop": -self.strength}
 
     def mass_fractions(self, design) -> np.ndarray:
         S, b, feed = SlowingDownTruth(0.0, self.params).linear_parts(design)
