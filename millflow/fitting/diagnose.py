@@ -157,6 +157,9 @@ def _drift(model, params, optimizer, result):
         return None, None
     t = model.data.table
     if spec.mode == "batch":
+        if model._nonlinear is not None and "slowing_down" in spec.kinetics:
+            # kappa(t) keeps its reference time: a half of the data must not redefine s
+            spec = replace(spec, kinetics_params={**dict(spec.kinetics_params), "t_ref_s": model._nonlinear.t_ref})
         times = sorted({g[2] for g in model.groups})
         h = len(times) // 2
         if h < 2 or len(times) - h < 2:
