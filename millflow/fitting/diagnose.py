@@ -203,6 +203,9 @@ def diagnose(cfg, *, progress=None, quiet: bool = False, loco: bool = True) -> D
         specs[user_label] = user_spec
     grid = cfg.model().grid
     fits, rows, notes = {}, [], []
+    if user_spec.classification is not None:
+        notes.append(f"non-linear candidates (cushioning, aggregation) are fitted without classification only; "
+                     f"the model's classification ({user_spec.classification}) keeps them out of the set")
     linear_theta = None
     order = ["linear"] + [k for k in specs if k != "linear"]
     for label in order:
