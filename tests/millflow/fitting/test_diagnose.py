@@ -59,3 +59,27 @@ def test_diagnose_chooses_the_truths_class(truth, best):
     assert dg.best == best, dg.text()
     assert {r["model"] for r in dg.table} == {"linear", "slowing_down", "cushioning", "aggregation"}
     json.dumps(dg.to_dict())  # JSON-clean (no NaN)
+
+
+def test_cli_bad_config_is_one_line_exit_2(tmp_path, capsys):
+    from millflow.cli import main
+    assert main(["diagnose", str(tmp_path / "missing.toml"), "--quiet"]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and "config file not found" in err[0]
+
+
+@pytest.mark.slow  # three 8-parameter fits on the 151-class knife-mill grid (~40 s)
+def test_cli_knife_mill_prefers_three_tanks(tmp_path, capsys):
+    """The documented conclusion on the SPRITE knife mill (docs/model-error.md): three tanks
+    beat one perfect mixer by more than 10 BIC units; the files are written."""
+    from millflow.cli import main
+    from tests import paths
+    config = paths.EXAMPLES / "knife_mill" / "knife_mill.toml"
+    if not (paths.REPO.parent / "shared" / "data" / "sprite-knife-mill").is_dir():
+        pytest.skip("the SPRITE knife-mill data are not present")
+    out = tmp_path / "diag"
+    assert main(["diagnose", str(config), "--json", "--quiet", "--no-loco", "--out", str(out)]) == 0
+    res = json.loads(capsys.readouterr().out)
+    rows = {r["model"]: r for r in res["table"]}
+    assert res["best"] == "tanks_3" and rows["linear"]["delta_bic"] > 10
+    assert {"results.nc", "table.csv", "fits.png"} <= {p.name for p in out.iterdir()}
