@@ -22,6 +22,8 @@ ln_A0 = -4.09
 
 [assumed]                # the fitted model: ModelSpec keys
 mode = "well_mixed"      # batch designs: "batch"
+# kinetics = "aggregation"   # or population, slowing_down, a list: fit the non-linear model
+# [assumed.kinetics_params]  # kernel, x_ref_um, fines_um, w, kappa, t_ref_min (defaults match the truths')
 [assumed.params.alpha]   # bounds of the global search
 min = 0.2
 max = 2.5
@@ -68,7 +70,7 @@ _TOP = {"replicates": int, "seed": int, "workers": int, "drift_replicates": int,
 _TRUTH = {"type": str, "strength": _NUM, "strengths": list, "r": _NUM, "params": dict, "n_screen": _NUM,
           "kernel": str, "x_ref_um": _NUM, "fines_um": _NUM, "n_tanks": int}
 _ASSUMED = {"mode": str, "rate": str, "breakage": str, "classification": str, "n_tanks": int, "transport": str,
-            "transport_params": dict, "where": str, "params": dict}
+            "transport_params": dict, "where": str, "params": dict, "kinetics": (str, list), "kinetics_params": dict}
 _DESIGN = {"tau_s": list, "tau_min": list, "times_s": list, "times_min": list, "top_size_um": _NUM,
            "n_sieves": int, "sieve_ratio": _NUM, "grid_per_sieve": int}
 _NOISE = {"kind": str, "sigma": _NUM, "rho": _NUM}
@@ -169,7 +171,12 @@ def parse_config(raw: dict, src: str = "<config>") -> StudyConfig:
                                    extra_process=extra, **kw)
 
     # assumed model
-    akw = {k: v for k, v in asm.items() if k != "params"}
+    akw = {k: v for k, v in asm.items() if k not in ("params", "kinetics", "kinetics_params")}
+    if "kinetics" in asm:  # the fit config's reader: units in the key names (x_ref_um, fines_um, t_ref_min)
+        from millflow.fitting.config import _kinetics
+        akw["kinetics"], akw["kinetics_params"] = _kinetics(asm, f"{src}: assumed")
+    elif "kinetics_params" in asm:
+        raise InputError(f"{src}: assumed.kinetics_params given without assumed.kinetics")
     if not design.is_batch and akw.get("mode", "batch") in ("well_mixed", "plug_flow", "mill"):
         akw["tau_column"] = "tau_s"
     if akw.get("mode", "batch") == "batch" and not design.is_batch:

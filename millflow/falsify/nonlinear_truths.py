@@ -26,6 +26,7 @@ import numpy as np
 
 from millflow.errors import InputError, SolverError
 from millflow.falsify.truths import BREAKAGE_TRUTH, SlowingDownTruth
+from millflow.fitting.kinetics import fines_mask
 from millflow.mill.nonlinear import tanks_in_series, well_mixed
 from millflow.nonlinear import KERNELS, Aggregation, batch_nonlinear, kinetics
 
@@ -79,6 +80,12 @@ class AggregationTruth:
         if self.kernel not in KERNELS:
             raise InputError(f"truth.kernel = {self.kernel!r}: expected one of {sorted(KERNELS)}")
 
+    @property
+    def kinetic_truth(self) -> dict:
+        """The fit's parameter of this truth (``beta0`` of :mod:`millflow.fitting.kinetics`;
+        meaningful when the fit uses the same kernel and x_ref)."""
+        return {"beta0": self.strength}
+
     def mass_fractions(self, design) -> np.ndarray:
         S, b, feed = SlowingDownTruth(0.0, self.params).linear_parts(design)
         x_ref = self.x_ref_m or float(design.sieves_m[-1])
@@ -103,13 +110,19 @@ class PopulationTruth:
         if not (math.isfinite(self.strength) and self.strength >= 0):
             raise InputError(f"truth.strength = {self.strength!r}: expected a cushioning exponent >= 0")
 
+    @property
+    def kinetic_truth(self) -> dict:
+        """The fit's parameter of this truth (``lam_pop`` = -strength, with w = 1 and the same
+        fines size)."""
+        return {"lam_pop": -self.strength}
+
     def mass_fractions(self, design) -> np.ndarray:
         S, b, feed = SlowingDownTruth(0.0, self.params).linear_parts(design)
         sieves = np.asarray(design.sieves_m)
         fines = self.fines_m or float(sieves[len(sieves) // 2])
         n = design.grid.n
         w = np.zeros((n, n))
-        w[:, design.grid.x <= fines] = 1.0  # classes whose upper size is at or below the fines size
+        w[:, fines_mask(design.grid, fines) > 0] = 1.0  # classes at or below the fines size (the fit's mask)
         kin = kinetics(S[0], b, w=w, lam=-self.strength)
         M, _ = _solve(kin, design, feed, self.n_tanks)
         return M

@@ -288,7 +288,9 @@ def _dataset(truths, names, outs, R, noise) -> xr.Dataset:
     scal = {k: np.array([o[k] for o in outs], float).reshape(S, R) for k in ("r2", "ser", "runs_p", "lag1")}
     drift = np.array([o["drift"] for o in outs], float).reshape(S, R, 3)
     failed = np.array([bool(o["error"]) for o in outs]).reshape(S, R)
-    truth = np.array([[float(tr.params.get(n, np.nan)) for n in names] for tr in truths])
+    # a truth's own non-linear parameters (beta0, lam_pop, s_slow) count where the assumed model fits them
+    truth = np.array([[float({**tr.params, **getattr(tr, "kinetic_truth", {})}.get(n, np.nan)) for n in names]
+                      for tr in truths])
     tv = truth[:, None, :]
     with np.errstate(invalid="ignore", divide="ignore"), warnings.catch_warnings():
         # all-NaN columns (parameters the truth lacks, failed fits) give NaN, which is the answer

@@ -134,6 +134,12 @@ class SlowingDownTruth:
         if not (math.isfinite(self.strength) and self.strength >= 0):
             raise InputError(f"truth.strength = {self.strength!r}: expected a finite number >= 0 for slowing-down")
 
+    @property
+    def kinetic_truth(self) -> dict:
+        """The fit's parameter of this truth (``s_slow``; the default hyperbolic kappa and
+        t_ref = the last sampling time, as the fit's defaults; none for a user kappa or t_ref)."""
+        return {} if self.kappa is not None or self.t_ref_s is not None else {"s_slow": self.strength}
+
     def theta(self, t, t_ref: float) -> np.ndarray:
         """Transformed time theta(t) = int_0^t kappa [s]."""
         t = np.asarray(t, float)

@@ -12,6 +12,9 @@ Tables and keys (paths relative to the config file)::
                   b_matrix_csv = "b.csv", b_kind = "b" | "B"   # fixed breakage (hybrid fit)
                   t10_table_csv = "tn_t10.csv", t10 = 0.2      # or: B from the ore's t10 family
     [model.transport_params]  n = 10 / pe = 8.0 / n = 5, r = 1.0   # fixed, tau from tau_column
+                  kinetics = "population" | "aggregation" | "slowing_down" | ["population", "aggregation"]
+    [model.kinetics_params]   kernel = "constant", x_ref_um = 22, fines_um = 250, w = 1.0,
+                              kappa = "hyperbolic", t_ref_min = 16     # constants (fitted: lam_pop, beta0, s_slow)
     [params.NAME] value, min, max, vary
     [optimizer]   global = true, starts = 20, popsize = 15, maxiter = 200, seed = 0
     [validation]  hold_out = "each" | ["cond", ...] | [["a", "b"], ...]
@@ -41,7 +44,8 @@ __all__ = ["FitConfig", "load_config", "read_b_matrix"]
 _TABLES = {"data", "grid", "model", "params", "optimizer", "validation", "output", "candidates", "weights"}
 _MODEL_KEYS = {"mode", "rate", "breakage", "classification", "rate_process", "param_process", "screen_column",
                "ball_column", "tau_column", "n_tanks", "transport", "transport_params", "where", "b_matrix_csv",
-               "b_kind", "t10_table_csv", "t10", "objective", "label", "transport_fit"} | unit_keys("x0", "length")
+               "b_kind", "t10_table_csv", "t10", "objective", "label", "transport_fit", "kinetics",
+               "kinetics_params"} | unit_keys("x0", "length")
 _OPT_KEYS = {"global", "starts", "popsize", "maxiter", "seed"}
 
 
@@ -158,6 +162,11 @@ def _spec(table: dict, where: str, rel=None, grid_of=None) -> tuple[str, ModelSp
         kw["param_process"] = tuple(tuple(x) for x in pp)
     if x0 is not None:
         kw["x0_m"] = x0
+    if "kinetics" in table:
+        kw["kinetics"], kw["kinetics_params"] = _kinetics(table, where)
+    elif "kinetics_params" in table:
+        raise InputError(f"{where}.kinetics_params: given without kinetics = \"population\" (or slowing_down, "
+                         "aggregation, a list)")
     try:
         spec = ModelSpec(**kw)
     except (TypeError, ValueError) as exc:
@@ -165,6 +174,38 @@ def _spec(table: dict, where: str, rel=None, grid_of=None) -> tuple[str, ModelSp
             raise
         raise InputError(f"{where}: {exc}") from exc
     return str(table.get("label", spec.label())), spec
+
+
+def _kinetics(table: dict, where: str) -> tuple:
+    """``kinetics`` (a name or a list) and ``[model.kinetics_params]`` with units in the
+    key names: kernel, kappa, w (plain), x_ref_<length>, fines_<length>, t_ref_<time>."""
+    k = table["kinetics"]
+    if not (isinstance(k, str) or (isinstance(k, list) and k and all(isinstance(x, str) for x in k))):
+        raise InputError(f"{where}.kinetics = {k!r}: expected a name or a list of names, e.g. \"aggregation\" or "
+                         "[\"population\", \"aggregation\"]")
+    kp = table.get("kinetics_params", {})
+    kw = f"{where}.kinetics_params"
+    if not isinstance(kp, dict):
+        raise InputError(f"{kw}: expected a table, e.g. [model.kinetics_params] kernel = \"constant\"")
+    used: set = set()
+    consts = {}
+    for base, dim, name in (("x_ref", "length", "x_ref_m"), ("fines", "length", "fines_m"),
+                            ("t_ref", "time", "t_ref_s")):
+        v = quantity(kp, base, dim, kw, None, used=used)
+        if v is not None:
+            consts[name] = v
+    for key in ("kernel", "kappa"):
+        if key in kp:
+            consts[key] = string(kp, key, kw)
+            used.add(key)
+    if "w" in kp:
+        consts["w"] = number(kp, "w", kw, lo=0.0, lo_open=True)
+        used.add("w")
+    unknown = sorted(set(kp) - used)
+    if unknown:
+        raise InputError(f"{kw}: unknown keys {unknown}; expected some of kernel, kappa, w, x_ref_um, fines_um, "
+                         "t_ref_s (or other units)")
+    return (k,) if isinstance(k, str) else tuple(k), consts
 
 
 def load_config(path, data_dir: str | None = None) -> FitConfig:

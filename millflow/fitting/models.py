@@ -125,7 +125,11 @@ _DEFAULTS = {  # value, min, max
     # fitted transport (mode "mill", transport_fit): tau [s] in logs, Peclet number in logs,
     # recirculation ratio r
     "ln_tau": (6.0, 0.0, 11.5), "ln_pe": (2.0, -2.0, 6.0), "r": (1.0, 0.0, 10.0),
+    # non-linear kinetics (millflow.fitting.kinetics): 0 is the linear model
+    "s_slow": (0.0, 0.0, 10.0), "lam_pop": (0.0, -5.0, 5.0), "beta0": (0.0, 0.0, 0.1),
 }
+#: Transports of mode "mill" with a non-linear steady solve (millflow.mill.nonlinear).
+_NONLINEAR_TRANSPORTS = ("perfect_mixing", "tanks_in_series", "plug_flow", "axial_dispersion")
 
 
 @dataclass(frozen=True)
@@ -193,6 +197,8 @@ class ModelSpec:
     transport_params: tuple = ()
     where: str | None = None
     transport_fit: tuple = ()
+    kinetics: tuple = ()
+    kinetics_params: tuple = ()
 
     def __post_init__(self):
         for key, val, ok in (("mode", self.mode, MODES), ("rate", self.rate, RATE_FORMS),
@@ -204,6 +210,17 @@ class ModelSpec:
         if int(self.n_tanks) != self.n_tanks or self.n_tanks < 1:
             raise InputError(f"model.n_tanks = {self.n_tanks!r}: expected an integer >= 1")
         self._check_transport()
+        from millflow.fitting.kinetics import check_kinetics
+        kp = self.kinetics_params
+        forms, consts = check_kinetics(self.kinetics, dict(kp) if not isinstance(kp, dict) else kp, self.mode)
+        object.__setattr__(self, "kinetics", forms)
+        object.__setattr__(self, "kinetics_params", consts)
+        if forms and self.mode == "mill" and self.transport not in _NONLINEAR_TRANSPORTS:
+            raise InputError(f"model.kinetics with transport {self.transport!r}: non-linear kinetics are fitted with "
+                             f"transports {list(_NONLINEAR_TRANSPORTS)}")
+        if forms and self.classification is not None:
+            raise InputError(f"model.kinetics with classification {self.classification!r}: non-linear kinetics are "
+                             "fitted without classification (d* = 1)")
         if self.breakage == "fixed" and self.b_matrix is None:
             raise InputError("model.breakage = 'fixed' needs b_matrix (the fractional b on the numerical grid)")
         object.__setattr__(self, "rate_process", tuple(self.rate_process))
@@ -281,6 +298,8 @@ class ModelSpec:
         for name in [f"a_{p}" for p in self.rate_process] + list(self.base_names[1:]):
             names.append(name)
             names += [f"{name}_{col}" for par, col in self.param_process if par == name]
+        from millflow.fitting.kinetics import KINETICS_FORMS
+        names += [n for f in self.kinetics for n in KINETICS_FORMS[f]]
         names += [TRANSPORT_FIT[k][0] for k in self.transport_fit]
         return tuple(names)
 
@@ -296,6 +315,8 @@ class ModelSpec:
             parts.append("A~" + "*".join(self.rate_process))
         for par, col in self.param_process:
             parts.append(f"{par}~{col}")
+        if self.kinetics:
+            parts.append("kinetics=" + "+".join(self.kinetics))
         return " ".join(parts)
 
 
@@ -369,7 +390,23 @@ class ForwardModel:
         log_ratio = np.log(x[:-1] / x[1:])
         geometric = x.size > 1 and float(np.ptp(log_ratio)) <= 1e-12 * float(log_ratio.mean())
         self._ratio = (float(np.exp(log_ratio.mean())) if geometric and spec.breakage in ("normalized", "single")
-                       else None)
+                       and not spec.kinetics else None)
+        self._nonlinear = None
+        #: relative noise of the predictions, for the finite-difference step of the
+        #: Jacobian (machine epsilon for the exact linear solves; the ODE tolerance for
+        #: non-linear kinetics: see millflow.fitting.kinetics)
+        self.fd_noise = float(np.finfo(float).eps)
+        if spec.kinetics:
+            from millflow.fitting.kinetics import ODE_RTOL, CompiledKinetics
+            t_max = max([g[2] for g in self.groups] + [0.0])
+            self._nonlinear = CompiledKinetics.build(spec.kinetics, dict(spec.kinetics_params), self.grid, data, t_max)
+            if any(f != "slowing_down" for f in spec.kinetics):
+                self.fd_noise = ODE_RTOL
+            if spec.mode == "mill":
+                bad = sorted({g[1] for g in self.groups if g[1] != "product"})
+                if bad:
+                    raise InputError(f"{data.source}: locations {bad}: a mill with non-linear kinetics is fitted to "
+                                     "product samples only")
 
     # ----------------------------------------------------------------- compilation
     def _build_tracer(self):
@@ -716,7 +753,9 @@ class ForwardModel:
         b = None if geometric else self.frac_b(p, n_pop)
         tau = self._proc[self.spec.tau_column] if self.spec.tau_column else np.ones(len(self.conditions))
         out = np.empty((n_pop, len(self.groups), self.n))
-        if mode == "well_mixed":
+        if self._nonlinear is not None:
+            self._predict_nonlinear(S, b, p, tau, out)
+        elif mode == "well_mixed":
             d = self.discharge(p, n_pop)
             prod = self._feeds
             tau_k = tau[None, :] / self.spec.n_tanks
@@ -753,6 +792,43 @@ class ForwardModel:
                 # eq. 4 by the core's population solve: exact also for nearly equal rates
                 out[:, gsel] = batch_grind_population(S[:, c], b[:, c] if b.ndim == 4 else b, self._feeds[c], t)
         return out
+
+    def _predict_nonlinear(self, S, b, p, tau, out):
+        """Non-linear kinetics (:mod:`millflow.fitting.kinetics`), member by member and
+        condition by condition: batch (eq. 4 + R(M)), plug flow, well-mixed tanks
+        (n_tanks), or mode "mill" with a transport of :data:`_NONLINEAR_TRANSPORTS`."""
+        spec, nl = self.spec, self._nonlinear
+        mode = spec.mode
+        tau_pc = None
+        if mode == "mill":
+            tau_pc, extra = self.transport_values(p)
+        tp = dict(spec.transport_params)
+        for c in range(len(self.conditions)):
+            gsel = [g for g, grp in enumerate(self.groups) if grp[0] == c]
+            if mode == "batch":  # the whole population in one stacked solve
+                t = np.array([self.groups[g][2] for g in gsel])
+                out[:, gsel] = nl.solve_batch_population(S[:, c], b[:, c] if b.ndim == 4 else b,
+                                                         self._feeds[c], t, p)
+                continue
+            for k in range(S.shape[0]):
+                bk = b[k, c] if b.ndim == 4 else b[k]
+                if not (np.isfinite(S[k, c]).all() and np.isfinite(bk).all()):
+                    out[k, gsel] = np.nan
+                    continue
+
+                if mode == "mill":
+                    tr = spec.transport
+                    kw = {"transport": "plug_flow" if tr == "plug_flow" else
+                          "axial_dispersion" if tr == "axial_dispersion" else "well_mixed",
+                          "n_tanks": int(tp.get("n", 1)) if tr == "tanks_in_series" else 1}
+                    if tr == "axial_dispersion":
+                        kw["pe"] = float(np.exp(p["ln_pe"][k])) if "ln_pe" in p else float(tp["pe"])
+                    tc = float(tau_pc[k, c])
+                else:
+                    kw = {"transport": "plug_flow" if mode == "plug_flow" else "well_mixed",
+                          "n_tanks": spec.n_tanks}
+                    tc = float(tau[c])
+                out[k, gsel] = nl.solve_steady(S[k, c], bk, self._feeds[c], tc, p, k, **kw)
 
     def _chain_cells(self):
         """Number of equal well-mixed cells in a row for transports that are such a chain

@@ -28,13 +28,19 @@ CORR_LIMIT = 0.95
 _EPS3 = np.finfo(float).eps ** (1.0 / 3.0)
 
 
-def jacobian(resid_pop, theta, lower, upper):
-    """Central-difference Jacobian (n_res, p) of ``resid_pop`` ((P, p) -> (P, n_res)) at theta."""
+def jacobian(resid_pop, theta, lower, upper, noise: float | None = None):
+    """Central-difference Jacobian (n_res, p) of ``resid_pop`` ((P, p) -> (P, n_res)) at theta.
+
+    Step h = noise^(1/3) x max(|theta|, 0.1 x width, 1e-3): the optimum of a central
+    difference whose function values carry relative noise ``noise`` (machine epsilon by
+    default, exact solves; an adaptive ODE solve's tolerance otherwise, since its error
+    is not smooth in the parameters)."""
     theta = np.asarray(theta, dtype=float)
     p = theta.size
     lower, upper = np.asarray(lower, float), np.asarray(upper, float)
     width = np.where(np.isfinite(upper - lower), upper - lower, 1.0)
-    h = _EPS3 * np.maximum.reduce([np.abs(theta), 0.1 * width, np.full(p, 1e-3)])
+    step = _EPS3 if noise is None else float(noise) ** (1.0 / 3.0)
+    h = step * np.maximum.reduce([np.abs(theta), 0.1 * width, np.full(p, 1e-3)])
     pts, kind = [theta], []
     for k in range(p):
         e = np.zeros(p)
@@ -62,8 +68,14 @@ def jacobian(resid_pop, theta, lower, upper):
     return J
 
 
-#: A fit is flagged when the cluster-robust and eq. 9 standard errors differ by more than this factor.
+#: A fit is flagged when the cluster-robust SE exceeds eq. 9's by more than this factor.
 SE_RATIO_FLAG = 1.5
+#: ... and only from at least this many samples (clusters): with fewer, the sandwich's
+#: meat is a sum of a handful of outer products and its ratio to eq. 9 scatters by a
+#: factor of ~2 either way even for independent residuals (Cameron and Miller 2015, sec.
+#: VI: "few clusters"). A ratio below 1 is never evidence of correlation: positively
+#: correlated residuals within a sample inflate the sandwich, they do not shrink it.
+ROBUST_MIN_CLUSTERS = 10
 
 
 def cluster_robust_covariance(J, r, clusters, n_params: int):
@@ -195,8 +207,9 @@ def parameter_statistics(names, theta, J, ssr, n_data, lower=None, upper=None, r
         if at_bound:
             reasons.append("at a bound (statistics not valid there)")
         flags = list(reasons)
-        if robust is not None and not (1 / SE_RATIO_FLAG <= ratio[k] <= SE_RATIO_FLAG):
-            flags.append(f"cluster-robust SE {ratio[k]:.2g} x eq. 9 (residuals correlated within samples)")
+        if robust is not None and G >= ROBUST_MIN_CLUSTERS and ratio[k] > SE_RATIO_FLAG:
+            flags.append(f"cluster-robust SE {ratio[k]:.2g} x eq. 9 from {G} samples "
+                         "(residuals correlated within samples)")
         params[name] = {"value": v, "se": s, "t": None if tval is None else float(tval), "p_value": pval,
                         "ci95": ci, "significant": not reasons, "reasons": reasons, "at_bound": at_bound,
                         "se_eq9": float(se9[k]), "se_cluster": None if robust is None else float(robust["se"][k]),
@@ -210,7 +223,7 @@ def parameter_statistics(names, theta, J, ssr, n_data, lower=None, upper=None, r
            "condition_number_raw": cond_raw, "ser": math.sqrt(ser2) if dof > 0 else math.nan, "dof": dof,
            "dof_intervals": dof_t, "correlated_pairs": pairs, "singular": singular,
            "clusters": G, "se_ratio_max": float(np.max(ratio)) if robust is not None else math.nan,
-           "se_ratio_flag": bool(robust is not None and np.any((ratio > SE_RATIO_FLAG) | (ratio < 1 / SE_RATIO_FLAG)))}
+           "se_ratio_flag": bool(robust is not None and G >= ROBUST_MIN_CLUSTERS and np.any(ratio > SE_RATIO_FLAG))}
     if residuals is not None and clusters is not None:
         out["residuals"] = residual_structure(residuals, clusters)
     return out

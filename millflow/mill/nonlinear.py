@@ -17,11 +17,17 @@ then the local mass fraction everywhere.
   dM/dlambda = -R(M) + h(lambda) (M - f), h = E/(1 - F), integrated from large lambda
   (where M solves the same equation with dM/dlambda = 0) down to lambda = 0, product M(0).
   For first-order kinetics the two coincide (the RTD fixes the product, segregated flow
-  is exact); then one linear answer is returned and the result says so.
+  is exact); then one linear answer is returned and the result says so. Otherwise they
+  are the extremes of mixing, not bounds: Zwietering's ordering of the conversion holds
+  for one species with a rate of one convexity, not class by class for a population
+  whose rates couple (four tanks in series with nipping rates lie outside both).
 
 A linear scene (nothing non-linear declared) takes the exact linear path of
 :mod:`millflow.linalg` / :mod:`millflow.mill` with nothing added. A steady solve that
-does not reach its tolerance raises SolverError naming the unit and the residual.
+does not reach its tolerance raises SolverError naming the unit and the residual. Newton's
+criterion is scaled: max|F| <= tol * s with s the size of the terms of F (feed, state,
+breakage flux; :func:`residual_scale`), tol = :data:`NEWTON_RTOL` = 1e-11 by default, or,
+at the rounding floor where no step reduces max|F|, a full Newton step below tol * s.
 The state carries the aggregation overflow (mass above the top class) as component N + 1:
 it leaves with the product and is reported as ``overflow_mass``.
 """
@@ -74,11 +80,33 @@ def _check(kin: Kinetics, feed, tau):
     return feed, float(tau)
 
 
+def residual_scale(kin: Kinetics, y_in, y, tau) -> float:
+    """The size of the terms the steady residual F = y_in - y + tau R(y) is made of:
+    s = max(sum|y_in|, max|y|, tau sum_i S_i[M] M_i) (the feed, the state, the breakage
+    flux through the cell). Rounding alone leaves |F| ~ N eps s, so the convergence test
+    is relative to s: a residual of 1e-11 on a state of order 1 with tau S ~ 10 is
+    converged, whatever units the feed rate is given in."""
+    M = y[:-1]
+    try:
+        flux = float(np.abs(kin.rates(M) * M).sum())
+    except SolverError:
+        flux = 0.0
+    return float(max(np.abs(y_in).sum(), np.abs(y).max(), tau * flux, np.finfo(float).tiny))
+
+
+#: Relative tolerance of the non-linear Newton solves (see :func:`residual_scale`).
+NEWTON_RTOL = 1e-11
+
+
 def _newton_cell(kin: Kinetics, y_in, tau, y0, *, tol, max_iter, unit,
                  phases=("newton", "pseudo-transient", "newton")):
     """Solve F(y) = y_in - y + tau R(y) = 0; returns (y, residual, step, iterations, how).
-    ``phases``: Newton, then (if it stalls) pseudo-transient continuation to residual
-    1e-6, then Newton again."""
+
+    Stated criterion: converged when max|F| <= tol * s, s = :func:`residual_scale` (the
+    feed, the state and the breakage flux), or, when the line search can no longer
+    reduce max|F| (the rounding floor), when the full Newton step is itself below
+    tol * s. ``phases``: Newton, then (if it stalls) pseudo-transient continuation to
+    residual 1e-6 s, then Newton again."""
     n1 = y_in.size
     eye = np.eye(n1)
 
@@ -97,13 +125,18 @@ def _newton_cell(kin: Kinetics, y_in, tau, y0, *, tol, max_iter, unit,
     its = 0
     ran = []
     lu = None
+    floor = False  # converged at the rounding floor (full step below tol * scale)
+
+    def limit():
+        return tol * residual_scale(kin, y_in, y, tau)
+
     for phase in phases:
-        if res <= tol:
+        if res <= limit() or floor:
             break
         ran.append(phase)
         dt = 0.1 * tau
         stalled = False
-        while res > tol and its < max_iter:
+        while res > limit() and its < max_iter:
             its += 1
             J = -eye + tau * kin.jacobian(y)
             if phase == "newton":
@@ -119,6 +152,7 @@ def _newton_cell(kin: Kinetics, y_in, tau, y0, *, tol, max_iter, unit,
                     lam *= 0.5
                 if not accepted:
                     stalled = True
+                    floor = bool(np.isfinite(dy).all() and np.abs(dy).max() <= limit())
                     break
             else:
                 dy = np.linalg.solve(eye / dt - J, f)
@@ -128,25 +162,31 @@ def _newton_cell(kin: Kinetics, y_in, tau, y0, *, tol, max_iter, unit,
                     dt *= 0.25
                     continue
                 dt *= min(10.0, max(0.5, res / max(float(np.abs(ft).max()), 1e-300)))
-                if float(np.abs(ft).max()) < 1e-6:
+                if float(np.abs(ft).max()) < 1e-6 * residual_scale(kin, y_in, yt, tau):
                     y, f, res = yt, ft, float(np.abs(ft).max())
                     break
             y, f, res = yt, ft, float(np.abs(ft).max())
-        if res <= tol:
+        if res <= limit() or floor:
             break
         if phase == "newton" and not stalled and its >= max_iter:
             break
     how = " + ".join(ran) or "newton (start already converged)"
-    if res > tol or not np.isfinite(res):
+    scale = residual_scale(kin, y_in, y, tau)
+    if not np.isfinite(res) or (res > tol * scale and not floor):
         raise SolverError(f"{unit}: the steady state did not converge: residual max|f - M + tau R(M)| = {res:.3g} "
-                          f"> tol {tol:g} after {its} iterations ({kin.describe()})")
-    if lu is None:
-        lu = scipy.linalg.lu_factor(-eye + tau * kin.jacobian(y), check_finite=False)
-    step = float(np.abs(scipy.linalg.lu_solve(lu, -f, check_finite=False)).max())
+                          f"> tol {tol:g} x scale {scale:.3g} after {its} iterations ({kin.describe()})")
+    # one polishing Newton step at the answer: kept if it lowers max|F|; its size is the
+    # error estimate (an over-estimate for the polished state: Newton converges quadratically)
+    lu = scipy.linalg.lu_factor(-eye + tau * kin.jacobian(y), check_finite=False)
+    dy = scipy.linalg.lu_solve(lu, -f, check_finite=False)
+    step = float(np.abs(dy).max())
+    ft = safe_F(y + dy)
+    if ft is not None and np.isfinite(ft).all() and float(np.abs(ft).max()) < res:
+        y, res = y + dy, float(np.abs(ft).max())
     return y, res, step, its, how
 
 
-def well_mixed(kin: Kinetics, feed, tau: float, *, tol: float = 1e-12, max_iter: int = 60,
+def well_mixed(kin: Kinetics, feed, tau: float, *, tol: float = NEWTON_RTOL, max_iter: int = 60,
                unit: str = "perfectly mixed mill") -> NonlinearSteady:
     """Steady product of a perfectly mixed mill with non-linear kinetics (eq. 3 + R(M))."""
     feed, tau = _check(kin, feed, tau)
@@ -163,7 +203,7 @@ def well_mixed(kin: Kinetics, feed, tau: float, *, tol: float = 1e-12, max_iter:
                            time.perf_counter() - start, {"kinetics": kin.describe()})
 
 
-def tanks_in_series(kin: Kinetics, feed, tau: float, n: int, *, tol: float = 1e-12, max_iter: int = 60
+def tanks_in_series(kin: Kinetics, feed, tau: float, n: int, *, tol: float = NEWTON_RTOL, max_iter: int = 60
                     ) -> NonlinearSteady:
     """n equal perfect mixers in series (total mean residence time tau), one cell at a time."""
     feed, tau = _check(kin, feed, tau)
@@ -199,7 +239,7 @@ def plug_flow(kin: Kinetics, feed, tau: float, *, rtol: float = 1e-8, atol: floa
                            {"kinetics": res.info["kinetics"]})
 
 
-def axial_dispersion(kin: Kinetics, feed, tau: float, pe: float, *, m_cells: int = 64, tol: float = 1e-12,
+def axial_dispersion(kin: Kinetics, feed, tau: float, pe: float, *, m_cells: int = 64, tol: float = NEWTON_RTOL,
                      max_iter: int = 40) -> NonlinearSteady:
     """Axial dispersion (Peclet ``pe``), closed vessel, on ``m_cells`` volumes; Newton on
     all nodes. The discretisation error is estimated against the grid of m_cells / 2."""
@@ -247,32 +287,39 @@ def _axial_newton(kin, feed, tau, pe, m, tol, max_iter):
         R = np.array([kin.rate(c) for c in C])
         return Tbig @ C.ravel() + src + tau * (wts[:, None] * R).ravel()
 
+    def scale(C):  # the terms F is made of: feed, transport (a + bt + 1) C, tau w_k S M
+        try:
+            flux = max(float(wts[k] * np.abs(kin.rates(C[k, :-1]) * C[k, :-1]).sum()) for k in range(m + 1))
+        except SolverError:
+            flux = 0.0
+        return float(max(np.abs(feed).sum(), (a + bt + 1.0) * np.abs(C).max(), tau * flux))
+
     f = F(C)
     res = float(np.abs(f).max())
     its = 0
-    while res > tol and its < max_iter:
+    floor = False  # the rounding floor: no decrease possible, full step below tol * scale
+    while res > tol * scale(C) and its < max_iter:
         its += 1
         D = np.array([tau * wts[k] * kin.jacobian(C[k]) for k in range(m + 1)])
         D[:, np.arange(n1), np.arange(n1)] += main[:, None]
         dC = _block_thomas(D, a, bt, -f.reshape(m + 1, n1))
-        lam = 1.0
-        while True:
+        lam, ft = 1.0, None
+        while lam >= 1.0 / 256:
             try:
-                ft = F(C + lam * dC)
-                if np.abs(ft).max() <= (1.0 - 1e-4 * lam) * res or lam < 1.0 / 256:
+                trial = F(C + lam * dC)
+                if np.abs(trial).max() <= (1.0 - 1e-4 * lam) * res:
+                    ft = trial
                     break
             except SolverError:
                 pass
             lam *= 0.5
-            if lam < 1.0 / 256:
-                ft = None
-                break
         if ft is None:
+            floor = bool(np.isfinite(dC).all() and np.abs(dC).max() <= tol * scale(C))
             break
         C, f, res = C + lam * dC, ft, float(np.abs(ft).max())
-    if res > tol:
-        raise SolverError(f"axial dispersion mill: Newton did not converge: residual {res:.3g} > tol {tol:g} "
-                          f"after {its} iterations on {m} volumes ({kin.describe()})")
+    if not np.isfinite(res) or (res > tol * scale(C) and not floor):
+        raise SolverError(f"axial dispersion mill: Newton did not converge: residual {res:.3g} > tol {tol:g} x "
+                          f"scale {scale(C):.3g} after {its} iterations on {m} volumes ({kin.describe()})")
     out = C[-1]  # product = v c(1) with v = 1
     return out[:-1].copy(), float(out[-1]), res, its
 
@@ -402,6 +449,8 @@ def micromixing_bounds(kin: Kinetics, feed, model, *, rtol: float = 1e-9, atol: 
     err = float(seg_err + rtol * np.abs(mm).max() * 10 + atol + h_err * np.abs(mm - y0).max())
     return MicromixingBounds(seg[:-1], mm[:-1], spread, False,
                              "non-linear kinetics: the product depends on micromixing, which the RTD cannot tell; "
-                             "every real mill lies between these two limits", err, time.perf_counter() - start,
+                             "these are the two extremes of mixing, not bounds: a mill of intermediate mixing (e.g. "
+                             "tanks in series) can lie outside them class by class (Zwietering's ordering holds only "
+                             "for one species with a rate of one convexity)", err, time.perf_counter() - start,
                              {"overflow": (float(seg[-1]), float(mm[-1])), "lambda_max_s": lam_max,
                               "kinetics": kin.describe(), "hazard_interpolation_error": h_err})

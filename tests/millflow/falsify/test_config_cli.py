@@ -109,3 +109,25 @@ def test_the_documented_configs_parse(name):
     path = Path(__file__).resolve().parents[3] / "docs" / "examples" / "falsify" / name
     cfg = load_config(path)
     assert cfg.replicates == 50 and len(cfg.strengths) >= 5
+
+
+def test_assumed_kinetics_fits_the_non_linear_model():
+    """[assumed] kinetics: the documented worked study 5 parses into a six-parameter
+    slowing-down fit, and the truth's s is the reference of the fitted s_slow."""
+    from pathlib import Path
+
+    from millflow.falsify.config import load_config
+    path = Path(__file__).resolve().parents[3] / "docs" / "examples" / "falsify" / "slowing_fitted.toml"
+    cfg = load_config(path)
+    assert cfg.assumed.kinetics == ("slowing_down",) and "s_slow" in cfg.params
+    assert cfg.truth(1.0).kinetic_truth == {"s_slow": 1.0}
+
+
+def test_assumed_kinetics_params_need_units(tmp_path):
+    from millflow.errors import InputError
+    from millflow.falsify.config import parse_config
+    raw = {"truth": {"type": "aggregation", "strength": 0.01}, "design": {"times_s": [30, 60, 120]},
+           "noise": {"sigma": 0.01},
+           "assumed": {"mode": "batch", "kinetics": "aggregation", "kinetics_params": {"x_ref": 22}}}
+    with pytest.raises(InputError, match="x_ref: units of measure missing"):
+        parse_config(raw)

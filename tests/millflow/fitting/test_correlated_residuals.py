@@ -87,3 +87,36 @@ def test_default_intervals_cover_at_least_as_often_as_eq9():
 def test_default_interval_coverage_under_ar1_is_at_least_085():
     cov, cov9 = coverage(200, seed=7)
     assert min(cov.values()) >= 0.85, (cov, cov9)
+
+
+def test_robust_flag_needs_enough_samples_and_a_ratio_above_one():
+    """The flag fires on a ratio > 1.5 from >= 10 samples only: fewer samples cannot support
+    it, and a ratio below 1 is no evidence of correlation. The message names the count."""
+    from millflow.fitting.statistics import ROBUST_MIN_CLUSTERS, parameter_statistics
+
+    rng = np.random.default_rng(3)
+
+    def stats_for(G, rho):
+        n_per = 12
+        J = rng.standard_normal((G * n_per, 2))
+        r = np.empty((G, n_per))
+        z = rng.standard_normal((G, n_per))
+        r[:, 0] = z[:, 0]
+        for k in range(1, n_per):
+            r[:, k] = rho * r[:, k - 1] + np.sqrt(1 - rho ** 2) * z[:, k]
+        # the scores J_g^T r_g grow with the within-sample correlation of J and r: give J
+        # the same smooth structure so that rho > 0 really inflates the sandwich
+        J = J + 3.0 * np.repeat(rng.standard_normal((G, 1, 2)), n_per, axis=1).reshape(-1, 2)
+        r = r + 3.0 * rho * rng.standard_normal((G, 1))
+        return parameter_statistics(["a", "b"], np.array([1.0, 2.0]), J, float((r ** 2).sum()), r.size,
+                                    residuals=r.ravel(), clusters=np.repeat(np.arange(G), n_per))
+
+    few = stats_for(ROBUST_MIN_CLUSTERS - 4, 0.9)
+    assert not few["se_ratio_flag"] and not any(few["params"][n]["flags"] for n in "ab")
+    many = stats_for(60, 0.9)
+    assert many["se_ratio_max"] > 1.5  # strongly correlated within samples: the sandwich is wider
+    assert many["se_ratio_flag"]
+    assert any("from 60 samples" in f for n in "ab" for f in many["params"][n]["flags"])
+    indep = stats_for(60, 0.0)  # independent residuals: ratio ~ 1 (never flagged below 1)
+    assert not any("cluster-robust" in f for n in "ab" for f in indep["params"][n]["flags"]
+                   if indep["params"][n]["se_cluster"] / indep["params"][n]["se_eq9"] < 1)

@@ -135,3 +135,54 @@ def test_pseudo_transient_continuation_reaches_the_newton_answer():
     assert how == "pseudo-transient + newton" and res <= 1e-12
     ref = nl.well_mixed(kin, feed, TAU)
     assert np.abs(y[:-1] - ref.product).max() < 1e-12  # the same root, both to residual 1e-12
+
+
+def test_newton_criterion_is_relative_to_the_feed_and_the_state():
+    """The feed rate in other units (x 1e3, with w / 1e3 so that w M, hence the physics,
+    is unchanged): the product scales exactly, where an absolute 1e-12 on max|F| would
+    ask for 1e-15 relative accuracy, below rounding of the 1e3-sized terms."""
+    grid, S, b, feed = _scene()
+    w = np.zeros((S.size, S.size))
+    w[:, S.size // 2:] = 3.0
+    ref = nl.well_mixed(kinetics(S, b, w=w, lam=1.0), feed, TAU)
+    big = nl.well_mixed(kinetics(S, b, w=w / 1e3, lam=1.0), 1e3 * feed, TAU)
+    # same root; both to NEWTON_RTOL relative (plus the conditioning of the 41 x 41 solve)
+    assert np.abs(big.product / 1e3 - ref.product).max() < 1e-10
+    assert big.error_estimate < 1e-9 * 1e3
+
+
+def test_a_converged_answer_at_the_rounding_level_is_accepted():
+    """A residual of a few 1e-12 on a state of order 1 (tau S ~ 30) is converged under the
+    scaled criterion: no iteration needed; a residual of 1e-6 is not, and says so."""
+    grid, S, b, feed = _scene()
+    kin = _nonlinear(grid, S, b)
+    ref = nl.well_mixed(kin, feed, TAU)
+    y_in = np.append(feed, 0.0)
+    y_star = np.append(ref.product, ref.overflow_mass)
+    near = y_star + 3e-13 * np.sign(np.arange(y_star.size) % 2 - 0.5)
+    f = y_in - near + TAU * kin.rate(near)
+    assert 1e-12 < np.abs(f).max() < nl.NEWTON_RTOL * nl.residual_scale(kin, y_in, near, TAU)
+    y, res, step, its, _ = nl._newton_cell(kin, y_in, TAU, near, tol=nl.NEWTON_RTOL, max_iter=0, unit="test")
+    assert its == 0 and np.abs(y - y_star).max() < 1e-11  # the polishing step only
+    far = y_star + 1e-6
+    with pytest.raises(SolverError, match=r"test: .*residual .* > tol 1e-11 x scale"):
+        nl._newton_cell(kin, y_in, TAU, far, tol=nl.NEWTON_RTOL, max_iter=0, unit="test")
+
+
+@pytest.mark.parametrize("lam, outside", [(1.0, 5e-4), (-1.0, 5e-5)])
+def test_micromixing_limits_are_not_bounds_class_by_class(lam, outside):
+    """Four tanks in series share the RTD of rtd.TanksInSeries(tau, 4) and are a state of
+    intermediate micromixing; with coupled non-linear rates (nipping lam > 0, cushioning
+    lam < 0) their product lies outside both limits in some class, by far more than the
+    error estimates of either solve: the limits are extremes, not bounds (as documented)."""
+    grid, S, b, feed = _scene()
+    w = np.zeros((S.size, S.size))
+    w[:, S.size // 2:] = 3.0
+    kin = kinetics(S, b, w=w, lam=lam)
+    four = nl.tanks_in_series(kin, feed, TAU, 4)
+    mm = nl.micromixing_bounds(kin, feed, rtd.TanksInSeries(TAU, 4))
+    lo = np.minimum(mm.segregated, mm.max_mixedness)
+    hi = np.maximum(mm.segregated, mm.max_mixedness)
+    beyond = float(np.maximum(lo - four.product, four.product - hi).max())
+    assert beyond > outside > 1e3 * (mm.error_estimate + four.error_estimate)
+    assert "not bounds" in mm.note

@@ -1,0 +1,284 @@
+"""Which model do the data support? Fit a candidate set and rank it (Principle I).
+
+Candidates, built from the user's fit config (its rate, breakage, transport and data):
+
+- ``linear``: the user's model without non-linear kinetics (first-order, eq. 4/3);
+- ``slowing_down`` (batch data only): S_i(t) = S_i0 / (1 + s t/t_ref);
+- ``cushioning``: population-dependent rates S_i (1 + F_fines)^lambda;
+- ``aggregation``: breakage + constant-kernel aggregation, beta0 [1/s];
+- continuous data: also the user's transport with ``n_tanks`` 2 and 3 (alternative RTDs),
+  and, without classification in the user's model, a ``screen_power`` classification
+  when the process table has a screen column.
+
+Each candidate is fitted (:func:`millflow.fitting.estimate.fit`). The non-linear
+candidates nest the linear one (their extra parameter at 0), so they start from the
+linear fit's optimum with the extra parameter at 0 and at a Sobol spread of values
+(local starts; the global search is the linear fit's). Ranking: BIC (the selection rule:
+consistent, so a true model in the set wins with probability -> 1) and AICc; the
+leave-one-condition-out prediction RMSE where there are >= 3 conditions. Per candidate:
+the drift test (ln A0 fitted to the short and the long half of the times, batch, or of
+the residence times, continuous: the classical symptom of non-linear breakage), and
+the residual structure (mean lag-1 autocorrelation within samples, runs-test rejection
+fraction). A verdict per parameter of the user's model: "consistent" when the
+best-supported model is the user's, or the parameter differs between the two by less
+than 2 combined SE; otherwise "falsified: the data prefer X, under which this parameter
+is Y +- SE".
+"""
+from __future__ import annotations
+
+import math
+import time
+from dataclasses import dataclass, field, replace
+
+import numpy as np
+
+from millflow.errors import InputError, MillflowError
+from millflow.fitting.estimate import fit
+from millflow.fitting.models import ForwardModel, ModelSpec, Parameter, default_parameters
+from millflow.fitting.progress import reporter
+
+__all__ = ["Diagnosis", "candidate_specs", "diagnose"]
+
+#: Sobol-free fixed starts of the extra non-linear parameter (besides 0), per parameter.
+_EXTRA_STARTS = {"s_slow": (0.5, 2.0), "lam_pop": (-1.0, 1.0), "beta0": (0.005, 0.02)}
+
+
+def candidate_specs(spec: ModelSpec, data) -> dict:
+    """label -> ModelSpec of the candidate set for the user's ``spec`` and data."""
+    base = replace(spec, kinetics=(), kinetics_params=())
+    out = {"linear": base}
+    batch = spec.mode == "batch"
+    cls_ok = spec.classification is None
+    if batch:
+        out["slowing_down"] = replace(base, kinetics=("slowing_down",))
+    if cls_ok and (batch or spec.mode in ("well_mixed", "plug_flow") or spec.mode == "mill"):
+        try:
+            out["cushioning"] = replace(base, kinetics=("population",))
+            out["aggregation"] = replace(base, kinetics=("aggregation",))
+        except InputError:  # a transport the non-linear solves do not cover
+            out.pop("cushioning", None)
+    if spec.mode == "well_mixed":
+        for n in (2, 3):
+            if n != spec.n_tanks:
+                out[f"tanks_{n}"] = replace(base, n_tanks=n)
+        if cls_ok and spec.screen_column in data.process.columns:
+            out["classification"] = replace(base, classification="screen_power")
+    return out
+
+
+@dataclass
+class Diagnosis:
+    """Outcome of :func:`diagnose`: ``table`` (rows per candidate, best BIC first), ``fits``
+    (label -> FitResult), ``verdicts`` (user parameter -> text), ``best`` (label)."""
+
+    table: list
+    fits: dict
+    verdicts: dict
+    best: str
+    user: str
+    runtime_s: float
+    notes: list = field(default_factory=list)
+
+    def to_dict(self) -> dict:
+        fits = {label: {n: {"value": s["value"], "se": s["se"], "ci95": s["ci95"]}
+                        for n, s in r.stats["params"].items()} for label, r in self.fits.items()}
+        return {"best": self.best, "user_model": self.user, "table": self.table, "verdicts": self.verdicts,
+                "parameters": _clean(fits), "notes": self.notes, "runtime_s": self.runtime_s}
+
+    def text(self) -> str:
+        lines = [f"{'candidate':<16}{'p':>3}{'SSR':>12}{'BIC':>10}{'dBIC':>8}{'AICc':>10}{'LOCO RMSE':>11}"
+                 f"{'drift A % (SE)':>18}{'lag-1':>7}{'runs':>6}"]
+        for r in self.table:
+            loco = "-" if r["loco_rmse"] is None else f"{r['loco_rmse']:.4f}"
+            drift = "-" if r["drift_pct"] is None else f"{r['drift_pct']:+.1f} ({r['drift_se']:+.1f})"
+            lag = "-" if r["lag1"] is None else f"{r['lag1']:.2f}"
+            runs = "-" if r["runs_reject"] is None else f"{r['runs_reject']:.2f}"
+            lines.append(f"{r['model']:<16}{r['n_params']:>3}{r['ssr']:>12.5g}{r['bic']:>10.2f}{r['delta_bic']:>8.2f}"
+                         f"{r['aicc']:>10.2f}{loco:>11}{drift:>18}{lag:>7}{runs:>6}")
+        lines.append(f"best supported (BIC): {self.best}; the user's model: {self.user}")
+        for name, v in self.verdicts.items():
+            lines.append(f"  {name}: {v}")
+        lines += [f"note: {n}" for n in self.notes]
+        return "\n".join(lines)
+
+
+def _clean(v):
+    if isinstance(v, dict):
+        return {k: _clean(x) for k, x in v.items()}
+    if isinstance(v, (list, tuple)):
+        return [_clean(x) for x in v]
+    if isinstance(v, (float, np.floating)):
+        return float(v) if math.isfinite(v) else None
+    return v
+
+
+def _params_for(spec, user_params: dict, start: dict | None = None) -> dict:
+    """The user's bounds for shared parameters, defaults for the others; start values
+    from ``start`` (a previous fit) where given."""
+    base = default_parameters(spec)
+    out = {}
+    for n, par in base.items():
+        p = user_params.get(n, par)
+        v = float(start[n]) if start and n in start else p.value
+        out[n] = Parameter(n, min(max(v, p.min), p.max), p.min, p.max, p.vary)
+    return out
+
+
+def _fit_candidate(model, params, linear_theta, optimizer, extra):
+    """A nested non-linear candidate: local fits from the linear optimum with the extra
+    parameter at 0 and at its fixed starts; the best is kept (then its statistics)."""
+    if linear_theta is None or not extra:
+        return fit(model, params, grid_check=False, quiet=True, **optimizer)
+    best = None
+    for v in (0.0,) + _EXTRA_STARTS.get(extra, ()):
+        par = dict(params)
+        p = par[extra]
+        par[extra] = Parameter(extra, min(max(v, p.min), p.max), p.min, p.max, p.vary)
+        start = {**{n: linear_theta[n] for n in par if n in linear_theta}}
+        par = {n: (Parameter(n, min(max(start[n], q.min), q.max), q.min, q.max, q.vary) if n in start else q)
+               for n, q in par.items()}
+        try:
+            r = fit(model, par, global_search=False, starts=1, grid_check=False, quiet=True)
+        except MillflowError:
+            continue
+        if best is None or r.ssr < best.ssr:
+            best = r
+    if best is None:
+        raise InputError("no start of the candidate could be fitted")
+    return best
+
+
+def _drift(model, params, optimizer, result):
+    """ln A0 on the long half minus the short half (batch: times; continuous: tau), in %
+    and in SE; None where the data have no such halves."""
+    from millflow.fitting.data import PSDData
+    spec = model.spec
+    if "ln_A0" not in result.stats["params"]:
+        return None, None
+    t = model.data.table
+    if spec.mode == "batch":
+        if model._nonlinear is not None and "slowing_down" in spec.kinetics:
+            # kappa(t) keeps its reference time: a half of the data must not redefine s
+            spec = replace(spec, kinetics_params={**dict(spec.kinetics_params), "t_ref_s": model._nonlinear.t_ref})
+        times = sorted({g[2] for g in model.groups})
+        h = len(times) // 2
+        if h < 2 or len(times) - h < 2:
+            return None, None
+        halves = []
+        for part in (times[:h], times[h:]):
+            keep = (t.location == "feed") | t.time_s.isin(part)
+            halves.append(ForwardModel(spec, PSDData(t[keep].reset_index(drop=True), model.data.process,
+                                                     model.data.source), model.grid))
+    else:
+        if not spec.tau_column or len(model.conditions) < 4:
+            return None, None
+        tau = model.data.process.loc[model.conditions, spec.tau_column].to_numpy(float)
+        order = [c for _, c in sorted(zip(tau, model.conditions))]
+        h = len(order) // 2
+        halves = [model.for_conditions(order[:h]), model.for_conditions(order[h:])]
+    est = []
+    start = {n: s["value"] for n, s in result.stats["params"].items()}
+    for m in halves:
+        r = fit(m, _params_for(spec, params, start), global_search=False, starts=1, grid_check=False, quiet=True,
+                profile=False)
+        s = r.stats["params"]["ln_A0"]
+        est.append((s["value"], s["se"]))
+    (a, sa), (b, sb) = est
+    return 100.0 * math.expm1(b - a), (b - a) / math.hypot(sa, sb)
+
+
+def diagnose(cfg, *, progress=None, quiet: bool = False, loco: bool = True) -> Diagnosis:
+    """Fit the candidate set of a fit config (:class:`~millflow.fitting.config.FitConfig`)
+    and rank it; see the module docstring."""
+    from millflow.fitting.statistics import information_criteria
+    from millflow.fitting.validate import condition_rmse
+
+    say = reporter(progress, quiet, "diagnose")
+    t0 = time.perf_counter()
+    user_spec = cfg.spec
+    specs = candidate_specs(user_spec, cfg.data)
+    user_label = next((k for k, s in specs.items() if s == user_spec), None)
+    if user_label is None:  # the user's own non-linear model joins the set
+        user_label = "user: " + "+".join(user_spec.kinetics)
+        specs[user_label] = user_spec
+    grid = cfg.model().grid
+    fits, rows, notes = {}, [], []
+    if user_spec.classification is not None:
+        notes.append(f"non-linear candidates (cushioning, aggregation) are fitted without classification only; "
+                     f"the model's classification ({user_spec.classification}) keeps them out of the set")
+    linear_theta = None
+    order = ["linear"] + [k for k in specs if k != "linear"]
+    for label in order:
+        spec = specs[label]
+        model = cfg.model(spec, grid)
+        params = _params_for(spec, cfg.params)
+        extra = [n for n in spec.param_names if n in _EXTRA_STARTS]
+        say(f"fitting {label} ({len(params)} parameters)")
+        try:
+            res = _fit_candidate(model, params, linear_theta, cfg.optimizer, extra[0] if len(extra) == 1 else None)
+        except MillflowError as exc:
+            notes.append(f"{label}: not fitted ({exc})")
+            continue
+        if label == "linear":
+            linear_theta = {n: s["value"] for n, s in res.stats["params"].items()}
+        fits[label] = res
+        ic = information_criteria(res.ssr, res.n_data, res.n_params)
+        loco_rmse = None
+        if loco and len(model.conditions) >= 3:
+            errs = []
+            for c in model.conditions:
+                train = [x for x in model.conditions if x != c]
+                start = {n: s["value"] for n, s in res.stats["params"].items()}
+                r = fit(model.for_conditions(train), _params_for(spec, params, start), global_search=False, starts=1,
+                        grid_check=False, quiet=True, profile=False)
+                errs.extend(condition_rmse(model.for_conditions([c]), r.theta).values())
+            loco_rmse = float(np.sqrt(np.mean(np.square(errs))))
+        try:
+            d_pct, d_se = _drift(model, cfg.params, cfg.optimizer, res)
+        except MillflowError:
+            d_pct, d_se = None, None
+        rs = res.stats.get("residuals") or {}
+        rows.append({"model": label, "label": spec.label(), "n_params": res.n_params, "ssr": res.ssr,
+                     "bic": ic["bic"], "aicc": ic["aicc"], "aic": ic["aic"], "loco_rmse": loco_rmse,
+                     "drift_pct": d_pct, "drift_se": d_se, "lag1": _f(rs.get("mean_lag1")),
+                     "runs_reject": _f(rs.get("runs_reject_fraction"))})
+    if not rows:
+        raise InputError("diagnose: no candidate could be fitted; " + "; ".join(notes))
+    rows.sort(key=lambda r: r["bic"])
+    for r in rows:
+        r["delta_bic"] = r["bic"] - rows[0]["bic"]
+        r["delta_aicc"] = r["aicc"] - min(x["aicc"] for x in rows)
+    best = rows[0]["model"]
+    if len(next(iter(fits.values())).model.conditions) < 3:
+        notes.append("leave-one-condition-out prediction needs >= 3 conditions: not computed")
+    verdicts = _verdicts(fits, user_label, best)
+    return Diagnosis(_clean(rows), fits, verdicts, best, user_label, time.perf_counter() - t0, notes)
+
+
+def _f(v):
+    return None if v is None or not math.isfinite(v) else float(v)
+
+
+def _verdicts(fits, user, best) -> dict:
+    if user not in fits:
+        return {}
+    out = {}
+    us = fits[user].stats["params"]
+    bs = fits[best].stats["params"]
+    for n, s in us.items():
+        if best == user:
+            out[n] = f"consistent with the best-supported model ({best}): {s['value']:.4g} +- {s['se']:.2g}"
+            continue
+        if n not in bs:
+            out[n] = f"falsified: the data prefer {best}, which has no parameter {n}"
+            continue
+        b = bs[n]
+        diff = abs(s["value"] - b["value"])
+        comb = math.hypot(s["se"], b["se"])
+        if math.isfinite(comb) and diff <= 2 * comb:
+            out[n] = (f"consistent with the best-supported model ({best}): {s['value']:.4g} +- {s['se']:.2g} here, "
+                      f"{b['value']:.4g} +- {b['se']:.2g} there")
+        else:
+            out[n] = (f"falsified: the data prefer {best}, under which this parameter is {b['value']:.4g} +- "
+                      f"{b['se']:.2g} (here {s['value']:.4g} +- {s['se']:.2g})")
+    return out
