@@ -26,7 +26,7 @@ from dataclasses import dataclass
 from typing import ClassVar
 
 import numpy as np
-from scipy import optimize, special
+from scipy import special
 
 from rtd.base import ParameterError, RTDModel, as_s, as_time, check_positive
 
@@ -296,6 +296,8 @@ class AxialDispersion(RTDModel):
             return cls(mean, 1e-3, bc)
         if r <= closed_variance(1e6):
             return cls(mean, 1e6, bc)
+        from scipy import optimize  # here: scipy.optimize is a large share of start-up
+
         lpe = optimize.brentq(lambda x: closed_variance(math.exp(x)) - r,
                               math.log(1e-3), math.log(1e6), xtol=1e-12)
         return cls(mean, math.exp(lpe), bc)

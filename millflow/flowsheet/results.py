@@ -357,6 +357,22 @@ def psd_table(sol, props=None):
     return df
 
 
+def write_netcdf(ds, path) -> None:
+    """``ds.to_netcdf(path, engine="scipy")`` (netCDF-3, 64-bit offsets) without xarray's
+    probe for a dask scheduler: ``to_netcdf`` imports dask and dask.distributed when they
+    are installed (about half a second of a command's start-up) to choose a file lock.
+    Our datasets hold numpy arrays only, so a plain lock is the right one."""
+    import threading
+
+    from xarray.backends import ScipyDataStore
+
+    store = ScipyDataStore(str(path), mode="w", lock=threading.Lock())
+    try:
+        ds.dump_to_store(store)
+    finally:
+        store.close()
+
+
 #: CSV number format: 10 significant digits. The solve is exact to ~1e-13 relative, so
 #: digits past the 10th are rounding noise (100.00000000000003 is written 100).
 CSV_FLOAT_FORMAT = "%.10g"
@@ -374,7 +390,7 @@ def save(sol, out_dir, *, plots: bool = True, grid_check=None, props=None) -> di
     files = {}
     ds = to_dataset(sol, props, grid_check)
     files["netcdf"] = out / "results.nc"
-    ds.to_netcdf(files["netcdf"], engine="scipy")
+    write_netcdf(ds, files["netcdf"])
     files["streams_csv"] = out / "streams.csv"
     stream_table(sol, props).to_csv(files["streams_csv"], float_format=CSV_FLOAT_FORMAT)
     files["units_csv"] = out / "units.csv"

@@ -20,8 +20,14 @@ scene, :func:`transient_mill` the dynamics. Modules, one job each:
   population-dependent rates; issue 12): perfect mixing by Newton, tanks in series,
   plug flow, axial dispersion, and the two micromixing limits of any RTD.
 """
-from millflow.mill.composed import Mill
-from millflow.mill.steady import steady_mill, transfer_matrix
-from millflow.mill.transient import transient_mill
+from millflow._lazy import attach
+
+# Served on first use: a flowsheet that needs only the steady solve does not load the
+# transient solver (scipy.integrate) or the composed Mill (xarray).
+__getattr__, __dir__ = attach(__name__, {
+    "millflow.mill.composed": ("Mill",),
+    "millflow.mill.steady": ("steady_mill", "transfer_matrix"),
+    "millflow.mill.transient": ("transient_mill",),
+})
 
 __all__ = ["Mill", "steady_mill", "transfer_matrix", "transient_mill"]
