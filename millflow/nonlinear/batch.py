@@ -21,6 +21,7 @@ from millflow import checks
 from millflow.batch import BatchResult, batch_solve
 from millflow.errors import InputError, SolverError
 from millflow.nonlinear.kinetics import Kinetics
+from millflow.threads import limit_blas_threads
 
 __all__ = ["NonlinearBatchResult", "batch_nonlinear", "METHODS"]
 
@@ -52,6 +53,7 @@ def _integrate(kin: Kinetics, y0, t, method, rtol, atol):
     return out, stats
 
 
+@limit_blas_threads  # LU factorisations of ~N x N: one BLAS thread (millflow.threads)
 def batch_nonlinear(kin: Kinetics, feed, t, method: str = "BDF", *, rtol: float = 1e-8, atol: float = 1e-12,
                     error_estimate: bool = True) -> NonlinearBatchResult:
     """Mass fractions M(t) of a batch grind with non-linear kinetics; diagnostics included.
