@@ -23,7 +23,7 @@ import numpy as np
 
 from millflow.errors import GridError
 from millflow.flowsheet.water import slurry_properties
-from millflow.psd import _fix_sum, cum_passing, cum_passing_at, percentile_size
+from millflow.psd import _fix_sum, cum_passing, cum_passing_at, percentile_size, percentile_sizes
 
 __all__ = ["stream_properties", "circulating_loads", "mass_balance", "to_dataset", "summary",
            "stream_table", "unit_table", "psd_table", "save"]
@@ -36,6 +36,15 @@ def _percentile(grid, frac, q):
         return percentile_size(grid, frac, q)
     except GridError:
         return float("nan")  # the percentile lies in the sink: unknown on this grid
+
+
+def _p80_p50(grid, frac) -> tuple[float, float]:
+    """P80 and P50 [m] in one pass; NaN for one that lies in the sink (unknown on this grid)."""
+    try:
+        p80, p50 = percentile_sizes(grid, frac, [80, 50])
+        return float(p80), float(p50)
+    except GridError:  # at least P50 is in the sink
+        return _percentile(grid, frac, 80), float("nan")
 
 
 def stream_properties(sol) -> dict:
@@ -52,7 +61,7 @@ def stream_properties(sol) -> dict:
             # separately); the sum residual goes to the largest class as in psd
             frac = _fix_sum(np.maximum(f, 0.0) / math.fsum(np.maximum(f, 0.0)))
             cum = cum_passing(frac)
-            p80, p50 = _percentile(fs.grid, frac, 80), _percentile(fs.grid, frac, 50)
+            p80, p50 = _p80_p50(fs.grid, frac)
             passing = (cum_passing_at(fs.grid, frac, np.array(fs.passing_sizes)) if fs.passing_sizes
                        else np.zeros(0))
             # below the finest edge the grid cannot tell how the sink's mass is spread:
