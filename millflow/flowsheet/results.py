@@ -23,7 +23,7 @@ import numpy as np
 
 from millflow.errors import GridError
 from millflow.flowsheet.water import slurry_properties
-from millflow.psd import _fix_sum, cum_passing, cum_passing_at, percentile_size, percentile_sizes
+from millflow.psd import _fix_sum, _percentiles_of_cum, cum_passing, cum_passing_at
 
 __all__ = ["stream_properties", "circulating_loads", "mass_balance", "to_dataset", "summary",
            "stream_table", "unit_table", "psd_table", "save"]
@@ -31,20 +31,20 @@ __all__ = ["stream_properties", "circulating_loads", "mass_balance", "to_dataset
 TPH = 3.6  # kg/s -> t/h
 
 
-def _percentile(grid, frac, q):
+def _p80_p50(x, cum) -> tuple[float, float]:
+    """P80 and P50 [m] from the cumulative passing of a PSD made here (non-negative,
+    summing to 1: not validated again); NaN for one that lies in the sink (unknown on
+    this grid)."""
+    P = cum.copy()
+    P[0] = 1.0
     try:
-        return percentile_size(grid, frac, q)
-    except GridError:
-        return float("nan")  # the percentile lies in the sink: unknown on this grid
-
-
-def _p80_p50(grid, frac) -> tuple[float, float]:
-    """P80 and P50 [m] in one pass; NaN for one that lies in the sink (unknown on this grid)."""
-    try:
-        p80, p50 = percentile_sizes(grid, frac, [80, 50])
+        p80, p50 = _percentiles_of_cum(x, P, np.array([80.0, 50.0]))
         return float(p80), float(p50)
     except GridError:  # at least P50 is in the sink
-        return _percentile(grid, frac, 80), float("nan")
+        try:
+            return float(_percentiles_of_cum(x, P, np.array([80.0]))[0]), float("nan")
+        except GridError:
+            return float("nan"), float("nan")
 
 
 def stream_properties(sol) -> dict:
@@ -61,7 +61,7 @@ def stream_properties(sol) -> dict:
             # separately); the sum residual goes to the largest class as in psd
             frac = _fix_sum(np.maximum(f, 0.0) / math.fsum(np.maximum(f, 0.0)))
             cum = cum_passing(frac)
-            p80, p50 = _p80_p50(fs.grid, frac)
+            p80, p50 = _p80_p50(fs.grid.x, cum)
             passing = (cum_passing_at(fs.grid, frac, np.array(fs.passing_sizes)) if fs.passing_sizes
                        else np.zeros(0))
             # below the finest edge the grid cannot tell how the sink's mass is spread:
