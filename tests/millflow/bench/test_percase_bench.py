@@ -18,3 +18,14 @@ def test_percase_rows_and_same_numbers(monkeypatch):
     pops = [r for r in rows if r["method"] == "steady_population"]
     assert len(pops) == 3 and all(r["mills_per_s"] > r["baseline_mills_per_s"] for r in pops)
     assert "met" in percase.format_table(rows)
+
+
+def test_nonlinear_batch_rows_accuracy_not_time():
+    from millflow.bench import nonlinear_batch
+
+    rows = nonlinear_batch.run(quick=True)
+    plain, est = rows
+    assert plain["method"].startswith("batch_nonlinear (LSODA)")
+    assert plain["max_abs_error"] < 1e-9  # rtol 1e-8 on O(1) masses
+    assert est["error_estimate"] >= est["max_abs_error"]  # an estimate is at least the actual error
+    assert "met" in nonlinear_batch.format_table(rows)
