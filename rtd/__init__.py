@@ -14,30 +14,12 @@ Standalone: imports nothing from millflow. Times are in any unit used consistent
 from rtd.axial import AxialDispersion
 from rtd.compartments import CompartmentNetwork, RecirculatingCells
 from rtd.compose import Parallel, Series, talbot_inverse
+from rtd.fit import MODELS, FitResult, compare, fit
 from rtd.models import ParameterError, PerfectMixing, PlugFlow, RTDError, RTDModel, TanksInSeries
 from rtd.names import TRANSPORTS, canonical_name
 from rtd.names import build as build_transport
 from rtd.tracer import (Moments, TracerCurve, TracerError, check_tracer, convolve_inlet, moments,
                         normalise, read_tracer_csv, step_moments, subtract_baseline)
-
-#: Fitting names served on first use (PEP 562): rtd.fit loads scipy.stats, which a
-#: model evaluation does not need.
-_LAZY = dict.fromkeys(("MODELS", "FitResult", "compare", "fit"), "rtd.fit")
-
-
-def __getattr__(name):
-    if name in _LAZY:
-        import importlib
-
-        value = getattr(importlib.import_module(_LAZY[name]), name)
-        globals()[name] = value
-        return value
-    raise AttributeError(f"module 'rtd' has no attribute {name!r}")
-
-
-def __dir__():
-    return sorted(set(globals()) | set(_LAZY))
-
 
 __all__ = [
     "AxialDispersion", "CompartmentNetwork", "FitResult", "MODELS", "Moments", "Parallel",
