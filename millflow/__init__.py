@@ -5,39 +5,27 @@ upper class edges in metres (Austin's convention), times in seconds, rates in 1/
 Equations are numbered as in docs/equations.md.
 """
 import millflow._interrupt  # noqa: F401  (first: Ctrl-C while the command line imports is quiet)
-from millflow.batch import batch_grind, batch_solve, grind, plug_flow_profile
-from millflow.breakage import (
-    AustinRate,
-    NonNormalizedBreakage,
-    NormalizedBreakage,
-    PowerLawRate,
-    TabulatedBreakage,
-    TabulatedRate,
-    b_from_B,
-    non_normalized_B,
-    normalized_B,
-    power_law_rates,
-)
-from millflow.errors import (AccuracyWarning, BreakageError, GridError, InputError, MillflowError, OutputError,
-                             SolverError)
-from millflow.grid import SizeGrid
-from millflow.linalg import SpectralBlocks, breakage_matrix
-from millflow.mill import Mill, steady_mill, transfer_matrix
-from millflow.mill.well_mixed import solve_well_mixed
 
 __version__ = "0.1.0"
 
-#: Names served from higher layers on first use (the package root imports only the core).
-_LAZY = {"Flowsheet": "millflow.flowsheet"}
+from millflow._lazy import attach
 
-
-def __getattr__(name):
-    if name in _LAZY:
-        import importlib
-
-        return getattr(importlib.import_module(_LAZY[name]), name)
-    raise AttributeError(f"module 'millflow' has no attribute {name!r}")
-
+# Public names and their modules, imported on first use: ``import millflow`` (and
+# ``millflow --version``) loads no scipy.integrate, scipy.stats, pandas, xarray or
+# matplotlib until a call needs them.
+__getattr__, __dir__ = attach(__name__, {
+    "millflow.batch": ("batch_grind", "batch_solve", "grind", "plug_flow_profile"),
+    "millflow.breakage": ("AustinRate", "NonNormalizedBreakage", "NormalizedBreakage", "PowerLawRate",
+                          "TabulatedBreakage", "TabulatedRate", "b_from_B", "non_normalized_B", "normalized_B",
+                          "power_law_rates"),
+    "millflow.errors": ("AccuracyWarning", "BreakageError", "GridError", "InputError", "MillflowError",
+                        "OutputError", "SolverError"),
+    "millflow.grid": ("SizeGrid",),
+    "millflow.linalg": ("SpectralBlocks", "breakage_matrix"),
+    "millflow.mill": ("Mill", "steady_mill", "transfer_matrix"),
+    "millflow.mill.well_mixed": ("solve_well_mixed",),
+    "millflow.flowsheet": ("Flowsheet",),
+})
 
 __all__ = [
     "Flowsheet",

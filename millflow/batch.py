@@ -272,11 +272,13 @@ def _on_grid(rates, breakage, grid):
 
 
 def _grind_grid_error(rates, breakage, grid, feed, times_s, method, M, how):
-    """Grid error [max abs of M] of a batch grind of continuous forms: the grind again on the
-    grid refined 2x, the feed moved there by the module's monotone interpolation of its
-    cumulative passing (:func:`millflow.psd.regrid`: the same class masses on the coarse
-    edges), reduced exactly to the coarse edges, Richardson at the scheme's order with
-    Roache's safety factor 3. Discrete S_i, b_ij carry no grid error."""
+    """Grid error [max abs of M] of a batch grind of continuous forms.
+
+    The grind again on the grid refined 2x, the feed moved there by the module's monotone
+    interpolation of its cumulative passing (:func:`millflow.psd.regrid`: the same class
+    masses on the coarse edges), reduced exactly to the coarse edges, Richardson at the
+    scheme's order with Roache's safety factor 3. Discrete S_i, b_ij carry no grid error.
+    """
     from millflow.grid import SAFETY_FACTOR
     from millflow.psd import regrid
 

@@ -85,6 +85,12 @@ def main(argv: list[str] | None = None) -> int:
     and argparse's usage errors); 130 SIGINT. Every failure is one line on stderr;
     MILLFLOW_DEBUG=1 adds the traceback of an internal error.
     """
+    argv = sys.argv[1:] if argv is None else list(argv)
+    if argv == ["--version"]:  # answered before the sub-commands (and numpy) are imported
+        from millflow import __version__
+
+        print(f"millflow {__version__}")
+        raise SystemExit(0)  # as argparse's version action does
     parser = build_parser()
     args = parser.parse_args(argv)
     name = f"millflow {args.command}"

@@ -336,10 +336,12 @@ def check_classes(n: int, how: str = "") -> None:
 
 
 def check_run_memory(n: int, matrices: int, refined_n: int | None = None, what: str = "the run") -> float:
-    """Refuse, before a solve allocates anything, a run whose N x N matrices together exceed
-    the memory budget: ``matrices`` of them on the grid of ``n`` classes (a flowsheet holds a
-    transfer matrix per unit besides b and B), as many again on ``refined_n`` classes when
-    a grid check runs beside the first solution. Returns the bytes estimated."""
+    """Refuse a run whose N x N matrices together exceed the memory budget, before it allocates.
+
+    ``matrices`` of them on the grid of ``n`` classes (a flowsheet holds a transfer matrix
+    per unit besides b and B), as many again on ``refined_n`` classes when a grid check
+    runs beside the first solution. Returns the bytes estimated.
+    """
     need = 8.0 * matrices * (float(n) ** 2 + (float(refined_n) ** 2 if refined_n else 0.0))
     budget = memory_budget_bytes()
     if need > budget:

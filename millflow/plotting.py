@@ -21,8 +21,18 @@ def figure(nrows: int = 1, ncols: int = 1, *, figsize=(8, 5), **subplots_kw):
     return fig, fig.subplots(nrows, ncols, **subplots_kw)
 
 
-def save(fig, path, dpi: int = 110) -> Path:
-    """Lay out and write ``fig`` to ``path`` (format from the suffix); returns the path."""
-    fig.tight_layout()
-    fig.savefig(path, dpi=dpi)
+def save(fig, path, dpi: int = 110, *, margins: dict | None = None) -> Path:
+    """Lay out and write ``fig`` to ``path`` (format from the suffix); returns the path.
+
+    ``margins`` (``subplots_adjust`` fractions: left, right, bottom, top, ...) places the
+    axes directly; without it ``tight_layout`` measures every label, which costs a full
+    extra draw of the figure. PNGs are written with zlib level 1: line plots compress
+    nearly as well, several times faster than the default level 6.
+    """
+    if margins is None:
+        fig.tight_layout()
+    else:
+        fig.subplots_adjust(**margins)
+    png = str(path).lower().endswith(".png")
+    fig.savefig(path, dpi=dpi, **({"pil_kwargs": {"compress_level": 1}} if png else {}))
     return Path(path)

@@ -21,8 +21,6 @@ import warnings
 from dataclasses import dataclass
 
 import numpy as np
-from scipy.interpolate import PchipInterpolator
-from scipy.optimize import brentq
 
 from millflow.errors import GridError
 from millflow.grid import SizeGrid, as_sizes, class_label, validate_edges
@@ -34,6 +32,7 @@ __all__ = [
     "retained",
     "percentile_size",
     "percentile_from_cum",
+    "percentile_sizes",
     "p80",
     "p50",
     "regrid",
@@ -179,12 +178,71 @@ def retained(cum, *, name: str = "cum") -> np.ndarray:
 
 
 # --------------------------------------------------------------- interpolation core
-def _pchip_logx(x_desc: np.ndarray, P_desc: np.ndarray) -> PchipInterpolator:
+def _pchip_slopes(u: np.ndarray, y: np.ndarray) -> np.ndarray:
+    """Node slopes dy/du of scipy's ``PchipInterpolator`` for u increasing.
+
+    Fritsch and Butland's weighted harmonic mean inside, zero at a local extremum or flat
+    secant; the shape-preserving three-point formula at the two ends (Moler, Numerical
+    Computing with MATLAB, 3.6). Computed here, with the Hermite form below, so that a
+    PSD's percentiles and passing values need no interpolant object and no scalar root finder.
+    """
+    h = np.diff(u)
+    m = np.diff(y) / h
+    d = np.empty_like(y)
+    if y.size == 2:
+        d[:] = m[0]
+        return d
+    # harmonic-mean slopes overflow to inf for subnormal secants, giving derivative 0:
+    # the right (monotone) answer, as in scipy
+    with np.errstate(divide="ignore", invalid="ignore", over="ignore"):
+        flat = (np.sign(m[1:]) != np.sign(m[:-1])) | (m[1:] == 0) | (m[:-1] == 0)
+        w1, w2 = 2 * h[1:] + h[:-1], h[1:] + 2 * h[:-1]
+        d[1:-1] = np.where(flat, 0.0, 1.0 / ((w1 / m[:-1] + w2 / m[1:]) / (w1 + w2)))
+    d[0] = _pchip_edge(h[0], h[1], m[0], m[1])
+    d[-1] = _pchip_edge(h[-1], h[-2], m[-1], m[-2])
+    return d
+
+
+def _pchip_edge(h0, h1, m0, m1) -> float:
+    d = ((2 * h0 + h1) * m0 - h0 * m1) / (h0 + h1)
+    if np.sign(d) != np.sign(m0):
+        return 0.0
+    if np.sign(m0) != np.sign(m1) and abs(d) > 3 * abs(m0):
+        return 3 * m0
+    return d
+
+
+def _hermite(t, h, y0, y1, d0, d1):
+    """Cubic Hermite on an interval of width h at fraction t in [0, 1]: value and d/dt."""
+    t2 = t * t
+    t3 = t2 * t
+    val = (2 * t3 - 3 * t2 + 1) * y0 + (t3 - 2 * t2 + t) * h * d0 + (3 * t2 - 2 * t3) * y1 + (t3 - t2) * h * d1
+    der = (6 * t2 - 6 * t) * (y0 - y1) + (3 * t2 - 4 * t + 1) * h * d0 + (3 * t2 - 2 * t) * h * d1
+    return val, der
+
+
+class _LogPchip:
+    """PCHIP of P against ln x from data ordered coarse -> fine.
+
+    Scipy's interpolant, evaluated in Hermite form; values agree with
+    ``PchipInterpolator`` to rounding.
+    """
+
+    def __init__(self, x_desc: np.ndarray, P_desc: np.ndarray):
+        self.u = np.log(x_desc[::-1])
+        self.y = np.asarray(P_desc[::-1], dtype=float)
+        self.d = _pchip_slopes(self.u, self.y)
+
+    def __call__(self, u_new: np.ndarray) -> np.ndarray:
+        k = np.clip(np.searchsorted(self.u, u_new, side="right") - 1, 0, self.u.size - 2)
+        h = self.u[k + 1] - self.u[k]
+        val, _ = _hermite((u_new - self.u[k]) / h, h, self.y[k], self.y[k + 1], self.d[k], self.d[k + 1])
+        return val
+
+
+def _pchip_logx(x_desc: np.ndarray, P_desc: np.ndarray) -> _LogPchip:
     """Monotone interpolant of P against ln x from data ordered coarse -> fine."""
-    # scipy's harmonic-mean slopes overflow to inf for subnormal secants and then give
-    # derivative 0, which is the right (monotone) answer: silence only that warning
-    with np.errstate(over="ignore", divide="ignore"):
-        return PchipInterpolator(np.log(x_desc[::-1]), P_desc[::-1], extrapolate=False)
+    return _LogPchip(x_desc, P_desc)
 
 
 def _eval_cum(x_known, P_known, x_new) -> np.ndarray:
@@ -348,9 +406,10 @@ def percentile_size(grid, frac, percent: float, *, validate: bool = True) -> flo
     the crossing it is interpolated by the cubic in ln x through those and their two
     neighbours (error O(h^4) in the class width h; at ratio 2^(1/4) ~1e-6 relative for
     Rosin-Rammler and Gates-Gaudin-Schuhmann PSDs, against ~1e-4 for PCHIP, whose
-    derivative estimates are first order), and the crossing is found by Brent's method.
-    Where that cubic is not monotone on the interval, or the crossing is in the first or
-    last class, P is interpolated by PCHIP in ln x (monotone; as :func:`from_sieves`).
+    derivative estimates are first order). Where that cubic is not monotone on the
+    interval, or the crossing is in the first or last class, P is interpolated by PCHIP in
+    ln x (monotone; as :func:`from_sieves`). The crossing is solved on the one bracketing
+    interval (:func:`percentile_sizes`).
 
     Parameters
     ----------
@@ -384,53 +443,158 @@ def percentile_size(grid, frac, percent: float, *, validate: bool = True) -> flo
     >>> percentile_size(grid, frac, 80), percentile_size(grid, frac, 50)
     (0.0005, 0.00025)
     """
+    return float(percentile_sizes(grid, frac, [percent], validate=validate)[0])
+
+
+def percentile_sizes(grid, frac, percents, *, validate: bool = True) -> np.ndarray:
+    """Sizes [m] at which each of ``percents`` % of the mass passes, in one pass.
+
+    The reading of :func:`percentile_size` for several percentiles at once. Each crossing
+    is solved on its bracketing interval by Newton's method on the interval's cubic (the
+    local cubic, or PCHIP's cubic Hermite with scipy's node slopes), safeguarded by
+    bisection (the cubic is monotone there), to a step of ~2e-15 in ln x or a residual
+    at rounding level.
+    """
     if validate:
         x = as_sizes(grid)
         f = validate_fractions(frac, x)
     else:
         x = grid.upper_m if isinstance(grid, SizeGrid) else np.asarray(grid, dtype=float)
         f = np.asarray(frac, dtype=float)
-    if not (np.isfinite(percent) and 0 < percent <= 100):
-        raise GridError(f"percent = {percent!r}: expected 0 < percent <= 100")
-    q = percent / 100.0
+    pct = np.atleast_1d(np.asarray(percents, dtype=float))
+    for p in np.atleast_1d(np.asarray(percents)).tolist():  # plain numbers in the message
+        if not (isinstance(p, (int, float)) and math.isfinite(p) and 0 < p <= 100):
+            raise GridError(f"percent = {p!r}: expected 0 < percent <= 100")
     P = cum_passing(f)
     P[0] = 1.0
-    if P[-1] >= q:
-        raise GridError(
-            f"P{percent:g} lies below the grid: {P[-1]:.6g} of the mass passes the finest edge "
-            f"{x[-1]:.6g} m ({class_label(x.size - 1, x)} is the sink); extend the grid to finer sizes"
-        )
-    return percentile_from_cum(x, P, q)
+    return _percentiles_of_cum(x, P, pct)
 
 
 def percentile_from_cum(x: np.ndarray, P: np.ndarray, q: float) -> float:
-    """Size [m] where cumulative passing ``P`` at the upper edges ``x`` (coarse -> fine,
-    P[0] = 1, P[-1] < q) reaches the fraction ``q``: the reading of
-    :func:`percentile_size` without validation, for loops that have checked their input."""
-    # first edge (from fine to coarse) where P reaches q: the crossing is between it
-    # and the edge below it
-    k = int(np.flatnonzero(P >= q)[-1])
-    if P[k] == q:
-        return float(x[k])
-    ln_hi, ln_lo = math.log(x[k]), math.log(x[k + 1])
-    cubic = _local_cubic(np.log(x), P, k)
-    fun = cubic if cubic is not None else _pchip_logx(x, P)
-    root = brentq(lambda u: float(fun(u)) - q, ln_lo, ln_hi, xtol=1e-14, rtol=4 * np.finfo(float).eps)
-    return float(math.exp(root))
+    """Size [m] where cumulative passing ``P`` reaches the fraction ``q``.
+
+    ``P`` at the upper edges ``x`` (coarse -> fine, P[0] = 1, P[-1] < q): the reading of
+    :func:`percentile_size` without validation, for loops that have checked their input.
+    """
+    return float(_percentiles_of_cum(np.asarray(x, float), np.asarray(P, float), np.array([100.0 * q]))[0])
 
 
-def _local_cubic(u: np.ndarray, P: np.ndarray, k: int):
-    """The cubic in u = ln x through the four edges k-1..k+2 around the crossing between
-    edges k and k+1 (three or four edges nearer the ends of the grid: no cubic), if it is
-    monotone (P non-increasing in x) on that interval; else None."""
-    lo, hi = k - 1, k + 3
-    if lo < 0 or hi > P.size:
+def _percentiles_of_cum(x, P, pct) -> np.ndarray:
+    q = pct / 100.0
+    if P[-1] >= q.min():
+        bad = float(pct[np.argmin(q)])
+        raise GridError(
+            f"P{bad:g} lies below the grid: {P[-1]:.6g} of the mass passes the finest edge "
+            f"{x[-1]:.6g} m ({class_label(x.size - 1, x)} is the sink); extend the grid to finer sizes"
+        )
+    # first edge (from fine to coarse) where P reaches q: the crossing is between it and
+    # the edge below it. P is non-increasing coarse -> fine: count the edges with P >= q.
+    ks = np.searchsorted(-P, -q, side="right") - 1
+    lx, Pl = np.log(x).tolist(), P.tolist()  # a few scalar steps: Python floats beat numpy here
+    out = np.empty(q.size)
+    for i, (k, qi) in enumerate(zip(ks.tolist(), q.tolist())):
+        out[i] = x[k] if Pl[k] == qi else math.exp(_crossing(lx, Pl, k, qi))
+    return out
+
+
+def _node_slope(lx: list, P: list, j: int) -> float:
+    """PCHIP slope dP/d(ln x) at edge j, as scipy's.
+
+    Lists coarse -> fine (ln x, P); from its neighbours: the numbers of
+    :func:`_pchip_slopes` at that node, in Python floats.
+    """
+    n = len(P)
+    if n == 2:
+        return (P[0] - P[1]) / (lx[0] - lx[1])
+    if j in (0, n - 1):  # the coarsest or finest edge: the three-point end formula
+        a, b, c = (0, 1, 2) if j == 0 else (n - 1, n - 2, n - 3)
+        h0, h1 = abs(lx[a] - lx[b]), abs(lx[b] - lx[c])
+        m0, m1 = (P[a] - P[b]) / (lx[a] - lx[b]), (P[b] - P[c]) / (lx[b] - lx[c])
+        return _pchip_edge(h0, h1, m0, m1)
+    h0, h1 = lx[j] - lx[j + 1], lx[j - 1] - lx[j]  # ascending in ln x: j+1, j, j-1
+    m0, m1 = (P[j] - P[j + 1]) / h0, (P[j - 1] - P[j]) / h1
+    if m0 == 0 or m1 == 0 or (m0 > 0) != (m1 > 0):
+        return 0.0
+    w1, w2 = 2 * h1 + h0, h1 + 2 * h0
+    try:
+        return (w1 + w2) / (w1 / m0 + w2 / m1)
+    except (ZeroDivisionError, OverflowError):  # subnormal secants: slope 0, as in scipy
+        return 0.0
+
+
+def _local_cubic(lx: list, P: list, k: int):
+    """Local cubic of P in ln x around the crossing between edges k+1 and k, or None.
+
+    The cubic in v = ln x - ln x_{k+1} through the four edges k-1..k+2, as a function
+    v -> (value, derivative), if it is monotone (P non-decreasing in ln x) on [0, h]; else
+    None (too near a grid end, or not monotone). Newton's divided differences in Python floats.
+    """
+    if k < 1 or k + 2 > len(P) - 1:
         return None
-    c = np.polyfit(u[lo:hi] - u[k], P[lo:hi], 3)
-    t = np.linspace(u[k + 1], u[k], 33) - u[k]
-    if np.any(np.diff(np.polyval(c, t)) < 0):  # increasing in u = non-increasing coarse -> fine
-        return None
-    return lambda v: np.polyval(c, v - u[k])
+    u0 = lx[k + 1]
+    z = [lx[k + 2] - u0, 0.0, lx[k] - u0, lx[k - 1] - u0]
+    y = [P[k + 2], P[k + 1], P[k], P[k - 1]]
+    d1 = [(y[i + 1] - y[i]) / (z[i + 1] - z[i]) for i in range(3)]
+    d2 = [(d1[i + 1] - d1[i]) / (z[i + 2] - z[i]) for i in range(2)]
+    c0, c1, c2, c3 = y[0], d1[0], d2[0], (d2[1] - d2[0]) / (z[3] - z[0])
+
+    def fun(v):
+        r2 = c2 + (v - z[2]) * c3
+        r1 = c1 + (v - z[1]) * r2
+        return c0 + (v - z[0]) * r1, r1 + (v - z[0]) * (r2 + (v - z[1]) * c3)
+
+    h = z[2]
+    # the derivative is a quadratic: non-negative at both ends and at its vertex inside
+    g0, gm, gh = fun(0.0)[1], fun(0.5 * h)[1], fun(h)[1]
+    curv = 2.0 * (g0 - 2.0 * gm + gh) / (h * h)  # its second derivative (constant)
+    checks = [g0, gh]
+    if curv != 0.0:
+        vertex = 0.5 * h - (gh - g0) / (h * curv)
+        if 0.0 < vertex < h:
+            checks.append(fun(vertex)[1])
+    return fun if min(checks) >= 0.0 else None
+
+
+def _crossing(lx: list, P: list, k: int, q: float) -> float:
+    """Log size where the interval's cubic crosses q between edges k+1 (P < q) and k (P > q).
+
+    Newton in v in [0, h] safeguarded by bisection (the cubic is monotone there), to a
+    step of 2e-15 h or a residual at rounding level (near the root the cubic's rounding
+    over its slope moves v back and forth by a few 1e-15 h).
+    """
+    u0, h = lx[k + 1], lx[k] - lx[k + 1]
+    fun = _local_cubic(lx, P, k)
+    if fun is None:  # PCHIP's cubic Hermite on the interval
+        y0, y1 = P[k + 1], P[k]
+        d0, d1 = _node_slope(lx, P, k + 1), _node_slope(lx, P, k)
+
+        def fun(v):
+            t = v / h
+            t2 = t * t
+            t3 = t2 * t
+            val = (2 * t3 - 3 * t2 + 1) * y0 + (t3 - 2 * t2 + t) * h * d0 + (3 * t2 - 2 * t3) * y1 + (t3 - t2) * h * d1
+            der = ((6 * t2 - 6 * t) * (y0 - y1) + (3 * t2 - 4 * t + 1) * h * d0 + (3 * t2 - 2 * t) * h * d1) / h
+            return val, der
+
+    a, b = 0.0, h
+    v = min(max((q - P[k + 1]) / (P[k] - P[k + 1]), 0.0), 1.0) * h
+    for _ in range(80):
+        val, der = fun(v)
+        r = val - q
+        if r == 0:
+            break
+        if r < 0:
+            a = v
+        else:
+            b = v
+        vn = v - r / der if der != 0 else -1.0
+        if not a <= vn <= b:
+            vn = 0.5 * (a + b)
+        step = abs(vn - v)
+        v = vn
+        if step <= 2e-15 * h or abs(r) <= 8.9e-16:
+            break
+    return u0 + v
 
 
 def p80(grid, frac) -> float:

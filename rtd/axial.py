@@ -26,7 +26,7 @@ from dataclasses import dataclass
 from typing import ClassVar
 
 import numpy as np
-from scipy import optimize, special
+from scipy import special
 
 from rtd.base import ParameterError, RTDModel, as_s, as_time, check_positive
 
@@ -88,8 +88,11 @@ def _closed_den(a, q):
 
 
 def _mixed_limit(out, p, a):
-    """Where 4p/Pe overflows (Pe below ~1e-300 p) the vessel is one perfect mixer to
-    relative O(Pe): E_hat = 1/(1 + p)."""
+    """Use the perfect-mixing transform where 4p/Pe overflows.
+
+    Where 4p/Pe overflows (Pe below ~1e-300 p) the vessel is one perfect mixer to
+    relative O(Pe): E_hat = 1/(1 + p).
+    """
     bad = ~np.isfinite(a)
     if np.any(bad):
         out = np.where(bad, 1.0 / (1.0 + p), out)
@@ -340,6 +343,8 @@ class AxialDispersion(RTDModel):
             return cls(mean, 1e-3, bc)
         if r <= closed_variance(1e6):
             return cls(mean, 1e6, bc)
+        from scipy import optimize  # here: scipy.optimize is a large share of start-up
+
         lpe = optimize.brentq(lambda x: closed_variance(math.exp(x)) - r,
                               math.log(1e-3), math.log(1e6), xtol=1e-12)
         return cls(mean, math.exp(lpe), bc)

@@ -21,7 +21,6 @@ from dataclasses import dataclass
 from typing import ClassVar
 
 import numpy as np
-from scipy import optimize
 
 from rtd.base import ParameterError, RTDModel, as_s, as_time, check_fraction, check_memory, check_positive
 
@@ -441,6 +440,8 @@ class RecirculatingCells(RTDModel):
             return cls(tau, n, 0.0, dead, bypass)
         if excess(1e4) <= 0:
             return cls(tau, n, 1e4, dead, bypass)
+        from scipy import optimize  # here: scipy.optimize is a large share of start-up
+
         r = optimize.brentq(lambda x: excess(math.expm1(x)), 0.0, math.log1p(1e4), xtol=1e-10)
         return cls(tau, n, math.expm1(r), dead, bypass)
 

@@ -19,7 +19,6 @@ from dataclasses import dataclass, field
 from typing import ClassVar
 
 import numpy as np
-from scipy import optimize, stats
 
 from rtd.compartments import RecirculatingCells
 from rtd.models import PlugFlow, RTDError
@@ -102,6 +101,8 @@ class FitResult:
     def interval(self, name: str, level: float = 0.95) -> tuple[float, float]:
         """Confidence interval value -/+ t_{(1+level)/2, n-p} se."""
         i = self.names.index(name)
+        from scipy import stats  # on first use: scipy.stats costs a command's start-up
+
         half = stats.t.ppf(0.5 + level / 2, self.n_data - self.n_params) * self.se[i]
         return float(self.values[i] - half), float(self.values[i] + half)
 
@@ -319,6 +320,8 @@ def _least_squares(start, names, t, c, kind, inlet, mom, notes, scale=None) -> F
     with np.errstate(divide="ignore"):
         zlo, zhi, z0 = (np.where(logs, np.log(v), v) for v in (lo, hi, x0))
     z0 = np.clip(z0, zlo, zhi)
+    from scipy import optimize  # here, not at module level (start-up)
+
     sol = optimize.least_squares(resid, z0, bounds=(zlo, zhi), method="trf",
                                  x_scale="jac", xtol=1e-10, ftol=1e-10, gtol=1e-10)
     x = to_x(sol.x)

@@ -204,8 +204,10 @@ def read_tracer_csv(path, kind: str | None = None) -> TracerCurve:
 
 
 def _check_unique_header(path, text: str) -> None:
-    """A column named twice is refused (pandas would rename the second 'name.1' and one of
-    them would be fitted without a word)."""
+    """Refuse a column named twice.
+
+    pandas would rename the second 'name.1' and one of them would be fitted without a word.
+    """
     import csv
 
     line = next((ln for ln in text.splitlines() if ln.strip() and not ln.lstrip().startswith("#")), "")

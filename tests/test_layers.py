@@ -16,7 +16,7 @@ PACKAGES = ("millflow", "rtd")
 # Layers, lowest first: a module may import from its own layer and the ones below.
 LAYERS = [
     ("base", ("millflow.errors", "millflow._interrupt", "millflow.grid", "millflow.compiled", "millflow.plotting",
-              "millflow.inputs", "millflow.balances",
+              "millflow.inputs", "millflow._lazy", "millflow.threads", "millflow.balances",
               "millflow.progress", "millflow.report")),  # report: pages from summaries, no physics
     ("kinetics", ("millflow.psd", "millflow.checks", "millflow.classifiers", "millflow.cyclones", "millflow.breakage",
                   "millflow.linalg",

@@ -34,7 +34,8 @@ def jacobian(resid_pop, theta, lower, upper, noise: float | None = None):
     Step h = noise^(1/3) x max(|theta|, 0.1 x width, 1e-3): the optimum of a central
     difference whose function values carry relative noise ``noise`` (machine epsilon by
     default, exact solves; an adaptive ODE solve's tolerance otherwise, since its error
-    is not smooth in the parameters)."""
+    is not smooth in the parameters).
+    """
     theta = np.asarray(theta, dtype=float)
     p = theta.size
     lower, upper = np.asarray(lower, float), np.asarray(upper, float)

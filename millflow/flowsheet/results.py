@@ -23,7 +23,7 @@ import numpy as np
 
 from millflow.errors import GridError
 from millflow.flowsheet.water import slurry_properties
-from millflow.psd import _fix_sum, cum_passing, cum_passing_at, percentile_size
+from millflow.psd import _fix_sum, _percentiles_of_cum, cum_passing, cum_passing_at
 
 __all__ = ["stream_properties", "circulating_loads", "mass_balance", "to_dataset", "summary", "error_report",
            "stream_table", "unit_table", "psd_table", "save"]
@@ -31,11 +31,20 @@ __all__ = ["stream_properties", "circulating_loads", "mass_balance", "to_dataset
 TPH = 3.6  # kg/s -> t/h
 
 
-def _percentile(grid, frac, q):
+def _p80_p50(x, cum) -> tuple[float, float]:
+    """P80 and P50 [m] from the cumulative passing of a PSD made here (non-negative,
+    summing to 1: not validated again); NaN for one that lies in the sink (unknown on
+    this grid)."""
+    P = cum.copy()
+    P[0] = 1.0
     try:
-        return percentile_size(grid, frac, q)
-    except GridError:
-        return float("nan")  # the percentile lies in the sink: unknown on this grid
+        p80, p50 = _percentiles_of_cum(x, P, np.array([80.0, 50.0]))
+        return float(p80), float(p50)
+    except GridError:  # at least P50 is in the sink
+        try:
+            return float(_percentiles_of_cum(x, P, np.array([80.0]))[0]), float("nan")
+        except GridError:
+            return float("nan"), float("nan")
 
 
 def stream_properties(sol) -> dict:
@@ -52,7 +61,7 @@ def stream_properties(sol) -> dict:
             # separately); the sum residual goes to the largest class as in psd
             frac = _fix_sum(np.maximum(f, 0.0) / math.fsum(np.maximum(f, 0.0)))
             cum = cum_passing(frac)
-            p80, p50 = _percentile(fs.grid, frac, 80), _percentile(fs.grid, frac, 50)
+            p80, p50 = _p80_p50(fs.grid.x, cum)
             passing = (cum_passing_at(fs.grid, frac, np.array(fs.passing_sizes)) if fs.passing_sizes
                        else np.zeros(0))
             # below the finest edge the grid cannot tell how the sink's mass is spread:
@@ -433,6 +442,22 @@ def psd_table(sol, props=None):
     return df
 
 
+def write_netcdf(ds, path) -> None:
+    """``ds.to_netcdf(path, engine="scipy")`` (netCDF-3, 64-bit offsets) without xarray's
+    probe for a dask scheduler: ``to_netcdf`` imports dask and dask.distributed when they
+    are installed (about half a second of a command's start-up) to choose a file lock.
+    Our datasets hold numpy arrays only, so a plain lock is the right one."""
+    import threading
+
+    from xarray.backends import ScipyDataStore
+
+    store = ScipyDataStore(str(path), mode="w", lock=threading.Lock())
+    try:
+        ds.dump_to_store(store)
+    finally:
+        store.close()
+
+
 #: CSV number format: 10 significant digits. The solve is exact to ~1e-13 relative, so
 #: digits past the 10th are rounding noise (100.00000000000003 is written 100).
 CSV_FLOAT_FORMAT = "%.10g"
@@ -450,7 +475,7 @@ def save(sol, out_dir, *, plots: bool = True, grid_check=None, props=None) -> di
     files = {}
     ds = to_dataset(sol, props, grid_check)
     files["netcdf"] = out / "results.nc"
-    ds.to_netcdf(files["netcdf"], engine="scipy")
+    write_netcdf(ds, files["netcdf"])
     files["streams_csv"] = out / "streams.csv"
     stream_table(sol, props).to_csv(files["streams_csv"], float_format=CSV_FLOAT_FORMAT)
     files["units_csv"] = out / "units.csv"

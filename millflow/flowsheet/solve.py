@@ -46,6 +46,7 @@ import scipy.sparse.linalg as spla
 
 from millflow.errors import InputError, SolverError
 from millflow.flowsheet.water import solve_water
+from millflow.threads import limit_blas_threads
 
 __all__ = ["solve", "FlowsheetSolution", "TEAR_METHODS", "assemble"]
 
@@ -293,6 +294,7 @@ def _newton(g, x0, tol, maxiter):
 TEAR_METHODS = {"wegstein": _wegstein, "substitution": _substitution, "newton": _newton}
 
 
+@limit_blas_threads  # unit matrices and tear Jacobians are small and dense (millflow.threads)
 def solve(fs, *, method="wegstein", tol: float = 1e-13, maxiter: int = 200,
           mass_tol: float = MASS_TOL) -> FlowsheetSolution:
     """Solve a flowsheet at steady state.

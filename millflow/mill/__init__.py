@@ -16,12 +16,20 @@ scene, :func:`transient_mill` the dynamics. Modules, one job each:
 - :mod:`~millflow.mill.axial_open`: the open vessel's PDE on the whole line (sampled or
   flux discharge);
 - :mod:`~millflow.mill.transient`: the dynamic response;
+- :mod:`~millflow.mill.population`: the products of many mills (rate vectors) at once;
 - :mod:`~millflow.mill.nonlinear`: mills with non-linear kinetics (aggregation,
   population-dependent rates): perfect mixing by Newton, tanks in series,
   plug flow, axial dispersion, and the two micromixing limits of any RTD.
 """
-from millflow.mill.composed import Mill
-from millflow.mill.steady import steady_mill, transfer_matrix
-from millflow.mill.transient import transient_mill
+from millflow._lazy import attach
 
-__all__ = ["Mill", "steady_mill", "transfer_matrix", "transient_mill"]
+# Served on first use: a flowsheet that needs only the steady solve does not load the
+# transient solver (scipy.integrate) or the composed Mill (xarray).
+__getattr__, __dir__ = attach(__name__, {
+    "millflow.mill.composed": ("Mill",),
+    "millflow.mill.steady": ("steady_mill", "transfer_matrix"),
+    "millflow.mill.transient": ("transient_mill",),
+    "millflow.mill.population": ("steady_population",),
+})
+
+__all__ = ["Mill", "steady_mill", "steady_population", "transfer_matrix", "transient_mill"]

@@ -52,7 +52,6 @@ import math
 from dataclasses import dataclass
 
 import numpy as np
-from scipy import optimize
 from scipy.linalg import lapack
 
 from millflow.errors import InputError, SolverError
@@ -80,6 +79,8 @@ def _tail(length: float, m: int) -> np.ndarray:
         k = max(1, math.ceil(length * m - 1e-9))
         return np.arange(1, k + 1) / m
     # (e^beta - 1) / beta = length: first volume length beta / (m (e^beta - 1)) ~ 1/m
+    from scipy import optimize  # here: scipy.optimize is a large share of start-up
+
     beta = optimize.brentq(lambda x: math.expm1(x) / x - length, 1e-9, 700.0, xtol=1e-14)
     j = np.arange(1, m + 1)
     return length * np.expm1(beta * j / m) / math.expm1(beta)

@@ -16,7 +16,6 @@ import xarray as xr
 from millflow.mill.accuracy import check_accuracy
 from millflow.mill.scene import _check_feed, _scene
 from millflow.mill.steady import _solve, steady_mill, transfer_matrix
-from millflow.mill.transient import transient_mill
 
 __all__ = ["Mill"]
 
@@ -85,5 +84,7 @@ class Mill:
 
     def transient(self, t, **kwargs) -> xr.Dataset:
         """:func:`millflow.mill.transient.transient_mill` for this mill."""
+        from millflow.mill.transient import transient_mill  # here: scipy.integrate only for dynamics
+
         return transient_mill(self.S, self.b, self.transport, t, d=self.d, where=self.where,
                               dispersion=self.dispersion, discharge=self.discharge, x=self.x, **kwargs)

@@ -49,6 +49,7 @@ from millflow.mill.well_mixed import solve_well_mixed
 from millflow.mill.axial import _bernoulli, solve_axial_grid
 from millflow.nonlinear.batch import batch_nonlinear
 from millflow.nonlinear.kinetics import Kinetics
+from millflow.threads import limit_blas_threads
 
 __all__ = ["NonlinearSteady", "MicromixingBounds", "well_mixed", "tanks_in_series", "plug_flow", "axial_dispersion",
            "micromixing_bounds"]
@@ -98,6 +99,7 @@ def residual_scale(kin: Kinetics, y_in, y, tau) -> float:
 NEWTON_RTOL = 1e-11
 
 
+@limit_blas_threads  # small dense Newton systems: one BLAS thread (millflow.threads)
 def _newton_cell(kin: Kinetics, y_in, tau, y0, *, tol, max_iter, unit,
                  phases=("newton", "pseudo-transient", "newton")):
     """Solve F(y) = y_in - y + tau R(y) = 0; returns (y, residual, step, iterations, how).
@@ -262,6 +264,7 @@ def axial_dispersion(kin: Kinetics, feed, tau: float, pe: float, *, m_cells: int
                            {"kinetics": kin.describe(), "error": "|p(M) - p(M/2)|"})
 
 
+@limit_blas_threads
 def _axial_newton(kin, feed, tau, pe, m, tol, max_iter):
     n1 = kin.n + 1
     h = 1.0 / m

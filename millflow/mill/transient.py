@@ -160,10 +160,13 @@ def _integrate(J, rhs_const, y0, t, method, rtol, atol):
 
 
 def _integrate_measured(J, rhs_const, y0, t, method, rtol, atol):
-    """:func:`_integrate` at (rtol, atol) and at 100x tighter: returns the tight solution,
-    the evaluation counts of both and Y_loose - Y_tight, whose size measures the time
-    integration's error (the tolerance itself is not an estimate: local errors accumulate,
-    and a tracer pulse through three tanks was 13x above rtol max|p| + atol)."""
+    """Integrate at (rtol, atol) and at 100x tighter, measuring the time-integration error.
+
+    Returns the tight solution, the evaluation counts of both and Y_loose - Y_tight, whose
+    size measures the time integration's error (the tolerance itself is not an estimate:
+    local errors accumulate, and a tracer pulse through three tanks was 13x above
+    rtol max|p| + atol).
+    """
     loose, info = _integrate(J, rhs_const, y0, t, method, rtol, atol)
     tight, info2 = _integrate(J, rhs_const, y0, t, method, rtol / 100, atol / 100)
     return tight, {k: info[k] + info2[k] for k in info}, loose - tight

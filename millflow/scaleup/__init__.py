@@ -5,14 +5,20 @@ Plain functions (power, scaling, hold-up) in :mod:`.power` and :mod:`.scaling`;
 dimensions and the circuit they work in; :mod:`.predict` binds them; :mod:`.uncertainty`
 propagates eq. 9's covariance; :mod:`.api` returns the result object.
 """
-from millflow.scaleup.api import ScaleupResult, predict_plant
-from millflow.scaleup.fitted import FittedBreakage, fit_from_dict, load_fit
-from millflow.scaleup.plant import Circuit, MillDesign
-from millflow.scaleup.power import (austin_power, ball_charge_mass, bond_rowland_power, charge_arm,
-                                    critical_speed, gross_power, hogg_fuerstenau_power, mill_power)
-from millflow.scaleup.predict import ScaleUp
-from millflow.scaleup.scaling import austin_factors, herbst_fuerstenau_rates, specific_rates
-from millflow.scaleup.uncertainty import delta_method, monte_carlo
+from millflow._lazy import attach
+
+# Served on first use: a flowsheet reading a mill by its dimensions needs the plant
+# module, not the fitting and uncertainty machinery (scipy.stats).
+__getattr__, __dir__ = attach(__name__, {
+    "millflow.scaleup.api": ("ScaleupResult", "predict_plant"),
+    "millflow.scaleup.fitted": ("FittedBreakage", "fit_from_dict", "load_fit"),
+    "millflow.scaleup.plant": ("Circuit", "MillDesign"),
+    "millflow.scaleup.power": ("austin_power", "ball_charge_mass", "bond_rowland_power", "charge_arm",
+                               "critical_speed", "gross_power", "hogg_fuerstenau_power", "mill_power"),
+    "millflow.scaleup.predict": ("ScaleUp",),
+    "millflow.scaleup.scaling": ("austin_factors", "herbst_fuerstenau_rates", "specific_rates"),
+    "millflow.scaleup.uncertainty": ("delta_method", "monte_carlo"),
+})
 
 __all__ = ["Circuit", "FittedBreakage", "MillDesign", "ScaleUp", "ScaleupResult", "austin_factors",
            "austin_power", "ball_charge_mass", "bond_rowland_power", "charge_arm", "critical_speed",

@@ -19,7 +19,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from millflow.errors import GridError, InputError, SolverError
-from millflow.psd import percentile_from_cum, percentile_size
+from millflow.psd import percentile_size
 from millflow.scaleup.fitted import FittedBreakage
 from millflow.scaleup.plant import Circuit, MillDesign
 from millflow.scaleup.scaling import austin_factors

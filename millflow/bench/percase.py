@@ -1,0 +1,191 @@
+"""Benchmark of per-case costs: percentile sizes, steady_mill's overhead, populations.
+
+Every row times a method and its baseline in the same process, in interleaved rounds
+(median of the rounds), with one BLAS thread, as CPU time of the process
+(``time.process_time``: on a loaded machine wall time mostly measures the wait for a
+core; with one BLAS thread CPU time is the work):
+
+- ``percentile sizes``: P80 and P50 of a PSD on N = 100 classes by
+  :func:`millflow.psd.percentile_sizes` against the previous method, scipy's
+  ``PchipInterpolator`` in ln x and Brent's root finder per percentile (the largest
+  relative difference of the sizes is reported);
+- ``steady_mill overhead``: :func:`millflow.mill.steady_mill` of a perfectly mixed mill
+  at N = 50 minus the bare triangular solve
+  (:func:`millflow.mill.well_mixed.solve_well_mixed`), target <= 0.1 ms; the same for
+  the fast path :meth:`millflow.mill.Mill.product` (validated once, no Dataset);
+- ``sweep case``: :func:`millflow.sweep.solve_case` (flowsheet dict -> built -> solved
+  -> summary) against :func:`millflow.flowsheet.solve` of the flowsheet built once
+  (the closed circuit of ``millflow bench sweep``), target <= 1.2x;
+- ``population``: :func:`millflow.mill.population.steady_population` of P = 2,000 rate
+  vectors at N = 100 in mills per second (targets: >= 1e6 perfect mixing, >= 1e5 tanks
+  in series), against steady_mill called member by member.
+"""
+from __future__ import annotations
+
+import math
+import os
+import statistics
+import time
+
+import numpy as np
+
+__all__ = ["DESCRIPTION", "run", "format_table"]
+
+DESCRIPTION = "per case: percentile sizes, steady_mill overhead, population solves (mills/s)"
+TARGET_OVERHEAD_S = 1e-4
+TARGET_SWEEP_RATIO = 1.2
+TARGET_MILLS_PER_S = {"perfect mixing": 1e6, "tanks in series n=3": 1e5, "tanks in series n=10": 1e5}
+
+
+def _interleaved(funs: dict, rounds: int, inner: int) -> dict:
+    times = {k: [] for k in funs}
+    for f in funs.values():
+        f()
+    for _ in range(rounds):
+        for k, f in funs.items():
+            t0 = time.process_time()
+            for _ in range(inner):
+                f()
+            times[k].append((time.process_time() - t0) / inner)
+    return {k: statistics.median(v) for k, v in times.items()}
+
+
+def _scene(n, members=0, seed=0):
+    from millflow.breakage import b_from_B, normalized_B, power_law_rates
+    from millflow.grid import SizeGrid
+
+    g = SizeGrid.geometric(1e-2, 2 ** 0.25, n)
+    b = b_from_B(normalized_B(g.x, 0.4, 0.8, 3.0))
+    S = power_law_rates(g.x, 0.05, 1.0, g.x[0])
+    S[-1] = 0.0
+    feed = np.zeros(n)
+    feed[:3] = [0.2, 0.5, 0.3]
+    if members:
+        rng = np.random.default_rng(seed)
+        S = S * rng.uniform(0.3, 3.0, (members, 1))
+        S[:, -1] = 0.0
+    return g, S, b, feed
+
+
+def _old_percentile(x, f, percent):
+    from scipy.interpolate import PchipInterpolator
+    from scipy.optimize import brentq
+
+    P = np.cumsum(f[::-1])[::-1]
+    P[0] = 1.0
+    q = percent / 100
+    k = int(np.flatnonzero(P >= q)[-1])
+    with np.errstate(over="ignore", divide="ignore"):
+        spline = PchipInterpolator(np.log(x[::-1]), P[::-1], extrapolate=False)
+    return math.exp(brentq(lambda u: float(spline(u)) - q, math.log(x[k + 1]), math.log(x[k]), xtol=1e-14,
+                           rtol=4 * np.finfo(float).eps))
+
+
+def run(quick: bool = False) -> list[dict]:
+    import rtd
+
+    from millflow.mill import steady_mill
+    from millflow.mill.population import steady_population
+    from millflow.mill.well_mixed import solve_well_mixed
+    from millflow.psd import percentile_sizes
+
+    rounds = 5 if quick else 11
+    load = f"{os.getloadavg()[0]:.2f}"
+    rows = []
+    g, S, b, feed = _scene(100)
+    from millflow.mill.well_mixed import solve_well_mixed as _wm
+
+    frac = _wm(S, b, feed, 600.0)
+    frac = frac / frac.sum()
+    med = _interleaved({"new": lambda: percentile_sizes(g.x, frac, [80, 50]),
+                        "old": lambda: (_old_percentile(g.x, frac, 80), _old_percentile(g.x, frac, 50))},
+                       rounds, 50)
+    new, old = percentile_sizes(g.x, frac, [80, 50]), [_old_percentile(g.x, frac, q) for q in (80, 50)]
+    rows.append({"case": "P80 + P50, N = 100", "method": "percentile_sizes", "runtime_s": med["new"],
+                 "baseline": "PchipInterpolator + brentq", "baseline_s": med["old"],
+                 "ratio_vs_baseline": med["new"] / med["old"],
+                 "max_rel_diff": float(np.max(np.abs(new - old) / np.asarray(old))), "load_average": load})
+    g, S, b, feed = _scene(50)
+    tr = rtd.PerfectMixing(600.0)
+    med = _interleaved({"steady_mill": lambda: steady_mill(S, b, feed, tr),
+                        "bare": lambda: solve_well_mixed(S, b, feed, 600.0)}, rounds, 20)
+    over = med["steady_mill"] - med["bare"]
+    rows.append({"case": "steady_mill, perfect mixing, N = 50", "method": "steady_mill (Dataset)",
+                 "runtime_s": med["steady_mill"], "baseline": "solve_well_mixed", "baseline_s": med["bare"],
+                 "ratio_vs_baseline": med["steady_mill"] / med["bare"], "overhead_s": over,
+                 "target_overhead_s": TARGET_OVERHEAD_S, "met": over <= TARGET_OVERHEAD_S, "load_average": load})
+    from millflow.mill import Mill
+
+    mill = Mill(S, b, tr)
+    med = _interleaved({"fast": lambda: mill.product(feed),
+                        "bare": lambda: solve_well_mixed(S, b, feed, 600.0)}, rounds, 50)
+    over = med["fast"] - med["bare"]
+    rows.append({"case": "steady_mill, perfect mixing, N = 50", "method": "Mill.product (fast path)",
+                 "runtime_s": med["fast"], "baseline": "solve_well_mixed", "baseline_s": med["bare"],
+                 "ratio_vs_baseline": med["fast"] / med["bare"], "overhead_s": over,
+                 "target_overhead_s": TARGET_OVERHEAD_S, "met": over <= TARGET_OVERHEAD_S, "load_average": load})
+    rows.append(_sweep_case_row(rounds, load))
+    members = 400 if quick else 2000
+    g, S, b, feed = _scene(100, members)
+    for name, tr in (("perfect mixing", rtd.PerfectMixing(600.0)), ("tanks in series n=3", rtd.TanksInSeries(600.0, 3)),
+                     ("tanks in series n=10", rtd.TanksInSeries(600.0, 10))):
+        loop_n = 20
+        med = _interleaved({"pop": lambda tr=tr: steady_population(S, b, feed, tr),
+                            "loop": lambda tr=tr: [steady_mill(S[k], b, feed, tr) for k in range(loop_n)]},
+                           max(3, rounds // 2), 1)
+        rate, base_rate = members / med["pop"], loop_n / med["loop"]
+        target = TARGET_MILLS_PER_S[name]
+        rows.append({"case": f"population {name}, N = 100, P = {members}", "method": "steady_population",
+                     "runtime_s": med["pop"], "mills_per_s": rate, "baseline": "steady_mill per member",
+                     "baseline_mills_per_s": base_rate, "ratio_vs_baseline": base_rate / rate,
+                     "target_mills_per_s": target, "met": rate >= target, "load_average": load})
+    return rows
+
+
+def _sweep_case_row(rounds: int, load: str) -> dict:
+    """One sweep case (:func:`millflow.sweep.solve_case`: the dict with the case's values,
+    built, solved, summarised) against the bare solve of the same flowsheet built once."""
+    import copy
+    import tempfile
+    from pathlib import Path
+
+    from millflow.bench.sweep import _write_case
+    from millflow.flowsheet import from_dict, solve
+    from millflow.inputs import read_toml
+    from millflow.sweep import solve_case
+    from millflow.sweep.cases import set_key
+
+    with tempfile.TemporaryDirectory() as tmp:
+        path = _write_case(Path(tmp))
+        data = read_toml(path, "flowsheet file")
+    case = {"units.ball_mill.tau_min": 3.0, "units.cyclones.d50c_um": 120.0}
+    d = copy.deepcopy(data)
+    for k, v in case.items():
+        set_key(d, k, v)
+    fs = from_dict(d, source=str(path))
+    med = _interleaved({"case": lambda: solve_case(data, case, str(path)), "solve": lambda: solve(fs)},
+                       rounds, 3)
+    return {"case": "sweep case, closed circuit N = 60, 5 cells", "method": "solve_case", "runtime_s": med["case"],
+            "baseline": "solve (flowsheet built once)", "baseline_s": med["solve"],
+            "ratio_vs_baseline": med["case"] / med["solve"], "target_ratio": TARGET_SWEEP_RATIO,
+            "met": med["case"] / med["solve"] <= TARGET_SWEEP_RATIO, "load_average": load}
+
+
+def format_table(rows: list[dict]) -> str:
+    out = []
+    for r in rows:
+        extra = ""
+        if "overhead_s" in r:
+            extra = f"overhead {1e3 * r['overhead_s']:.3f} ms (target <= {1e3 * r['target_overhead_s']:.1f} ms: " \
+                    f"{'met' if r['met'] else 'not met'})"
+        elif "mills_per_s" in r:
+            extra = (f"{r['mills_per_s']:.3g} mills/s vs {r['baseline_mills_per_s']:.3g} per member "
+                     f"(target >= {r['target_mills_per_s']:.0e}: {'met' if r['met'] else 'not met'})")
+        elif "target_ratio" in r:
+            extra = f"(target <= {r['target_ratio']:g}x: {'met' if r['met'] else 'not met'})"
+        elif "max_rel_diff" in r:
+            extra = f"max rel diff {r['max_rel_diff']:.1e}"
+        out.append(f"{r['case']:<46} {r['method']:<22} {1e3 * r['runtime_s']:>9.4f} ms  vs {r['baseline']:<28} "
+                   f"x{r['ratio_vs_baseline']:<8.3g} {extra}")
+    out.append(f"medians of interleaved rounds; load average {rows[0]['load_average']}")
+    return "\n".join(out)

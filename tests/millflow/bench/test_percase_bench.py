@@ -1,0 +1,31 @@
+"""millflow bench percase and startup: rows carry ratios measured in the same run; the
+numbers the rows compare are checked (same values), never the times."""
+import numpy as np
+
+from millflow.bench import percase
+
+
+def test_percase_rows_and_same_numbers(monkeypatch):
+    monkeypatch.setattr(percase, "_sweep_case_row", lambda rounds, load: {
+        "case": "sweep", "method": "solve_case", "runtime_s": 1.0, "baseline": "solve", "ratio_vs_baseline": 1.0,
+        "target_ratio": 1.2, "met": True, "load_average": load})
+    rows = percase.run(quick=True)
+    by = {r["method"]: r for r in rows}
+    assert by["percentile_sizes"]["max_rel_diff"] < 1e-12  # same P80/P50 as PCHIP + brentq
+    for r in rows:
+        assert np.isfinite(r["ratio_vs_baseline"]) and r["ratio_vs_baseline"] > 0
+    assert {"steady_mill (Dataset)", "Mill.product (fast path)"} <= set(by)
+    pops = [r for r in rows if r["method"] == "steady_population"]
+    assert len(pops) == 3 and all(r["mills_per_s"] > r["baseline_mills_per_s"] for r in pops)
+    assert "met" in percase.format_table(rows)
+
+
+def test_nonlinear_batch_rows_accuracy_not_time():
+    from millflow.bench import nonlinear_batch
+
+    rows = nonlinear_batch.run(quick=True)
+    plain, est = rows
+    assert plain["method"].startswith("batch_nonlinear (LSODA)")
+    assert plain["max_abs_error"] < 1e-9  # rtol 1e-8 on O(1) masses
+    assert est["error_estimate"] >= est["max_abs_error"]  # an estimate is at least the actual error
+    assert "met" in nonlinear_batch.format_table(rows)
