@@ -31,3 +31,36 @@ def attach(package: str, modules: dict[str, tuple[str, ...]]):
         return sorted(set(vars(importlib.import_module(package))) | set(where))
 
     return __getattr__, __dir__
+
+
+#: Modules that ``import millflow`` must not load until a call needs them.
+HEAVY = ("scipy.integrate", "scipy.stats", "pandas", "xarray", "matplotlib")
+
+
+def import_path_env(**extra) -> dict:
+    """Environment for a child Python that imports the same millflow as this process.
+
+    The folder the ``millflow`` package is imported from goes first on PYTHONPATH (an
+    installed package: site-packages; a source checkout: its root), plus ``extra`` variables.
+    """
+    import importlib.util
+    import os
+    from pathlib import Path
+
+    env = dict(os.environ, **extra)
+    package = importlib.util.find_spec(__name__.partition(".")[0]).submodule_search_locations[0]
+    root = str(Path(package).resolve().parent)
+    env["PYTHONPATH"] = root + (os.pathsep + env["PYTHONPATH"] if env.get("PYTHONPATH") else "")
+    return env
+
+
+def heavy_modules_loaded(statement: str = "import millflow") -> list[str]:
+    """The modules of :data:`HEAVY` in ``sys.modules`` of a fresh process after ``statement``."""
+    import json
+    import subprocess
+    import sys
+
+    code = f"import sys, json\n{statement}\nprint(json.dumps([m for m in {list(HEAVY)!r} if m in sys.modules]))"
+    out = subprocess.run([sys.executable, "-c", code], env=import_path_env(), capture_output=True, text=True,
+                         check=True)
+    return json.loads(out.stdout.strip().splitlines()[-1])

@@ -18,7 +18,6 @@ stretches every row, the ratios less so.
 """
 from __future__ import annotations
 
-import json
 import os
 import statistics
 import subprocess
@@ -27,12 +26,12 @@ import tempfile
 import time
 from pathlib import Path
 
+from millflow._lazy import HEAVY, heavy_modules_loaded  # noqa: F401  (re-exported names of the suite)
+
 __all__ = ["DESCRIPTION", "run", "format_table", "HEAVY", "SMALL_FLOWSHEET_TOML", "heavy_modules_loaded"]
 
 DESCRIPTION = "start-up: millflow --version, run --no-plots, run with plots as whole processes vs plain imports"
 
-#: Modules that ``import millflow`` must not load until a call needs them.
-HEAVY = ("scipy.integrate", "scipy.stats", "pandas", "xarray", "matplotlib")
 TARGET_VERSION = 1.3
 TARGET_RUN = 2.0
 TARGET_PLOT_SHARE = 0.30
@@ -77,10 +76,9 @@ undersize = {from = "screen.undersize", to = "product"}
 
 
 def _env() -> dict:
-    env = dict(os.environ, OPENBLAS_NUM_THREADS="1", OMP_NUM_THREADS="1", MKL_NUM_THREADS="1")
-    root = str(Path(__file__).resolve().parents[2])  # this source tree first, as the caller imports it
-    env["PYTHONPATH"] = root + (os.pathsep + env["PYTHONPATH"] if env.get("PYTHONPATH") else "")
-    return env
+    from millflow._lazy import import_path_env
+
+    return import_path_env(OPENBLAS_NUM_THREADS="1", OMP_NUM_THREADS="1", MKL_NUM_THREADS="1")
 
 
 def _time(cmd: list[str], env: dict, cwd: str) -> float:
@@ -90,13 +88,6 @@ def _time(cmd: list[str], env: dict, cwd: str) -> float:
     if proc.returncode != 0:
         raise RuntimeError(f"{' '.join(cmd)} failed ({proc.returncode}): {proc.stderr.strip()[-300:]}")
     return dt
-
-
-def heavy_modules_loaded(statement: str = "import millflow") -> list[str]:
-    """The modules of :data:`HEAVY` in ``sys.modules`` of a fresh process after ``statement``."""
-    code = f"import sys, json\n{statement}\nprint(json.dumps([m for m in {list(HEAVY)!r} if m in sys.modules]))"
-    out = subprocess.run([sys.executable, "-c", code], env=_env(), capture_output=True, text=True, check=True)
-    return json.loads(out.stdout.strip().splitlines()[-1])
 
 
 def run(quick: bool = False) -> list[dict]:

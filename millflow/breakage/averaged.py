@@ -68,7 +68,10 @@ def class_average(fun, grid, nodes: int = NODES) -> np.ndarray:
         return np.asarray(fun(x), dtype=float)
     y, w = class_nodes(x, nodes)
     vals = np.asarray(fun(np.append(y.ravel(), x[-1])), dtype=float)
-    avg = vals[:-1].reshape(y.shape) @ w
+    nodes_vals = vals[:-1].reshape(y.shape)
+    # a mean lies between its smallest and largest value: the weights' rounding (they sum
+    # to 1 within a few eps) must not put a partition of 1 at 1 + 2e-16 (a negative flow)
+    avg = np.clip(nodes_vals @ w, nodes_vals.min(axis=1), nodes_vals.max(axis=1))
     return np.append(avg, vals[-1])
 
 

@@ -10,8 +10,10 @@ linear system when every unit is linear, tear iterations only for nonlinear unit
 
 A file is read with ``load("flowsheets/closed_circuit_ball_mill.toml")``; the same text
 can be given as a string (an open circuit: a feed, a mill of three tanks in series, a
-product):
+product).
 
+Examples
+--------
 >>> from millflow.flowsheet import loads, solve, summary
 >>> sol = solve(loads('''
 ... grid = {top_um = 8000, bottom_um = 10, ratio = 1.4142135623730951}

@@ -7,7 +7,7 @@ import sys
 
 import pytest
 
-from millflow.bench.startup import HEAVY, heavy_modules_loaded
+from millflow._lazy import HEAVY, heavy_modules_loaded
 
 
 def _loaded(statement: str) -> list[str]:

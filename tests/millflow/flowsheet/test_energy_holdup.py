@@ -24,7 +24,8 @@ def open_mill(power_kW=1000.0, feed_tph=100.0, mill=None, rate=None):
          "breakage": {"form": "normalized", "phi": 0.5, "gamma": 0.8, "beta": 3.0}}
     m.update(mill or {"holdup_t": 20})
     return Flowsheet.from_dict({
-        "grid": {"top_um": 2000, "bottom_um": 500, "n": 3},
+        # upper-edge values: the exact product below takes S at the edge (class averages: docs/core.md)
+        "grid": {"top_um": 2000, "bottom_um": 500, "n": 3, "scheme": "upper_edge"},
         "units": {"feed": {"type": "feed", "solids_tph": feed_tph,
                            "psd": {"form": "ggs", "xmax_um": 2000, "m": 0.8}},
                   "mill": m, "product": {"type": "product"}},
@@ -148,7 +149,7 @@ def test_bad_energy_inputs_are_one_line(tmp_path, capsys, edit, match):
 
 def test_material_per_energy_carries_a_lab_rate():
     rate = {"form": "power", "A_per_min": 1.2, "alpha": 1.0, "x0_um": 1000}
-    doc = {"grid": {"top_um": 2000, "bottom_um": 500, "n": 3},
+    doc = {"grid": {"top_um": 2000, "bottom_um": 500, "n": 3, "scheme": "upper_edge"},
            "materials": {"ore": {"rate": rate, "breakage": {"form": "normalized", "phi": 0.5, "gamma": 0.8,
                                                             "beta": 3.0},
                                  "per_energy": {"lab_power_kW": 0.5, "lab_holdup_kg": 10}}},

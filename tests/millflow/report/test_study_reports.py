@@ -59,7 +59,7 @@ def test_compare_report_shows_compare_json(tmp_path, capsys):
 def test_sweep_report_shows_every_case(tmp_path, capsys):
     out = tmp_path / "sw"
     assert main(["sweep", str(paths.FLOWSHEETS / "closed_circuit_ball_mill.toml"), "--vary",
-                 "units.ball_mill.tau_min=2:6:3", "--scheduler", "serial", "--no-plots", "--quiet", "--json",
+                 "units.ball_mill.holdup_t=20:60:3", "--scheduler", "serial", "--no-plots", "--quiet", "--json",
                  "--out", str(out)]) == 0
     import pandas as pd
 
