@@ -11,7 +11,7 @@ def test_percase_rows_and_same_numbers(monkeypatch):
         "target_ratio": 1.2, "met": True, "load_average": load})
     rows = percase.run(quick=True)
     by = {r["method"]: r for r in rows}
-    assert by["percentile_sizes"]["max_rel_diff"] < 1e-11  # the same reading built the plain way (root tolerances ~1e-14)
+    assert by["percentile_sizes"]["max_rel_diff"] < 1e-11  # the same reading built plainly (roots to ~1e-14)
     for r in rows:
         assert np.isfinite(r["ratio_vs_baseline"]) and r["ratio_vs_baseline"] > 0
     assert {"steady_mill (Dataset)", "Mill.product (fast path)"} <= set(by)
