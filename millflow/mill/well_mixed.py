@@ -70,8 +70,6 @@ def well_mixed_population(S, b, feed, tau=1.0, d=None) -> np.ndarray:
     f = np.broadcast_to(f, lead + (n,))
     b_lead = (1,) * (len(lead) - (b.ndim - 2)) + b.shape[:-2]
     with np.errstate(over="ignore", invalid="ignore"):
-        if len(lead) == 1 and b.ndim == 2 and lead[0] > 1:
-            return _substitute_blocked(s, b, f)
         if len(lead) >= 1 and b_lead[-1] == 1 and lead[-1] > 1:
             return _substitute_shared(s, np.broadcast_to(b.reshape(b_lead + (n, n))[..., 0, :, :],
                                                          lead[:-1] + (n, n)), f)
@@ -83,41 +81,6 @@ def well_mixed_population(S, b, feed, tau=1.0, d=None) -> np.ndarray:
             p[..., i] = acc / denom[..., i]
             q[..., i] = s[..., i] * p[..., i]
     return p
-
-
-#: Classes per block of :func:`_substitute_blocked` and members per chunk (a chunk's
-#: (classes, members) arrays stay in cache).
-BLOCK_CLASSES, CHUNK_MEMBERS = 20, 512
-
-
-def _substitute_blocked(s, b, f):
-    """The substitution for P members sharing one b (N, N): s, f (P, N) -> p (P, N).
-
-    Classes in blocks of :data:`BLOCK_CLASSES`: what the classes before a block send
-    into it is one matrix product b[block, :k0] @ q[:k0, members] (BLAS level 3); inside
-    a block, one small product per class. Members in chunks of :data:`CHUNK_MEMBERS`.
-    With r = s/(1 + s): q_i = r_i (f_i + sum_{j<i} b_ij q_j), p_i = (f_i + ...)/(1 + s_i).
-    The same arithmetic as the class-by-class loop but for the order of the sum over j.
-    """
-    n_members, n = s.shape
-    out = np.empty((n_members, n))
-    bl = np.tril(b, -1)
-    for m0 in range(0, n_members, CHUNK_MEMBERS):
-        sT = s[m0:m0 + CHUNK_MEMBERS].T
-        denom = 1.0 + sT
-        rT = sT / denom
-        acc = np.array(f[m0:m0 + CHUNK_MEMBERS].T, dtype=float, order="C")  # f_i + sum_j b_ij q_j
-        qT = np.empty(acc.shape)
-        for k0 in range(0, n, BLOCK_CLASSES):
-            k1 = min(n, k0 + BLOCK_CLASSES)
-            if k0:
-                acc[k0:k1] += bl[k0:k1, :k0] @ qT[:k0]
-            np.multiply(acc[k0], rT[k0], out=qT[k0])
-            for i in range(k0 + 1, k1):
-                acc[i] += bl[i, k0:i] @ qT[k0:i]
-                np.multiply(acc[i], rT[i], out=qT[i])
-        out[m0:m0 + CHUNK_MEMBERS] = (acc / denom).T
-    return out
 
 
 def _substitute_shared(s, b, f):

@@ -68,24 +68,3 @@ def test_bad_shapes_one_line_errors():
         steady_population(S, b, feed[:-1], rtd.PerfectMixing(1.0))
     with pytest.raises(InputError, match="rates >= 0"):
         steady_population(-S, b, feed, rtd.PerfectMixing(1.0))
-
-
-@pytest.mark.parametrize("n_members,n", [(2, 1), (3, 7), (45, 41), (1100, 23)])
-def test_blocked_substitution_equals_class_loop(n_members, n):
-    """The blocked population substitution (classes in blocks, members in chunks) gives the
-    class-by-class loop's products to rounding, for sizes that are not whole blocks/chunks."""
-    from millflow.mill.well_mixed import _substitute_blocked, _substitute_shared, solve_well_mixed
-
-    rng = np.random.default_rng(n_members + n)
-    S = rng.uniform(0.0, 3.0, (n_members, n))
-    S[:, -1] = 0.0
-    b = np.tril(rng.uniform(0.0, 1.0, (n, n)), -1)
-    b /= np.maximum(b.sum(axis=0), 1e-300)
-    f = rng.uniform(0.0, 2.0, (n_members, n))
-    blocked = _substitute_blocked(S, b, f)
-    loop = _substitute_shared(S, b, f)
-    np.testing.assert_allclose(blocked, loop, rtol=1e-13, atol=1e-15 * f.sum(axis=1).max())
-    k = n_members - 1
-    single = solve_well_mixed(S[k], b, f[k], 1.0)
-    np.testing.assert_allclose(blocked[k], single, rtol=1e-13, atol=1e-15 * f[k].sum())
-    np.testing.assert_allclose(blocked.sum(axis=1), f.sum(axis=1), rtol=1e-13)  # mass kept
