@@ -52,3 +52,63 @@ def test_growth_exponent_recovers_a_power_law():
     ns = [100, 200, 400, 800]
     assert growth_exponent(ns, [3e-6 * n ** 1.37 for n in ns]) == pytest.approx(1.37, rel=1e-12)
 
+
+
+def _sparse(fs):
+    from millflow.flowsheet.solve import _linear_solve, _unit_blocks
+
+    blocks, infos = _unit_blocks(fs, {})
+    return _linear_solve(fs, blocks)[0], blocks, infos
+
+
+@pytest.mark.parametrize("n,cells", [(2, 1), (25, 1), (60, 3), (100, 10), (37, 7)])
+def test_class_by_class_solve_equals_sparse_lu(n, cells):
+    from millflow.bench.flowsheet import closed_circuit_case
+    from millflow.flowsheet.structured import structured_solve
+
+    fs = closed_circuit_case(n, cells)
+    x, info, blocks, infos = structured_solve(fs)
+    ref, ref_blocks, ref_infos = _sparse(fs)
+    np.testing.assert_allclose(x, ref, rtol=0, atol=1e-14 * ref.max())
+    assert info["relative_residual"] < 1e-13
+    # the mill's transfer matrix, built only when read, is the dense path's
+    np.testing.assert_array_equal(blocks["ball_mill"]["out"], ref_blocks["ball_mill"]["out"])
+    assert set(infos["ball_mill"]) == set(ref_infos["ball_mill"])  # the same report keys
+    assert infos["ball_mill"]["method"] == ref_infos["ball_mill"]["method"]
+    assert infos["ball_mill"]["error_estimate"] < 1e-12
+    sol = solve(fs)
+    assert sol.solver["method"].startswith("class-by-class")
+    np.testing.assert_array_equal(sol.flows, x)
+
+
+def test_two_mills_in_series_and_parallel_equal_sparse_lu():
+    from millflow.bench.flowsheet import CLOSED_CIRCUIT_TOML
+    from millflow.flowsheet import from_dict
+    from millflow.flowsheet.structured import structured_solve
+    import tomllib
+
+    data = tomllib.loads(CLOSED_CIRCUIT_TOML)
+    data["grid"] = {"top_um": 8000, "bottom_um": 2, "n": 50}
+    data["units"]["ball_mill"]["transport"] = {"model": "tanks_in_series", "n": 4}
+    data["units"]["regrind"] = {"type": "mill", "material": "ore", "tau_min": 1.5,
+                                "transport": {"model": "perfect_mixing"}}
+    data["streams"]["overflow"] = {"from": "cyclones.overflow", "to": "regrind"}
+    data["streams"]["final"] = {"from": "regrind", "to": "overflow_product"}
+    fs = from_dict(data)
+    x = structured_solve(fs)[0]
+    ref = _sparse(fs)[0]
+    np.testing.assert_allclose(x, ref, rtol=0, atol=1e-14 * ref.max())
+
+
+def test_classified_or_other_mills_take_the_sparse_path():
+    from millflow.bench.flowsheet import CLOSED_CIRCUIT_TOML
+    from millflow.flowsheet import from_dict
+    from millflow.flowsheet.structured import structured_solve
+    import tomllib
+
+    data = tomllib.loads(CLOSED_CIRCUIT_TOML)
+    data["grid"] = {"top_um": 8000, "bottom_um": 2, "n": 30}
+    data["units"]["ball_mill"]["transport"] = {"model": "plug_flow"}
+    fs = from_dict(data)
+    assert structured_solve(fs) is None
+    assert solve(fs).solver["method"].startswith("sparse LU")
