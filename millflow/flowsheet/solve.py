@@ -365,9 +365,15 @@ def solve(fs, *, method="wegstein", tol: float = 1e-13, maxiter: int = 200,
         water0 += sum((getattr(fs, "water_added", {}) or {}).values())
         state = {}
 
+        from millflow.flowsheet.structured import structured_solve
+
         def g(X):
-            blocks, infos = _unit_blocks(fs, unit_state(X))
-            flows, info = _linear_solve(fs, blocks)
+            fast = structured_solve(fs, unit_state(X))  # mills of equal cells: no transfer matrix
+            if fast is not None:
+                flows, info, blocks, infos = fast
+            else:
+                blocks, infos = _unit_blocks(fs, unit_state(X))
+                flows, info = _linear_solve(fs, blocks)
             state.update(blocks=blocks, infos=infos, flows=flows, info=info)
             return state_of(flows, infos)
 

@@ -27,11 +27,12 @@ from millflow.linalg import breakage_matrix
 __all__ = ["cell_chain", "structured_solve"]
 
 
-def cell_chain(unit, grid):
-    """(M (N, N) cell matrix, n cells, tau [s], info) of a linear mill of n equal well-mixed
-    cells without classification, or None when the mill is anything else."""
-    if getattr(unit, "type", None) != "mill" or getattr(unit, "nonlinear", True) \
-            or getattr(unit, "kinetic_nonlinear", True) or unit.classification is not None:
+def cell_chain(unit, grid, throughput=None, water=None):
+    """(M (N, N) cell matrix, n cells, tau [s]) of a mill of n equal well-mixed cells without
+    classification at the given (torn) solids throughput and water [kg/s], or None when the
+    mill is anything else."""
+    if getattr(unit, "type", None) != "mill" or getattr(unit, "kinetic_nonlinear", True) \
+            or unit.classification is not None:
         return None
     params = dict(unit.transport_params)
     if unit.transport == "perfect_mixing" and not params:
@@ -41,8 +42,8 @@ def cell_chain(unit, grid):
         n = int(params["n"])
     else:
         return None
-    tau = unit.residence_time()
-    S, b = unit.breakage_functions(grid, tau)
+    tau = unit.residence_time(throughput, water)
+    S, b = unit.breakage_functions(grid, tau, throughput)
     M = np.eye(S.size) - breakage_matrix(S, b) * (tau / n)
     return M, n, tau
 
@@ -50,12 +51,12 @@ def cell_chain(unit, grid):
 class _LazyBlocks(Mapping):
     """A mill's blocks ({"out": P}) built on first use (reports read only classifiers' blocks)."""
 
-    def __init__(self, unit, grid):
-        self._unit, self._grid, self._blocks = unit, grid, None
+    def __init__(self, unit, grid, state):
+        self._unit, self._grid, self._state, self._blocks = unit, grid, state, None
 
     def _get(self):
         if self._blocks is None:
-            self._blocks = self._unit.blocks(self._grid)[0]
+            self._blocks = self._unit.blocks(self._grid, **self._state)[0]
         return self._blocks
 
     def __getitem__(self, key):
@@ -68,9 +69,11 @@ class _LazyBlocks(Mapping):
         return 1
 
 
-def structured_solve(fs):
+def structured_solve(fs, state=None):
     """(flows (S, N), solver info, blocks, infos) of a linear flowsheet whose every block is
-    diagonal except cell-chain mills; None when some unit does not fit."""
+    diagonal except cell-chain mills; None when some unit does not fit. ``state`` maps a torn
+    unit to its torn inlet values (as :func:`millflow.flowsheet.solve._unit_blocks`)."""
+    state = state or {}
     t0 = time.perf_counter()
     grid = fs.grid
     N = grid.n
@@ -81,13 +84,13 @@ def structured_solve(fs):
     for uname, unit in fs.units.items():
         if getattr(unit, "type", None) == "mill":
             t1 = time.perf_counter()
-            chain = cell_chain(unit, grid)
+            chain = cell_chain(unit, grid, **state.get(uname, {}))
             if chain is None:
                 return None
             chains[uname] = chain
             infos[uname] = {"runtime_s": time.perf_counter() - t1}
             continue
-        blk, inf = unit.blocks(grid)
+        blk, inf = unit.blocks(grid, **state.get(uname, {}))
         if any(np.ndim(B) != 1 for B in blk.values()):
             return None
         blocks[uname], infos[uname] = blk, inf
@@ -166,7 +169,7 @@ def structured_solve(fs):
                 how += f" [{unit.transport_note}]"
             infos[uname] = {"method": how, "error_estimate": float(np.max(np.abs(ones - 1.0))),
                             "runtime_s": infos[uname]["runtime_s"], "tau_s": tau, **unit._basis_info()}
-            blocks[uname] = _LazyBlocks(unit, grid)
+            blocks[uname] = _LazyBlocks(unit, grid, state.get(uname, {}))
             continue
         for port in unit.ports:
             B = blocks[uname].get(port)
