@@ -162,13 +162,14 @@ def shipped_circuit_case(n: int = 100, cells: int = 10):
 
 
 def _interleaved(funs: dict, rounds: int) -> dict:
-    """Median wall time of each callable, timed in interleaved rounds (one call each per round)."""
+    """Median CPU time of the process (time.process_time: on a loaded machine wall time mostly
+    measures the wait for a core) of each callable, in interleaved rounds (one call each)."""
     times = {k: [] for k in funs}
     for _ in range(rounds):
         for k, fun in funs.items():
-            t0 = time.perf_counter()
+            t0 = time.process_time()
             fun()
-            times[k].append(time.perf_counter() - t0)
+            times[k].append(time.process_time() - t0)
     return {k: statistics.median(v) for k, v in times.items()}
 
 
@@ -185,7 +186,7 @@ def growth_rows(quick: bool = False) -> list[dict]:
     ns = (100, 200, 400) if quick else (100, 200, 400, 800)
     rows, t_lin, t_base, t_ship = [], [], [], []
     for n in ns:
-        rounds = 3 if n >= 400 else (5 if quick else 9)
+        rounds = 3 if n >= 400 else (5 if quick else 15)
         fs, fship = closed_circuit_case(n), shipped_circuit_case(n)
         solve(fs), solve(fship)  # warm-up
         t = _interleaved({"linear": lambda: solve(fs), "base": lambda: _substitution_baseline(fs),
