@@ -27,6 +27,8 @@ discrete model itself: they are used as given and carry no grid error.
 """
 from __future__ import annotations
 
+import functools
+
 import numpy as np
 
 from millflow.breakage.distributions import validate_b
@@ -50,11 +52,20 @@ def class_nodes(grid, nodes: int = NODES) -> tuple[np.ndarray, np.ndarray]:
     coarse first, so ``y.ravel()`` is strictly decreasing.
     """
     x = as_sizes(grid)
-    u, w = np.polynomial.legendre.leggauss(int(nodes))
-    u = u[::-1]  # descending: the coarse end of each class first
+    u, w = _leggauss(int(nodes))
     hi, lo = np.log(x[:-1]), np.log(x[1:])
     ln_y = 0.5 * (hi + lo)[:, None] + 0.5 * (hi - lo)[:, None] * u[None, :]
-    return np.exp(ln_y), w[::-1] / 2.0
+    return np.exp(ln_y), w / 2.0
+
+
+@functools.lru_cache(maxsize=8)
+def _leggauss(nodes: int) -> tuple[np.ndarray, np.ndarray]:
+    """Gauss-Legendre points (descending: the coarse end of a class first) and weights,
+    computed once per number of points (numpy builds them from a companion matrix)."""
+    u, w = np.polynomial.legendre.leggauss(nodes)
+    u, w = u[::-1].copy(), w[::-1].copy()
+    u.flags.writeable = w.flags.writeable = False
+    return u, w
 
 
 def class_average(fun, grid, nodes: int = NODES) -> np.ndarray:

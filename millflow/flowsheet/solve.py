@@ -365,9 +365,15 @@ def solve(fs, *, method="wegstein", tol: float = 1e-13, maxiter: int = 200,
         water0 += sum((getattr(fs, "water_added", {}) or {}).values())
         state = {}
 
+        from millflow.flowsheet.structured import structured_solve
+
         def g(X):
-            blocks, infos = _unit_blocks(fs, unit_state(X))
-            flows, info = _linear_solve(fs, blocks)
+            fast = structured_solve(fs, unit_state(X))  # mills of equal cells: no transfer matrix
+            if fast is not None:
+                flows, info, blocks, infos = fast
+            else:
+                blocks, infos = _unit_blocks(fs, unit_state(X))
+                flows, info = _linear_solve(fs, blocks)
             state.update(blocks=blocks, infos=infos, flows=flows, info=info)
             return state_of(flows, infos)
 
@@ -396,8 +402,14 @@ def solve(fs, *, method="wegstein", tol: float = 1e-13, maxiter: int = 200,
         if fallback:
             tear_report["fallback"] = fallback
     else:
-        blocks, infos = _unit_blocks(fs, {})
-        flows, lin = _linear_solve(fs, blocks)
+        from millflow.flowsheet.structured import structured_solve
+
+        fast = structured_solve(fs)  # mills of equal cells: class by class, no transfer matrix
+        if fast is not None:
+            flows, lin, blocks, infos = fast
+        else:
+            blocks, infos = _unit_blocks(fs, {})
+            flows, lin = _linear_solve(fs, blocks)
 
     water = solve_water(fs, flows, infos)
     reports = _unit_reports(fs, flows, infos, mass_tol, water)

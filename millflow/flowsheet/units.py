@@ -315,7 +315,7 @@ class MillUnit:
         on an "upper_edge" grid), a user's discrete S_i, b_ij as given
         (:func:`millflow.breakage.averaged.breakage_on_grid`); rates per energy become
         S = S^E P / H with H = tau F [kg] (the class average of S^E times P / H: the map is linear)."""
-        S, b, _ = breakage_on_grid(self.rate, self.breakage, grid)
+        S, b = self._on_grid(grid)
         if self.breakage_basis == "energy":
             if tau is None or throughput is None or not throughput > 0:
                 raise SolverError(f"units.{self.name}: rates per energy need the mill's hold-up, H = tau F; "
@@ -323,6 +323,19 @@ class MillUnit:
             from millflow.breakage.energy import time_rates
 
             S = time_rates(S, float(self.power), float(tau) * float(throughput))
+        return S, b
+
+    def _on_grid(self, grid):
+        """(S or S^E, b) of this mill's forms on ``grid``, computed once per grid object and kept
+        read-only on the unit (a torn mill asks for them at every tear iteration; they do not
+        depend on tau or the throughput)."""
+        kept = self.__dict__.get("_grid_forms")
+        if kept is not None and kept[0] is grid:
+            return kept[1], kept[2]
+        S, b, _ = breakage_on_grid(self.rate, self.breakage, grid)
+        S, b = np.array(S, dtype=float), np.array(b, dtype=float)
+        S.flags.writeable = b.flags.writeable = False
+        object.__setattr__(self, "_grid_forms", (grid, S, b))  # a cache, not a field (eq, repr, replace)
         return S, b
 
     def discretisation(self, grid) -> str:

@@ -28,3 +28,18 @@ def test_bench_rows():
     assert target["max_abs_error"] < 1e-9
     assert len(rows) >= 2 + 5
     assert "target" in bench.format_table(rows)
+
+
+def test_growth_rows_cover_both_forms_and_fit_exponents():
+    rows = bench.run(quick=True)
+    growth = [r for r in rows if "growth_linear" in r]
+    assert len(growth) == 1
+    g = growth[0]
+    sized = [r for r in rows if "n" in r]
+    assert sorted({r["n"] for r in sized}) == [100, 200, 400]
+    lin = [r["runtime_s"] for r in sized if r["method"].startswith("per-time")]
+    assert g["growth_linear"] == bench.growth_exponent([100, 200, 400], lin)
+    assert g["ratio_N100"] == next(r["ratio_vs_baseline"] for r in sized if r["n"] == 100
+                                   and r["method"].startswith("per-time"))
+    assert any(r["method"].startswith("energy + hold-up: tear") for r in sized)
+    assert "fitted exponents" in g["method"] and "N^" in bench.format_table(rows)
