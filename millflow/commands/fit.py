@@ -18,7 +18,8 @@ from millflow.commands.output import add_output_flags
 
 
 def add_parser(subparsers) -> None:
-    p = subparsers.add_parser("fit", help="fit breakage (and classification) parameters to PSD data, or a circuit to a survey",
+    p = subparsers.add_parser("fit", help="fit breakage (and classification) parameters to PSD data, "
+                                          "or a circuit to a survey",
                               description=__doc__.splitlines()[0])
     p.add_argument("config", help="TOML configuration (see docs/fitting.md)")
     add_output_flags(p, out="output folder (default: output.dir of the config, else <config stem>-fit)",
