@@ -63,6 +63,13 @@ def format_summary(s: dict) -> str:
     if not cand and s["largest_normalised_adjustments"]:
         c = s["largest_normalised_adjustments"][0]
         lines.append(f"largest normalised adjustment: {c['measurement']} ({c['normalised_adjustment']:+.2f})")
+    d = s.get("gross_error_detectability")
+    if d and d["n_redundant"]:
+        lines.append(f"a gross error of {d['k_sd']:g} SD would be detected with probability >= {d['power_level']:g} "
+                     f"in {d['n_detected_at_power']} of {d['n_redundant']} redundant measurements "
+                     f"({d['n_not_redundant']} not redundant: never); least detectable: " + ", ".join(
+                         f"{c['measurement']} (redundancy {c['redundancy']:.2f}, p = {c['power']:.2f}, "
+                         f"{c['detectable_sd']:.0f} SD for {d['power_level']:g})" for c in d["least_detectable"][:3]))
     for n, c in s["circulating_load"].items():
         lines.append(f"circulating load {n}: " + (f"{c['value_pct']:.1f} +- {c['sd_pct']:.1f} %"
                                                   if c["observable"] else "unobservable"))

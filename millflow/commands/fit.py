@@ -56,7 +56,7 @@ def run(args) -> int:
     from millflow.fitting.report import write_report
     from millflow.fitting.validate import leave_out
 
-    from millflow.survey.fit import survey_fit_config
+    from millflow.survey.config import survey_fit_config
 
     sc = survey_fit_config(args.config)  # a [survey] table, or the survey file itself: the circuit fit
     if sc is not None:
