@@ -63,6 +63,13 @@ def format_summary(s: dict) -> str:
     if not cand and s["largest_normalised_adjustments"]:
         c = s["largest_normalised_adjustments"][0]
         lines.append(f"largest normalised adjustment: {c['measurement']} ({c['normalised_adjustment']:+.2f})")
+    d = s.get("gross_error_detectability")
+    if d and d["n_redundant"]:
+        lines.append(f"a gross error of {d['k_sd']:g} SD would be detected with probability >= {d['power_level']:g} "
+                     f"in {d['n_detected_at_power']} of {d['n_redundant']} redundant measurements "
+                     f"({d['n_not_redundant']} not redundant: never); least detectable: " + ", ".join(
+                         f"{c['measurement']} (redundancy {c['redundancy']:.2f}, p = {c['power']:.2f}, "
+                         f"{c['detectable_sd']:.0f} SD for {d['power_level']:g})" for c in d["least_detectable"][:3]))
     for n, c in s["circulating_load"].items():
         lines.append(f"circulating load {n}: " + (f"{c['value_pct']:.1f} +- {c['sd_pct']:.1f} %"
                                                   if c["observable"] else "unobservable"))
@@ -91,34 +98,44 @@ def format_fit(f: dict) -> str:
 
 
 def run(args) -> int:
-    from millflow.commands.output import check_target, relocate, staged_folder
-    from millflow.survey import read_survey, reconcile
-    from millflow.survey.results import save, summary
+    from millflow.commands.output import check_target
+    from millflow.survey import read_survey
 
     path = Path(args.file)
     out = Path(args.out) if args.out else Path.cwd() / f"{path.stem}-balance"
     check_target(out, overwrite=args.overwrite, input_path=path)
     survey = read_survey(path)
+    return balance_and_fit(args, survey, path, out, survey.fit if not args.no_fit else None, command="balance")
+
+
+def balance_and_fit(args, survey, path: Path, out: Path, fit_spec: dict | None, *, command: str,
+                    plots: bool = True, seed: int = 0) -> int:
+    """Reconcile ``survey``, fit the circuit parameters of ``fit_spec`` (if any), write and print the
+    results: the one route of ``millflow balance`` and of ``millflow fit`` on a survey config."""
+    from millflow.commands.output import relocate, staged_folder
+    from millflow.survey import reconcile
+    from millflow.survey.results import save, summary
+
     bal = reconcile(survey)
     s = summary(bal)
     cf = None
-    if survey.fit and not args.no_fit:
+    if fit_spec:
         from millflow.survey.fit import fit_circuit
 
-        f = survey.fit
+        f = fit_spec
         if not args.quiet and not args.json:
             print(f"fitting {len(f['names'])} circuit parameters to the reconciled survey ...", file=sys.stderr)
         cf = fit_circuit(bal, f["names"], f["bounds"], starts=f["starts"], global_search=f["global_search"],
-                         leave_one_out=f["leave_one_out"], quiet=args.quiet or args.json)
+                         leave_one_out=f["leave_one_out"], quiet=args.quiet or args.json, seed=seed)
         s["fit"] = cf.to_dict()
-    with staged_folder(out, overwrite=args.overwrite, input_path=path, command="balance") as tmp:
-        files = relocate(save(bal, tmp, plots=not args.no_plots).values(), tmp, out)
+    with staged_folder(out, overwrite=args.overwrite, input_path=path, command=command) as tmp:
+        files = relocate(save(bal, tmp, plots=plots and not args.no_plots).values(), tmp, out)
         if cf is not None:
             from millflow.survey.fit import to_toml
 
             (tmp / "fitted_circuit.toml").write_text(
-                f"# {survey.flowsheet.title or 'circuit'}: parameters fitted to the survey {path.name} "
-                "by millflow balance\n" + to_toml(cf.document()), encoding="utf-8")
+                f"# {survey.flowsheet.title or 'circuit'}: parameters fitted to the survey "
+                f"{Path(survey.source).name} by millflow {command}\n" + to_toml(cf.document()), encoding="utf-8")
             (tmp / "fit.json").write_text(json.dumps(s["fit"], indent=2, default=float), encoding="utf-8")
             files += relocate([tmp / "fitted_circuit.toml", tmp / "fit.json"], tmp, out)
     s["output_dir"] = str(out)

@@ -1,5 +1,8 @@
 """``millflow fit CONFIG.toml [--json]``: estimate breakage parameters from PSD data.
 
+A config with a ``[survey]`` table (or a survey file with a ``[fit]`` table) fits named
+flowsheet parameters of a whole circuit to the reconciled survey instead (docs/survey.md).
+
 Reads the TOML config (:mod:`millflow.fitting.config`), runs the global fit, ranks
 candidate forms if any, predicts held-out conditions, writes the parameter table,
 summary and plots into the output folder, and prints a summary (or, with --json, one
@@ -15,7 +18,8 @@ from millflow.commands.output import add_output_flags
 
 
 def add_parser(subparsers) -> None:
-    p = subparsers.add_parser("fit", help="fit breakage (and classification) parameters to PSD data",
+    p = subparsers.add_parser("fit", help="fit breakage (and classification) parameters to PSD data, "
+                                          "or a circuit to a survey",
                               description=__doc__.splitlines()[0])
     p.add_argument("config", help="TOML configuration (see docs/fitting.md)")
     add_output_flags(p, out="output folder (default: output.dir of the config, else <config stem>-fit)",
@@ -52,6 +56,16 @@ def run(args) -> int:
     from millflow.fitting.report import write_report
     from millflow.fitting.validate import leave_out
 
+    from millflow.survey.config import survey_fit_config
+
+    sc = survey_fit_config(args.config)  # a [survey] table, or the survey file itself: the circuit fit
+    if sc is not None:
+        from millflow.commands.balance import balance_and_fit
+
+        out_dir = Path(args.out or sc.out_dir or Path.cwd() / f"{Path(args.config).stem}-fit")
+        check_target(out_dir, overwrite=args.overwrite, input_path=args.config)
+        return balance_and_fit(args, sc.survey, Path(args.config), out_dir, sc.fit, command="fit",
+                               plots=sc.plots, seed=sc.seed)
     say = (lambda msg: None) if args.quiet else (lambda msg: print(f"[fit] {msg}", file=sys.stderr, flush=True))
     cfg = load_config(args.config, data_dir=args.data_dir)
     out_dir = Path(args.out or cfg.out_dir)

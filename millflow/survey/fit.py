@@ -386,3 +386,4 @@ def to_toml(doc: dict) -> str:
 
     table(doc, [])
     return "\n".join(lines) + "\n"
+

@@ -53,6 +53,13 @@ RANK_RTOL = 1e-9
 OBSERVABLE_RTOL = 1e-6
 
 
+def test_power(k, redundancy, threshold: float):
+    """P(|N(k sqrt(r), 1)| > threshold): the power of the measurement test for a gross error of
+    ``k`` SD in a measurement of redundancy ``r`` (linearised reconciliation)."""
+    m = np.asarray(k, float) * np.sqrt(np.clip(redundancy, 0.0, 1.0))
+    return stats.norm.sf(threshold - m) + stats.norm.cdf(-threshold - m)
+
+
 @dataclass
 class Balance:
     """A reconciled survey: adjusted values, covariances and the statistics.
@@ -106,6 +113,26 @@ class Balance:
         with np.errstate(divide="ignore", invalid="ignore"):
             out = self.adjustment / (self.sd * np.sqrt(v))
         return np.where(self.redundant, out, np.nan)
+
+    @property
+    def redundancy(self) -> np.ndarray:
+        """r_i = 1 - H_ii of each measurement: the share of an error in it that shows in its own
+        adjustment (0: not redundant, 1: fully redundant). A gross error of k SD shifts the
+        normalised adjustment by k sqrt(r_i) (linearised)."""
+        return np.where(self.redundant, np.clip(1.0 - self.leverage, 0.0, 1.0), 0.0)
+
+    def detection_power(self, k: float = 10.0) -> np.ndarray:
+        """Probability that a gross error of ``k`` SD in each measurement alone (the others with
+        their stated errors) takes its normalised adjustment past the threshold: the power of the
+        measurement test, P(|N(k sqrt(r_i), 1)| > threshold) in the linearised reconciliation."""
+        return np.where(self.redundant, test_power(k, self.redundancy, self.threshold), 0.0)
+
+    def detectable_sd(self, power: float = 0.9) -> np.ndarray:
+        """The gross error, in SDs of each measurement, detected with probability ``power``:
+        (threshold + z_power) / sqrt(r_i) (the far tail neglected; inf where not redundant)."""
+        with np.errstate(divide="ignore"):
+            k = (self.threshold + stats.norm.ppf(power)) / np.sqrt(self.redundancy)
+        return np.where(self.redundant, k, np.inf)
 
     @property
     def gross_errors(self) -> list:

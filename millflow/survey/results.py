@@ -29,6 +29,7 @@ def measurement_table(bal):
 
     st = bal.structure
     norm = bal.normalised
+    red, power, kd = bal.redundancy, bal.detection_power(10.0), bal.detectable_sd(0.9)
     recs = []
     for i, row in enumerate(st.rows):
         k = _scale(row)
@@ -37,11 +38,13 @@ def measurement_table(bal):
                      "measured": st.y[i] * k, "sd": st.sd[i] * k, "adjusted": bal.adjusted[i] * k,
                      "adjusted_sd": bal.adjusted_sd[i] * k, "adjustment": bal.adjustment[i] * k,
                      "adjustment_in_sd": bal.adjustment[i] / st.sd[i], "normalised_adjustment": norm[i],
-                     "redundant": bool(bal.redundant[i])})
+                     "redundant": bool(bal.redundant[i]), "redundancy": red[i],
+                     "power_10sd": power[i], "detectable_sd_90": kd[i] if np.isfinite(kd[i]) else math.nan})
     for key, v in st.exact:
         recs.append({"key": key, "quantity": "exact", "class": "", "unit": "t/h", "measured": v * TPH, "sd": 0.0,
                      "adjusted": v * TPH, "adjusted_sd": 0.0, "adjustment": 0.0, "adjustment_in_sd": math.nan,
-                     "normalised_adjustment": math.nan, "redundant": False})
+                     "normalised_adjustment": math.nan, "redundant": False, "redundancy": 0.0,
+                     "power_10sd": 0.0, "detectable_sd_90": math.nan})
     return pd.DataFrame.from_records(recs)
 
 
@@ -152,6 +155,27 @@ def _clean(v):
     return v
 
 
+def detectability(bal, k: float = 10.0, power: float = 0.9, count: int = 5) -> dict:
+    """How well the survey can catch a gross error in each measurement: the power of the
+    measurement test for an error of ``k`` SD, the redundancies, and the least detectable ones."""
+    p, r, kd = bal.detection_power(k), bal.redundancy, bal.detectable_sd(power)
+    red = np.flatnonzero(bal.redundant)
+    worst = red[np.argsort(p[red], kind="stable")][:count]
+
+    def one(i):
+        d = bal._describe(int(i))
+        return {"measurement": d["measurement"], "redundancy": float(r[i]), "power": float(p[i]),
+                "detectable_sd": float(kd[i])}
+
+    return {"k_sd": k, "power_level": power,
+            "rule": (f"a gross error of k SD in one measurement shifts its normalised adjustment by k sqrt(r), "
+                     f"r = 1 - H_ii its redundancy; power = P(|N(k sqrt(r), 1)| > threshold); an error of "
+                     f"(threshold + z_{power:g}) / sqrt(r) SD is detected with probability {power:g}"),
+            "n_redundant": int(red.size), "n_not_redundant": int(p.size - red.size),
+            "n_detected_at_power": int(np.sum(p[red] >= power)),
+            "least_detectable": [one(i) for i in worst]}
+
+
 def summary(bal) -> dict:
     """What a metallurgist reads first: the test, the candidates, the flows, the loads, what is unknown."""
     chi = dict(bal.chi_square)
@@ -173,6 +197,7 @@ def summary(bal) -> dict:
                              "family-wise (Bonferroni) over the redundant measurements"),
         "gross_error_candidates": bal.gross_errors,
         "largest_normalised_adjustments": bal.ranked(5),
+        "gross_error_detectability": detectability(bal),
         "streams": _stream_values(bal),
         "circulating_load": cl,
         "observability": bal.observability(),

@@ -194,3 +194,48 @@ def test_psd_from_a_feed_style_csv_equals_the_inline_one(tmp_path):
     a, b = read_survey(inline).streams["fresh"].psd, read_survey(csv).streams["fresh"].psd
     np.testing.assert_allclose(a.sizes, b.sizes)
     np.testing.assert_allclose(a.passing, b.passing, atol=1e-12)
+
+
+def test_redundancy_is_the_share_of_an_error_that_shows_in_its_own_adjustment():
+    """r_i = 1 - H_ii against a direct measurement of it: a small error delta planted in one
+    size fraction of a noise-free survey is adjusted by -r_i delta (linear regime), and the
+    reported power of the test is the normal-tail formula at k sqrt(r_i)."""
+    from scipy import stats
+
+    sol = solved("flowsheets/closed_circuit_ball_mill.toml")
+    sieves = grid_sieves(sol.flowsheet.grid, 8, bottom=20e-6)
+    base = reconcile(_noise_free(sol, sieves)[0])
+    rows = base.structure.rows
+    for stream, cls in [("underflow", 4), ("fresh", 2), ("overflow", 12), ("underflow", 10)]:
+        i = next(j for j, r in enumerate(rows) if r["stream"] == stream and r["kind"] == "fraction"
+                 and r["class"] == cls)
+        bal = reconcile(_noise_free(sol, sieves, gross={"stream": stream, "class": cls, "sd": 1e-3})[0])
+        delta = bal.measured[i] - base.measured[i]
+        assert -bal.adjustment[i] / delta == pytest.approx(base.redundancy[i], rel=2e-3, abs=1e-5), stream
+        c, r = base.threshold, base.redundancy[i]
+        assert base.detection_power(10.0)[i] == pytest.approx(
+            stats.norm.sf(c - 10 * math.sqrt(r)) + stats.norm.cdf(-c - 10 * math.sqrt(r)), rel=1e-12)
+        # the error detectable with probability 0.9 is detected with (at least, the far tail) 0.9
+        k90 = base.detectable_sd(0.9)[i]
+        assert base.detection_power(k90)[i] == pytest.approx(0.9, abs=1e-6)
+    # no error: the power is the false-alarm rate of one measurement, 2 sf(threshold)
+    assert base.detection_power(0.0)[base.redundant] == pytest.approx(2 * stats.norm.sf(base.threshold))
+    assert set(base.redundancy[~base.redundant]) <= {0.0}
+
+
+def test_balance_reports_detectability(tmp_path, capsys):
+    out = tmp_path / "out"
+    assert main(["balance", str(EXAMPLE / "survey.toml"), "--out", str(out), "--no-fit", "--no-plots"]) == 0
+    text = capsys.readouterr().out
+    assert "a gross error of 10 SD would be detected with probability >= 0.9 in" in text
+    s = json.loads((out / "summary.json").read_text())
+    d = s["gross_error_detectability"]
+    assert d["n_redundant"] + d["n_not_redundant"] == s["n_measured"]
+    powers = [c["power"] for c in d["least_detectable"]]
+    assert powers == sorted(powers)
+    import pandas as pd
+
+    m = pd.read_csv(out / "measurements.csv")
+    assert {"redundancy", "power_10sd", "detectable_sd_90"} <= set(m.columns)
+    assert d["n_detected_at_power"] == int((m["power_10sd"] >= 0.9).sum())
+    assert m["power_10sd"].min() == pytest.approx(powers[0], rel=1e-6)

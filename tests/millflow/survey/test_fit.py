@@ -86,3 +86,38 @@ def test_coverage_and_second_operating_point():
     assert doc  # the example circuit was read
     assert np.mean(covered) >= 0.85, np.mean(covered)
     assert np.mean(predicted) >= 0.85, np.mean(predicted)
+
+
+@pytest.mark.slow
+def test_wet_cyclone_circuit_plitt_calibration_and_water_split():
+    """The wet circuit with Plitt-predicted cyclones: its calibration factors F1 (cut size) and
+    F3 (water split) fitted to a survey of the circuit calibrated at F1 = 1.15, F3 = 0.85,
+    starting from the uncalibrated model (1, 1). Noise-free: recovered to 1e-3 (the feed is known
+    only at the sieves). With noise from the error model (one seed): the truth inside the 95 %
+    intervals."""
+    import copy
+    import dataclasses
+
+    base = load(paths.REPO / "flowsheets" / "closed_circuit_wet_cyclones.toml")
+    doc = copy.deepcopy(base.meta["document"])
+    doc["units"]["cyclones"].update(F1=1.0, F3=1.0)
+    start = from_dict(copy.deepcopy(doc))
+    doc["units"]["cyclones"].update(F1=1.15, F3=0.85)
+    sol = solve(from_dict(doc))
+    sieves = grid_sieves(sol.flowsheet.grid, 10, bottom=20e-6)
+    names = ["units.cyclones.F1", "units.cyclones.F3"]
+    bounds = {names[0]: (0.5, 2.0), names[1]: (0.5, 2.0)}
+    truth = {names[0]: 1.15, names[1]: 0.85}
+    water = ErrorModel(solids_rel=0.02, water_rel=0.05, solids_content_sd=0.01, psd_sd=0.01, psd_floor=0.001)
+    for rng, exact in ((_Zero(), True), (np.random.default_rng(5), False)):
+        survey, _ = synthetic_survey(sol, sieves, rng, errors=water, additions=["ball_mill", "sump"])
+        survey = dataclasses.replace(survey, flowsheet=start)  # the fit starts from the uncalibrated model
+        cf = fit_circuit(reconcile(survey), names, bounds, starts=1, leave_one_out=False)
+        d = cf.to_dict()["parameters"]
+        for n in names:
+            if exact:
+                assert d[n]["value"] == pytest.approx(truth[n], rel=1e-3), (n, d[n])
+            else:
+                lo, hi = d[n]["ci95"]
+                assert lo <= truth[n] <= hi, (n, d[n])
+                assert d[n]["se"] < 0.1 * truth[n]  # the survey determines both factors
