@@ -9,19 +9,24 @@ from millflow.cli import main
 from millflow.errors import InputError
 from millflow.sweep import parse_vary, run_sweep
 from millflow.sweep.run import MAX_CASES
-from tests import paths
+import tempfile
+from pathlib import Path
 
-CLOSED = paths.FLOWSHEETS / "closed_circuit_ball_mill.toml"
+from tests import paths
+from tests.closed_circuit import per_time_file
+
+# the closed-circuit example in its per-time form (tau_min fixed), the key these sweeps vary
+CLOSED = per_time_file(Path(tempfile.mkdtemp()))
 OPEN = paths.FLOWSHEETS / "open_circuit_ball_mill.toml"
 
 
 def test_open_circuit_sweep_writes_a_readable_dataset_and_a_full_table(tmp_path, capsys):
     # no recycle stream: the zero-length dimension made sweep.nc unreadable and the CSV empty
     out = tmp_path / "s"
-    assert main(["sweep", str(OPEN), "--vary", "units.ball_mill.tau_min=2:6:3", "--scheduler", "serial",
+    assert main(["sweep", str(OPEN), "--vary", "units.ball_mill.holdup_t=12:24:3", "--scheduler", "serial",
                  "--quiet", "--no-plots", "--out", str(out)]) == 0
     with xr.open_dataset(out / "sweep.nc") as ds:
-        assert ds.sizes["units.ball_mill.tau_min"] == 3
+        assert ds.sizes["units.ball_mill.holdup_t"] == 3
         assert "circulating_load" not in ds and "no_recycle_stream" in ds.attrs
         assert float(ds["p80_um"].min()) > 0
     table = pd.read_csv(out / "sweep.csv")
