@@ -14,7 +14,7 @@ REPO = Path(__file__).resolve().parents[2]
 FILES = sorted([*(f"flowsheets/{p.name}" for p in (REPO / "flowsheets").glob("*.toml")),
                 "docs/examples/tracer_tis.csv", "docs/gallery/inputs/tracer_mill.toml",
                 "examples/scaleup/lab_fit.toml", "examples/scaleup/lab_psd.csv", "examples/scaleup/lab_process.csv",
-                "examples/scaleup/plant.toml"])
+                "examples/scaleup/plant.toml", "examples/survey/survey.toml", "examples/survey/circuit.toml"])
 
 
 def on_files(files, config):

@@ -5,8 +5,8 @@ reconciles it by weighted least squares with the node balances held exactly, and
 prints the adjusted stream flows with their SDs, the chi-square test of the weighted
 sum of squares, the gross-error candidates, the circulating loads and what the survey
 leaves undetermined. Writes results.nc, measurements.csv, streams.csv, passing.csv,
-summary.json and one plot per stream to the output folder (default
-``<file stem>-balance/``), whole or not at all.
+summary.json, report.html, results.xlsx (when openpyxl is installed) and one plot per
+stream to the output folder (default ``<file stem>-balance/``), whole or not at all.
 """
 from __future__ import annotations
 
@@ -24,7 +24,7 @@ def add_parser(subparsers) -> None:
     p.add_argument("file", help="survey file (TOML), e.g. examples/survey/survey.toml")
     add_output_flags(p, out="output folder (default: <file stem>-balance)",
                      json="print one JSON object (the summary) instead of the table",
-                     plots="do not write the PNG plots", quiet="print nothing but errors (and --json output)")
+                     plots="do not write the PNG plots")
     p.add_argument("--no-fit", action="store_true", help="skip the circuit fit of the survey's [fit] table")
     p.set_defaults(func=run)
 
@@ -97,6 +97,18 @@ def format_fit(f: dict) -> str:
     return "\n".join(lines)
 
 
+def write_reports(folder: Path, s: dict, input_path) -> dict:
+    """``report.html`` (always) and ``results.xlsx`` (when openpyxl is installed) of the
+    balance, from its summary (``s``: the summary.json dict); returns name -> path."""
+    from millflow.report.balance import write_balance_report
+    from millflow.report.excel import excel_available, write_balance_workbook
+
+    files = {"report_html": write_balance_report(folder / "report.html", s, input_path=input_path)}
+    if excel_available():
+        files["results_xlsx"] = write_balance_workbook(folder / "results.xlsx", s)
+    return files
+
+
 def run(args) -> int:
     from millflow.commands.output import check_target
     from millflow.survey import read_survey
@@ -138,11 +150,12 @@ def balance_and_fit(args, survey, path: Path, out: Path, fit_spec: dict | None, 
                 f"{Path(survey.source).name} by millflow {command}\n" + to_toml(cf.document()), encoding="utf-8")
             (tmp / "fit.json").write_text(json.dumps(s["fit"], indent=2, default=float), encoding="utf-8")
             files += relocate([tmp / "fitted_circuit.toml", tmp / "fit.json"], tmp, out)
+        files += relocate(write_reports(tmp, s, path).values(), tmp, out)
     s["output_dir"] = str(out)
     s["files_written"] = [Path(f).name for f in files]
     if args.json:
         print(json.dumps(s))
-    elif not args.quiet:
+    else:
         print(format_summary(s))
         if cf is not None:
             print(format_fit(s["fit"]))

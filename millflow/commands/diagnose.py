@@ -5,7 +5,7 @@ aggregation; for continuous data alternative RTDs and classification), ranks the
 AICc and leave-one-condition-out prediction error, reports the drift test and residual
 structure of each and a verdict per parameter of the config's model
 (:mod:`millflow.fitting.diagnose`). Writes table.csv, results.nc and fits.png into the
-output folder (default ``diagnose-results/`` beside the config).
+output folder (default ``<config stem>-diagnose/`` in the current folder).
 """
 from __future__ import annotations
 
@@ -20,7 +20,7 @@ def add_parser(subparsers) -> None:
     p = subparsers.add_parser("diagnose", help="rank candidate kinetics (linear, slowing-down, cushioning, "
                               "aggregation, RTDs) on a fit config's data", description=__doc__.splitlines()[0])
     p.add_argument("config", help="TOML fit configuration (see docs/fitting.md)")
-    add_output_flags(p, out="output folder (default diagnose-results/ beside the config)",
+    add_output_flags(p, out="output folder (default <config stem>-diagnose in the current folder)",
                      json="print one JSON object instead of the table", plots="do not write the plot",
                      quiet="no progress messages")
     p.add_argument("--no-loco", action="store_true", help="skip the leave-one-condition-out refits")
@@ -83,7 +83,7 @@ def run(args) -> int:
 
     say = (lambda msg: None) if args.quiet else (lambda msg: print(f"[diagnose] {msg}", file=sys.stderr, flush=True))
     cfg = load_config(args.config)
-    out = Path(args.out) if args.out else Path(args.config).resolve().parent / "diagnose-results"
+    out = Path(args.out) if args.out else Path.cwd() / f"{Path(args.config).stem}-diagnose"
     check_target(out, overwrite=args.overwrite, input_path=args.config)  # before the fits, not after
     diag = diagnose(cfg, progress=say, quiet=args.quiet, loco=not args.no_loco)
     summary = diag.to_dict()
@@ -99,6 +99,5 @@ def run(args) -> int:
         print(json.dumps({**summary, "out": str(out), "files": files}))
     else:
         print(diag.text())
-        if not args.quiet:
-            print(f"files: {', '.join(files)} in {out}")
+        print(f"files: {', '.join(files)} in {out}")  # --quiet hides progress only
     return 0

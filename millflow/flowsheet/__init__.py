@@ -8,6 +8,8 @@ linear system when every unit is linear, tear iterations only for nonlinear unit
 :func:`to_dataset` / :func:`save` turn the solution into an xarray Dataset (dimensions
 ``stream`` and ``size``), tables, ``summary.json`` and plots.
 
+Examples
+--------
 A file is read with ``load("flowsheets/closed_circuit_ball_mill.toml")``; the same text
 can be given as a string (an open circuit: a feed, a mill of three tanks in series, a
 product).

@@ -22,7 +22,7 @@ from pathlib import Path
 
 from millflow.errors import InputError
 
-__all__ = ["excel_available", "write_workbook", "class_flows_tph"]
+__all__ = ["excel_available", "write_workbook", "write_balance_workbook", "class_flows_tph"]
 
 
 def excel_available() -> bool:
@@ -105,6 +105,84 @@ def write_workbook(path, summary: dict, class_tph: dict | None = None) -> Path:
                      ("water balance error", summary.get("water_balance_error")),
                      ("conventions", "class 1 coarsest, the last class the sink; size = upper class edge; "
                                      "t/h = metric tonnes per hour")):
+        ws.append([key, val])
+    _style(ws, bold, {})
+    path = Path(path)
+    wb.save(path)
+    return path
+
+
+def write_balance_workbook(path, summary: dict) -> Path:
+    """The workbook of a reconciled survey (``millflow balance``), from its summary.json dict.
+
+    Sheets: ``Streams`` (per stream: solids, water and % solids measured, adjusted and SD,
+    P80 and P50 of the adjusted analysis), ``Size tph`` (adjusted solids t/h per sieve class
+    and stream, a total row equal to the stream's adjusted solids), ``Size % passing``
+    (adjusted cumulative passing at each sieve), ``Measurements`` (every measured value:
+    measured, SD, adjusted, its SD, the adjustment in SDs, the normalised adjustment) and
+    ``About`` (input, SHA-256, version, chi-square test, circulating loads).
+    """
+    try:
+        from openpyxl import Workbook
+        from openpyxl.styles import Font
+    except ImportError:
+        raise InputError("results.xlsx needs openpyxl: pip install 'millflow[report]'") from None
+    wb = Workbook()
+    bold = Font(bold=True)
+    streams = summary["streams"]
+    names = list(streams)
+    wet = any("water_tph" in s for s in streams.values())
+
+    ws = wb.active
+    ws.title = "Streams"
+    cols = [("solids measured t/h", "solids_measured_tph"), ("solids adjusted t/h", "solids_tph"),
+            ("solids SD t/h", "solids_sd_tph")]
+    if wet:
+        cols += [("water measured t/h", "water_measured_tph"), ("water adjusted t/h", "water_tph"),
+                 ("water SD t/h", "water_sd_tph"), ("% solids measured", "solids_content_measured_pct"),
+                 ("% solids adjusted", "solids_content_pct")]
+    cols += [("P80 adjusted um", "p80_um"), ("P50 adjusted um", "p50_um")]
+    head = ["stream", "from", "to"] + [c[0] for c in cols]
+    ws.append(head)
+    for n, s in streams.items():
+        ws.append([n, s.get("from"), s.get("to")] + [_num(s.get(k)) for _, k in cols])
+    _style(ws, bold, {h: ("0" if h.endswith(" um") else "0.00") for h in head[3:]})
+
+    ws = wb.create_sheet("Size tph")
+    ws.append(["size class"] + names)
+    for k, lab in enumerate(summary.get("classes") or []):
+        ws.append([lab] + [_num((streams[n].get("class_tph") or [None] * (k + 1))[k]) for n in names])
+    ws.append(["total"] + [_num(streams[n].get("solids_tph")) for n in names])
+    _style(ws, bold, {n: "0.000" for n in names})
+
+    ws = wb.create_sheet("Size % passing")
+    ws.append(["sieve um"] + names)
+    for k, x in enumerate(summary.get("sieves_um") or []):
+        ws.append([x] + [_num(streams[n]["passing_adjusted_pct"][k]) for n in names])
+    _style(ws, bold, {n: "0.00" for n in names})
+
+    ws = wb.create_sheet("Measurements")
+    mcols = ["key", "class", "unit", "measured", "sd", "adjusted", "adjusted_sd", "adjustment_in_sd",
+             "normalised_adjustment", "redundant"]
+    ws.append(mcols)
+    for m in summary.get("measurements") or []:
+        ws.append([m.get(c) if c in ("key", "class", "unit", "redundant") else _num(m.get(c)) for c in mcols])
+    _style(ws, bold, {c: "0.000" for c in mcols[3:9]})
+
+    ws = wb.create_sheet("About")
+    chi = summary.get("chi_square") or {}
+    rows = [("title", summary.get("title")), ("input file", summary.get("source_file")),
+            ("input SHA-256", summary.get("input_sha256")), ("millflow version", summary.get("millflow_version")),
+            ("chi-square SSR", _num(chi.get("ssr"))), ("degrees of freedom", _num(chi.get("dof"))),
+            ("chi-square 95 % point", _num(chi.get("critical_95"))), ("p-value", _num(chi.get("p_value"))),
+            ("verdict", summary.get("chi_square_verdict")),
+            ("gross-error candidates", ", ".join(c["measurement"] for c in summary.get("gross_error_candidates")
+                                                 or []) or "none")]
+    for n, c in (summary.get("circulating_load") or {}).items():
+        rows += [(f"circulating load {n} %", _num(c.get("value_pct"))), (f"circulating load {n} SD %",
+                                                                          _num(c.get("sd_pct")))]
+    rows.append(("conventions", "adjusted = reconciled values; t/h = metric tonnes per hour; sizes in um"))
+    for key, val in rows:
         ws.append([key, val])
     _style(ws, bold, {})
     path = Path(path)

@@ -181,7 +181,7 @@ def summary(bal) -> dict:
     chi = dict(bal.chi_square)
     cl = {n: {"value_pct": 100 * v, "sd_pct": 100 * s, "observable": ok}
           for n, (v, s, ok) in bal.circulating_loads().items()}
-    return _clean({
+    d = {
         "title": bal.survey.title, "source_file": bal.survey.source,
         "method": ("weighted least squares; node balances (solids per size class, total solids across mills, "
                    "water) held exactly by null-space elimination; bilinear flow x fraction terms by "
@@ -206,7 +206,71 @@ def summary(bal) -> dict:
         "exact": [k for k, _ in bal.structure.exact],
         "balance_error": bal.balance_error,
         "iterations": bal.nfev, "runtime_s": bal.runtime_s,
-    })
+    }
+    extra = _report_fields(bal)
+    for n, v in extra.pop("stream_topology").items():
+        d["streams"][n].update(v)
+    d.update(extra)
+    return _clean(d)
+
+
+def _p80_p50(sieves, passing) -> tuple[float, float]:
+    """P80 and P50 [m] read from cumulative passing at the sieves (coarse -> fine), linear
+    in log size between the two sieves that bracket it; NaN where the percentile lies above
+    the top sieve or below the finest, or the analysis is unobservable."""
+    x = np.asarray(sieves, float)
+    P = np.asarray(passing, float)
+    out = []
+    for q in (0.8, 0.5):
+        val = math.nan
+        if np.isfinite(P).all():
+            for k in range(P.size - 1):
+                if P[k] >= q > P[k + 1]:
+                    f = (P[k] - q) / (P[k] - P[k + 1])
+                    val = math.exp(math.log(x[k]) + f * (math.log(x[k + 1]) - math.log(x[k])))
+                    break
+        out.append(val)
+    return out[0], out[1]
+
+
+def _report_fields(bal) -> dict:
+    """What ``report.html`` and ``results.xlsx`` show beyond the balance itself: the
+    drawing's topology (``units``, each stream's ``from``/``to``), each stream's adjusted
+    passing at the sieves with SDs and its measured passing, P80/P50 of the adjusted
+    analysis, solids t/h per size class (``class_tph``, classes as in ``classes``), every
+    measurement with its adjustment (``measurements``), the input's SHA-256 and the version."""
+    import hashlib
+
+    from millflow import __version__
+
+    st = bal.structure
+    fs = bal.survey.flowsheet
+    meas, adj, sd = _passing(bal)
+    n_cls = st.sieves.size + 1
+    um = [x * 1e6 for x in st.sieves]
+    classes = [f"+{um[0]:.6g} um"] + [f"-{um[k - 1]:.6g} +{um[k]:.6g} um" for k in range(1, st.sieves.size)] \
+        + [f"-{um[-1]:.6g} um"]
+    streams = {}
+    for i, n in enumerate(st.streams):
+        s = fs.streams[n]
+        p80, p50 = _p80_p50(st.sieves, adj[i])
+        m = np.zeros(n_cls)
+        m[st.live] = bal.z[st.m_index(i)]
+        Mok = bal.solids(n)[2]
+        streams[n] = {"from": f"{s.source}.{s.port}", "to": s.target, "p80_um": p80 * 1e6, "p50_um": p50 * 1e6,
+                      "passing_adjusted_pct": list(100 * adj[i]), "passing_sd_pct": list(100 * sd[i]),
+                      "passing_measured_pct": list(100 * meas[i]),
+                      "class_tph": list(m * TPH) if Mok else [math.nan] * n_cls}
+    sha = None
+    try:
+        sha = hashlib.sha256(Path(bal.survey.source).read_bytes()).hexdigest()
+    except (OSError, TypeError, ValueError):
+        pass
+    cols = ["key", "quantity", "class", "unit", "measured", "sd", "adjusted", "adjusted_sd", "adjustment",
+            "adjustment_in_sd", "normalised_adjustment", "redundant"]
+    recs = measurement_table(bal)[cols].to_dict(orient="records")
+    return {"units": {u: {"type": fs.units[u].type} for u in fs.units}, "stream_topology": streams,
+            "classes": classes, "measurements": recs, "input_sha256": sha, "millflow_version": __version__}
 
 
 def save(bal, out_dir, *, plots: bool = True) -> dict:

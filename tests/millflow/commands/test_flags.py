@@ -24,7 +24,8 @@ def _options(name):
     return {o: a for a in sub.choices[name]._actions for o in a.option_strings}
 
 
-@pytest.mark.parametrize("name", ["run", "fit", "fit-rtd", "scaleup", "sweep", "compare", "falsify"])
+@pytest.mark.parametrize("name", ["run", "fit", "fit-rtd", "scaleup", "sweep", "compare", "falsify", "balance",
+                                  "diagnose"])
 def test_quiet_has_one_meaning(name):
     opts = _options(name)
     assert "--quiet" in opts
@@ -70,6 +71,28 @@ def test_default_output_folders_are_in_the_current_folder(tmp_path, capsys, monk
     assert "circulating load (recycle / new feed): A none (no recycle); B " in out and "{" not in out
     assert main(["fit-rtd", str(TRACER), "--quiet"]) == 0
     assert (tmp_path / "tracer_tis-rtd" / "fit.json").is_file()
+    assert main(["balance", str(paths.EXAMPLES / "survey" / "survey.toml"), "--no-fit", "--no-plots",
+                 "--quiet"]) == 0
+    assert (tmp_path / "survey-balance" / "report.html").is_file()
+
+
+def test_diagnose_default_output_folder_is_in_the_current_folder(tmp_path, monkeypatch):
+    """Where diagnose would write (checked before its fits, which are long): <config stem>-diagnose here."""
+    import millflow.commands.output as output
+
+    seen = []
+
+    def stop(out, **kw):
+        seen.append(out)
+        raise KeyboardInterrupt
+
+    monkeypatch.chdir(tmp_path)
+    monkeypatch.setattr(output, "check_target", stop)
+    with pytest.raises(KeyboardInterrupt):
+        from millflow.commands.diagnose import run
+
+        run(build_parser().parse_args(["diagnose", str(paths.EXAMPLES / "scaleup" / "lab_fit.toml")]))
+    assert seen == [tmp_path / "lab_fit-diagnose"]
 
 
 def test_fit_rtd_moments_match_levenspiel(tmp_path, capsys):

@@ -59,7 +59,7 @@ def test_compare_report_shows_compare_json(tmp_path, capsys):
 def test_sweep_report_shows_every_case(tmp_path, capsys):
     out = tmp_path / "sw"
     assert main(["sweep", str(paths.FLOWSHEETS / "closed_circuit_ball_mill.toml"), "--vary",
-                 "units.ball_mill.holdup_t=20:60:3", "--scheduler", "serial", "--no-plots", "--quiet", "--json",
+                 "units.ball_mill.power_kW=3000:4600:3", "--scheduler", "serial", "--no-plots", "--quiet", "--json",
                  "--out", str(out)]) == 0
     import pandas as pd
 
@@ -68,7 +68,7 @@ def test_sweep_report_shows_every_case(tmp_path, capsys):
     blob = json.loads(text.split('<script type="application/json" id="summary">')[1].split("</script>")[0])
     assert len(blob["cases"]) == len(cases) == 3
     n = check_numbers(text, blob)
-    assert n >= 3 * 4  # tau, P80, P50, circulating load ... of each case
+    assert n >= 3 * 4  # power, P80, P50, circulating load ... of each case
     j = blob["columns"].index("p80_um")
     for k in range(3):  # the page's cases are the CSV's (6 digits there)
         assert blob["cases"][k][j] == pytest.approx(cases["p80_um"][k], rel=1e-5)
