@@ -204,19 +204,27 @@ class CompiledKinetics:
         M[:, 0] += res.overflow_mass
         return M
 
-    def solve_steady(self, S, b, feed, tau, p, k, *, n_tanks: int = 1, transport: str = "well_mixed", pe=None):
-        """(N,) product of member k per unit feed (overflow in class 1); NaN on failure."""
+    def solve_steady(self, S, b, feed, tau, p, k, *, n_tanks: int = 1, transport: str = "well_mixed", pe=None,
+                     d=None, where: str = "discharge", network=None):
+        """(N,) product of member k per unit feed (overflow in class 1); NaN on failure.
+        ``d`` (N,) normalised discharge placed by ``where`` (well-mixed cells only);
+        ``network`` an rtd model of cells (recirculating cells): Newton on all cells."""
         from millflow.mill import nonlinear as nl
         kin = self._kin(S, b, p, k)
+        if d is not None and transport != "well_mixed":
+            raise InputError(f"classification with transport {transport!r}: non-linear kinetics take "
+                             "classification in well-mixed cells only")
         try:
-            if transport == "plug_flow":
+            if network is not None:
+                r = nl.cells(kin, feed, network, d, where)
+            elif transport == "plug_flow":
                 r = nl.plug_flow(kin, feed, tau, rtol=ODE_RTOL, atol=ODE_ATOL)
             elif transport == "axial_dispersion":
                 r = nl.axial_dispersion(kin, feed, tau, pe)
             elif n_tanks == 1:
-                r = nl.well_mixed(kin, feed, tau)
+                r = nl.well_mixed(kin, feed, tau, d)
             else:
-                r = nl.tanks_in_series(kin, feed, tau, n_tanks)
+                r = nl.tanks_in_series(kin, feed, tau, n_tanks, d, where)
         except MillflowError:
             return np.full(S.size, np.nan)
         out = r.product.copy()

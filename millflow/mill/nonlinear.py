@@ -197,14 +197,17 @@ def _newton_cell(kin: Kinetics, y_in, tau, y0, *, tol, max_iter, unit,
 
 
 def _discharge(kin: Kinetics, d):
-    """(N + 1,) normalised discharge d* of the state (the aggregation overflow, coarser
-    than class 1, leaves as class 1 does), or None for no classification."""
+    """(N + 1,) normalised discharge d* of the state, or None for no classification. The
+    aggregation overflow (mass above the top class) leaves unclassified (d* = 1): the
+    kinetics do not break it, so a grate holding it back (d* -> 0) would accumulate it
+    without bound and leave no steady state; it is a grid artefact (``overflow_mass``,
+    kept small by a grid top above the aggregates), not a class the mill can retain."""
     if d is None:
         return None
     d = checks.class_vector(d, kin.n, "d", "normalised discharge rate")
     if not np.all(d > 0):
         raise InputError("d: expected normalised discharge rates d_i* > 0 (d* = tau d_i)")
-    return np.append(d, d[0])
+    return np.append(d, 1.0)
 
 
 def well_mixed(kin: Kinetics, feed, tau: float, d=None, *, tol: float = NEWTON_RTOL, max_iter: int = 60,
@@ -374,6 +377,12 @@ def cells(kin: Kinetics, feed, transport, d=None, where="discharge", *, tol: flo
             flux = 0.0
         return float(max(feed_size, float((Tabs @ np.abs(c)).max()), flux, np.finfo(float).tiny))
 
+    def factor(A):
+        try:
+            return scipy.sparse.linalg.splu(A.tocsc())
+        except RuntimeError as exc:  # "Factor is exactly singular"
+            raise SolverError(f"recirculating cells: the Newton matrix is singular ({exc}; {kin.describe()})") from exc
+
     from millflow.mill.cells import solve_cells
     lin = solve_cells(kin.S, kin.b, feed, net, None if dx is None else dx[:-1],
                       "discharge" if where is None else where)
@@ -391,7 +400,7 @@ def cells(kin: Kinetics, feed, transport, d=None, where="discharge", *, tol: flo
             its += 1
             J = jac(c)
             if phase == "newton":
-                dc = scipy.sparse.linalg.splu(J).solve(-f)
+                dc = factor(J).solve(-f)
                 lam, ft = 1.0, None
                 while lam >= 1.0 / 256:
                     trial = safe_F(c + lam * dc)
@@ -404,7 +413,7 @@ def cells(kin: Kinetics, feed, transport, d=None, where="discharge", *, tol: flo
                     break
                 c, f, res = c + lam * dc, ft, float(np.abs(ft).max())
             else:
-                dc = scipy.sparse.linalg.splu((mass / dt - J).tocsc()).solve(f)
+                dc = factor(mass / dt - J).solve(f)
                 ft = safe_F(c + dc)
                 if ft is None or not np.isfinite(ft).all():
                     dt *= 0.25
@@ -422,7 +431,7 @@ def cells(kin: Kinetics, feed, transport, d=None, where="discharge", *, tol: flo
         return beta * np.append(feed, 0.0) + (H * o[None, :] * C.T).sum(axis=1)
 
     # one polishing step: kept if it lowers max|F|; the product's change is the error estimate
-    dc = scipy.sparse.linalg.splu(jac(c)).solve(-f)
+    dc = factor(jac(c)).solve(-f)
     err = float(np.abs(product(c + dc) - product(c)).max())
     ft = safe_F(c + dc)
     if ft is not None and np.isfinite(ft).all() and float(np.abs(ft).max()) < res:
