@@ -413,10 +413,12 @@ class ForwardModel:
             if any(f != "slowing_down" for f in spec.kinetics):
                 self.fd_noise = ODE_RTOL
             if spec.mode == "mill":
-                bad = sorted({g[1] for g in self.groups if g[1] != "product"})
+                cells_ok = spec.transport in _NONLINEAR_CLASSIFIED
+                bad = sorted({g[1] for g in self.groups if g[1] != "product" and not (
+                    cells_ok and (g[1] == "holdup" or g[1].startswith("cell:")))})
                 if bad:
                     raise InputError(f"{data.source}: locations {bad}: a mill with non-linear kinetics is fitted to "
-                                     "product samples only")
+                                     "product samples, and with well-mixed cells to holdup and cell:K samples")
 
     # ----------------------------------------------------------------- compilation
     def _build_tracer(self):
@@ -852,6 +854,9 @@ class ForwardModel:
                     tc = float(tau[c])
                 if d_all is not None:
                     kw["d"], kw["where"] = d_all[k, c], where
+                locs = [self.groups[g][1] for g in gsel]
+                if mode == "mill" and any(loc != "product" for loc in locs):
+                    kw["locations"] = locs  # hold-up and cell samples of well-mixed cells
                 out[k, gsel] = nl.solve_steady(S[k, c], bk, self._feeds[c], tc, p, k, **kw)
 
     def _chain_cells(self):

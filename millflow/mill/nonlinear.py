@@ -227,14 +227,16 @@ def well_mixed(kin: Kinetics, feed, tau: float, d=None, *, tol: float = NEWTON_R
     if kin.is_linear:
         return NonlinearSteady(lin, 0.0, "exact linear (eq. 3)", 0.0, float(np.finfo(float).eps * feed.sum() * kin.n),
                                float(abs(lin.sum() - feed.sum())), 0, time.perf_counter() - start,
-                               {"kinetics": "linear", "holdup": tau * (lin if dx is None else lin / dx[:-1])})
+                               {"kinetics": "linear", "holdup": tau * (lin if dx is None else lin / dx[:-1]),
+                                "holdup_overflow": 0.0})
     y_in = np.append(feed, 0.0)
     guess = np.append(np.maximum(lin if dx is None else lin / dx[:-1], 0.0), 0.0)
     y, res, step, its, how = _newton_cell(kin, y_in, tau, guess, tol=tol, max_iter=max_iter, unit=unit, d=dx)
     p = y if dx is None else dx * y
     err = step * (1.0 if dx is None else float(dx.max()))
     return NonlinearSteady(p[:-1], float(p[-1]), how, res, err, float(abs(p.sum() - feed.sum())), its,
-                           time.perf_counter() - start, {"kinetics": kin.describe(), "holdup": tau * y[:-1]})
+                           time.perf_counter() - start, {"kinetics": kin.describe(), "holdup": tau * y[:-1],
+                                                         "holdup_overflow": float(tau * y[-1])})
 
 
 def tanks_in_series(kin: Kinetics, feed, tau: float, n: int, d=None, where="discharge", *,
@@ -252,12 +254,15 @@ def tanks_in_series(kin: Kinetics, feed, tau: float, n: int, d=None, where="disc
     mask = _classified(n, where)
     start = time.perf_counter()
     if kin.is_linear:
-        p = feed
+        p, held = feed, []
         for k in range(n):
-            p = solve_well_mixed(kin.S, kin.b, p, tau / n, dx[:-1] if dx is not None and mask[k] else None)
+            dk = dx[:-1] if dx is not None and mask[k] else None
+            p = solve_well_mixed(kin.S, kin.b, p, tau / n, dk)
+            held.append(tau / n * (p if dk is None else p / dk))
         return NonlinearSteady(p, 0.0, "exact linear (cells)", 0.0, float(np.finfo(float).eps * kin.n * n),
                                float(abs(p.sum() - feed.sum())), 0, time.perf_counter() - start,
-                               {"kinetics": "linear"})
+                               {"kinetics": "linear", "cells": np.array(held), "cells_overflow": np.zeros(n),
+                                "holdup": np.sum(held, axis=0)})
     y = np.append(feed, 0.0)
     its, res, step, cells = 0, 0.0, 0.0, []
     for k in range(n):
@@ -270,10 +275,12 @@ def tanks_in_series(kin: Kinetics, feed, tau: float, n: int, d=None, where="disc
         its += i
         # the step in cell k's content, carried to the product by the cells downstream (contractive)
         res, step = max(res, r), max(step, s * (1.0 if dk is None else float(dk.max())))
-        cells.append(tau / n * c[:-1])
+        cells.append(tau / n * c)
+    cells = np.array(cells)  # (n, N + 1): hold-up per unit feed rate [s], the overflow last
     return NonlinearSteady(y[:-1], float(y[-1]), f"cells ({how})", res, step, float(abs(y.sum() - feed.sum())), its,
-                           time.perf_counter() - start, {"kinetics": kin.describe(), "cells": np.array(cells),
-                                                         "holdup": np.sum(cells, axis=0)})
+                           time.perf_counter() - start, {"kinetics": kin.describe(), "cells": cells[:, :-1],
+                                                         "cells_overflow": cells[:, -1],
+                                                         "holdup": cells[:, :-1].sum(axis=0)})
 
 
 def _classified(n: int, where) -> np.ndarray:
@@ -337,7 +344,7 @@ def cells(kin: Kinetics, feed, transport, d=None, where="discharge", *, tol: flo
                           "discharge" if where is None else where)
         return NonlinearSteady(sol.product, 0.0, "exact linear (cells)", 0.0, float(np.finfo(float).eps * kin.n * n),
                                float(abs(sol.product.sum() - feed.sum())), 0, time.perf_counter() - start,
-                               {"kinetics": "linear", "cell_holdup": sol.holdup})
+                               {"kinetics": "linear", "cell_holdup": sol.holdup, "cell_overflow": np.zeros(n)})
     # constant transport operator on the stacked state c (n cells x n1 components)
     rows, cols, vals = [], [], []
     idx = np.arange(n1)
@@ -439,7 +446,8 @@ def cells(kin: Kinetics, feed, transport, d=None, where="discharge", *, tol: flo
     p = product(c)
     return NonlinearSteady(p[:-1], float(p[-1]), "cells, Newton on all cells (" + (" + ".join(ran) or "start") + ")",
                            res, err, float(abs(p.sum() - feed.sum())), its, time.perf_counter() - start,
-                           {"kinetics": kin.describe(), "cell_holdup": V[:, None] * c.reshape(n, n1)[:, :-1]})
+                           {"kinetics": kin.describe(), "cell_holdup": V[:, None] * c.reshape(n, n1)[:, :-1],
+                            "cell_overflow": V * c.reshape(n, n1)[:, -1]})
 
 
 def plug_flow(kin: Kinetics, feed, tau: float, *, rtol: float = 1e-8, atol: float = 1e-12) -> NonlinearSteady:

@@ -118,3 +118,34 @@ plots = false
         lo, hi = par[name]["ci95"]
         assert lo <= v <= hi, (name, lo, v, hi)
     assert par["beta0"]["se"] < 0.002  # aggregation is determined (t ~ 20), not only bounded
+
+
+@pytest.mark.parametrize("transport, tp", [("recirculating_cells", {"n": N_CELLS, "r": R}),
+                                           ("tanks_in_series", {"n": 3}), ("perfect_mixing", {})])
+def test_holdup_and_cell_samples_at_zero_strength_equal_the_linear_model(transport, tp):
+    """Hold-up and cell samples of a classified non-linear mill (beta0 = 0 through the
+    non-linear code) against the linear forward model's own solves (another code path)."""
+    import pandas as pd
+
+    from millflow.fitting.data import psd_data_from_frames
+
+    design = continuous_design(TAUS, extra_process={"screen_mm": SCREENS})
+    base = design.data()
+    locs = ["product", "holdup"] + (["cell:2"] if transport != "perfect_mixing" else [])
+    t = base.table
+    feed = t[t.location == "feed"]
+    samples = [t[(t.location != "feed")].assign(location=loc) for loc in locs]
+    data = psd_data_from_frames(pd.concat([feed, *samples], ignore_index=True),
+                                base.process.reset_index(), strict=False)
+    common = dict(mode="mill", transport=transport, transport_params=tp, tau_column="tau_s",
+                  classification="screen", screen_column="screen_mm")
+    lin = ForwardModel(ModelSpec(**common), data, design.grid)
+    nlm = ForwardModel(ModelSpec(**common, kinetics=("aggregation",)), data, design.grid)
+    th = {**TRUTH, "beta0": 0.0}
+    ref = lin.predict_grid(np.array([[th[n] for n in lin.param_names]]))[0]
+    got = nlm.predict_grid(np.array([[th[n] for n in nlm.param_names]]))[0]
+    assert {g[1] for g in nlm.groups} == set(locs)
+    assert np.abs(got - ref).max() < 1e-11
+    # at beta0 = 0.01 the hold-up samples move (aggregation seen inside the mill)
+    th1 = np.array([[TRUTH[n] for n in nlm.param_names]])
+    assert np.abs(nlm.predict_grid(th1)[0] - got).max() > 1e-3
