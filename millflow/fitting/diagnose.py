@@ -51,11 +51,11 @@ def candidate_specs(spec: ModelSpec, data) -> dict:
     cls_ok = spec.classification is None
     if batch:
         out["slowing_down"] = replace(base, kinetics=("slowing_down",))
-    if cls_ok and (batch or spec.mode in ("well_mixed", "plug_flow") or spec.mode == "mill"):
-        try:
+    if batch or spec.mode in ("well_mixed", "plug_flow", "mill"):
+        try:  # with the user's classification where the non-linear solves take it (well-mixed cells)
             out["cushioning"] = replace(base, kinetics=("population",))
             out["aggregation"] = replace(base, kinetics=("aggregation",))
-        except InputError:  # a transport the non-linear solves do not cover
+        except InputError:  # a transport or classification the non-linear solves do not cover
             out.pop("cushioning", None)
     if spec.mode == "well_mixed":
         for n in (2, 3):
@@ -203,9 +203,10 @@ def diagnose(cfg, *, progress=None, quiet: bool = False, loco: bool = True) -> D
         specs[user_label] = user_spec
     grid = cfg.model().grid
     fits, rows, notes = {}, [], []
-    if user_spec.classification is not None:
-        notes.append(f"non-linear candidates (cushioning, aggregation) are fitted without classification only; "
-                     f"the model's classification ({user_spec.classification}) keeps them out of the set")
+    if user_spec.classification is not None and "aggregation" not in specs:
+        notes.append(f"non-linear candidates (cushioning, aggregation) take classification in well-mixed cells "
+                     f"only; the model's classification ({user_spec.classification}, transport "
+                     f"{user_spec.transport or user_spec.mode}) keeps them out of the set")
     linear_theta = None
     order = ["linear"] + [k for k in specs if k != "linear"]
     for label in order:

@@ -204,24 +204,51 @@ class CompiledKinetics:
         M[:, 0] += res.overflow_mass
         return M
 
-    def solve_steady(self, S, b, feed, tau, p, k, *, n_tanks: int = 1, transport: str = "well_mixed", pe=None):
-        """(N,) product of member k per unit feed (overflow in class 1); NaN on failure."""
+    def solve_steady(self, S, b, feed, tau, p, k, *, n_tanks: int = 1, transport: str = "well_mixed", pe=None,
+                     d=None, where: str = "discharge", network=None, locations=None):
+        """(N,) product of member k per unit feed (overflow in class 1); NaN on failure.
+        ``d`` (N,) normalised discharge placed by ``where`` (well-mixed cells only);
+        ``network`` an rtd model of cells (recirculating cells): Newton on all cells.
+        ``locations`` (well-mixed cells): a list of "product", "holdup", "cell:K" gives
+        (L, N) mass fractions of those samples (hold-up with its overflow in class 1)."""
         from millflow.mill import nonlinear as nl
         kin = self._kin(S, b, p, k)
+        if d is not None and transport != "well_mixed":
+            raise InputError(f"classification with transport {transport!r}: non-linear kinetics take "
+                             "classification in well-mixed cells only")
         try:
-            if transport == "plug_flow":
+            if network is not None:
+                r = nl.cells(kin, feed, network, d, where)
+            elif transport == "plug_flow":
                 r = nl.plug_flow(kin, feed, tau, rtol=ODE_RTOL, atol=ODE_ATOL)
             elif transport == "axial_dispersion":
                 r = nl.axial_dispersion(kin, feed, tau, pe)
             elif n_tanks == 1:
-                r = nl.well_mixed(kin, feed, tau)
+                r = nl.well_mixed(kin, feed, tau, d)
             else:
-                r = nl.tanks_in_series(kin, feed, tau, n_tanks)
+                r = nl.tanks_in_series(kin, feed, tau, n_tanks, d, where)
         except MillflowError:
-            return np.full(S.size, np.nan)
+            return np.full(S.size if locations is None else (len(locations), S.size), np.nan)
         out = r.product.copy()
         out[0] += r.overflow_mass
-        return out
+        if locations is None:
+            return out
+        info = r.info
+        if network is not None:
+            cells, over = info["cell_holdup"], info["cell_overflow"]
+        elif n_tanks == 1:
+            cells, over = info["holdup"][None], np.array([info["holdup_overflow"]])
+        else:
+            cells, over = info["cells"], info["cells_overflow"]
+        rows = []
+        for loc in locations:
+            if loc == "product":
+                rows.append(out)
+                continue
+            m = (cells.sum(axis=0) if loc == "holdup" else cells[int(loc[5:]) - 1]).copy()
+            m[0] += over.sum() if loc == "holdup" else over[int(loc[5:]) - 1]
+            rows.append(m / m.sum())
+        return np.array(rows)
 
 
 class StackedKinetics:

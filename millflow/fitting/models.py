@@ -129,7 +129,9 @@ _DEFAULTS = {  # value, min, max
     "s_slow": (0.0, 0.0, 10.0), "lam_pop": (0.0, -5.0, 5.0), "beta0": (0.0, 0.0, 0.1),
 }
 #: Transports of mode "mill" with a non-linear steady solve (millflow.mill.nonlinear).
-_NONLINEAR_TRANSPORTS = ("perfect_mixing", "tanks_in_series", "plug_flow", "axial_dispersion")
+_NONLINEAR_TRANSPORTS = ("perfect_mixing", "tanks_in_series", "recirculating_cells", "plug_flow", "axial_dispersion")
+#: Transports of mode "mill" where non-linear kinetics take classification (well-mixed cells).
+_NONLINEAR_CLASSIFIED = ("perfect_mixing", "tanks_in_series", "recirculating_cells")
 
 
 @dataclass(frozen=True)
@@ -218,9 +220,17 @@ class ModelSpec:
         if forms and self.mode == "mill" and self.transport not in _NONLINEAR_TRANSPORTS:
             raise InputError(f"model.kinetics with transport {self.transport!r}: non-linear kinetics are fitted with "
                              f"transports {list(_NONLINEAR_TRANSPORTS)}")
-        if forms and self.classification is not None:
-            raise InputError(f"model.kinetics with classification {self.classification!r}: non-linear kinetics are "
-                             "fitted without classification (d* = 1)")
+        if forms and self.classification is not None and self.mode == "mill" and (
+                self.transport not in _NONLINEAR_CLASSIFIED or self.where not in (None, "discharge", "cells")):
+            raise InputError(f"model.kinetics with classification {self.classification!r}, transport "
+                             f"{self.transport!r}, where {self.where!r}: non-linear kinetics take classification "
+                             f"at the discharge or at every cell outlet of transports {list(_NONLINEAR_CLASSIFIED)} "
+                             "(not along the axis of plug flow or axial dispersion)")
+        if forms and self.mode == "mill" and self.transport == "tanks_in_series":
+            n = dict(self.transport_params).get("n")
+            if n is not None and float(n) != int(n):
+                raise InputError(f"model.transport_params.n = {n!r}: a mill with non-linear kinetics solves "
+                                 "tanks in series cell by cell; expected an integer number of tanks")
         if self.breakage == "fixed" and self.b_matrix is None:
             raise InputError("model.breakage = 'fixed' needs b_matrix (the fractional b on the numerical grid)")
         object.__setattr__(self, "rate_process", tuple(self.rate_process))
@@ -403,10 +413,12 @@ class ForwardModel:
             if any(f != "slowing_down" for f in spec.kinetics):
                 self.fd_noise = ODE_RTOL
             if spec.mode == "mill":
-                bad = sorted({g[1] for g in self.groups if g[1] != "product"})
+                cells_ok = spec.transport in _NONLINEAR_CLASSIFIED
+                bad = sorted({g[1] for g in self.groups if g[1] != "product" and not (
+                    cells_ok and (g[1] == "holdup" or g[1].startswith("cell:")))})
                 if bad:
                     raise InputError(f"{data.source}: locations {bad}: a mill with non-linear kinetics is fitted to "
-                                     "product samples only")
+                                     "product samples, and with well-mixed cells to holdup and cell:K samples")
 
     # ----------------------------------------------------------------- compilation
     def _build_tracer(self):
@@ -803,6 +815,12 @@ class ForwardModel:
         if mode == "mill":
             tau_pc, extra = self.transport_values(p)
         tp = dict(spec.transport_params)
+        n_pop = S.shape[0]
+        # classification: at the discharge (mode "mill": the last cell's or the network's
+        # exit flows; where = "cells": every cell outlet), or in every tank (mode
+        # "well_mixed", as the linear forward model places it)
+        d_all = self.discharge(p, n_pop) if (spec.classification and mode != "batch") else None
+        where = (spec.where or "discharge") if mode == "mill" else "cells"
         for c in range(len(self.conditions)):
             gsel = [g for g, grp in enumerate(self.groups) if grp[0] == c]
             if mode == "batch":  # the whole population in one stacked solve
@@ -824,10 +842,21 @@ class ForwardModel:
                     if tr == "axial_dispersion":
                         kw["pe"] = float(np.exp(p["ln_pe"][k])) if "ln_pe" in p else float(tp["pe"])
                     tc = float(tau_pc[k, c])
+                    if tr == "recirculating_cells":
+                        try:
+                            kw["network"] = self._transport(tc, extra, k)
+                        except InputError:  # outside rtd's domain (e.g. r < 0): this member only
+                            out[k, gsel] = np.nan
+                            continue
                 else:
                     kw = {"transport": "plug_flow" if mode == "plug_flow" else "well_mixed",
                           "n_tanks": spec.n_tanks}
                     tc = float(tau[c])
+                if d_all is not None:
+                    kw["d"], kw["where"] = d_all[k, c], where
+                locs = [self.groups[g][1] for g in gsel]
+                if mode == "mill" and any(loc != "product" for loc in locs):
+                    kw["locations"] = locs  # hold-up and cell samples of well-mixed cells
                 out[k, gsel] = nl.solve_steady(S[k, c], bk, self._feeds[c], tc, p, k, **kw)
 
     def _chain_cells(self):

@@ -62,7 +62,9 @@ def _model_params(params: dict) -> dict:
 
 
 #: Transports a mill with non-linear kinetics runs with (millflow.mill.nonlinear).
-_KINETIC_TRANSPORTS = ("perfect_mixing", "tanks_in_series", "plug_flow", "axial_dispersion")
+_KINETIC_TRANSPORTS = ("perfect_mixing", "tanks_in_series", "recirculating_cells", "plug_flow", "axial_dispersion")
+#: Of those, the transports of well-mixed cells, where non-linear kinetics take classification.
+_KINETIC_CLASSIFIED = ("perfect_mixing", "tanks_in_series", "recirculating_cells")
 
 
 # ------------------------------------------------------------------ mill transfer
@@ -134,7 +136,9 @@ class MillUnit:
         shear) with ``aggregation_beta0`` [1/s] and ``x_ref_m`` [m]; ``cushion_lambda``
         with ``fines_m`` [m] (S_i (1 + F)^lambda, F the mass fraction at or below fines_m).
         Such a mill is not a linear map of its feed: the solver tears its inlet flow
-        vector (:mod:`millflow.flowsheet.solve`). No classification with it.
+        vector (:mod:`millflow.flowsheet.solve`). Classification with it: in well-mixed
+        cells (perfect mixing, tanks in series, recirculating cells), at the discharge
+        or at the cell outlets ``where`` names (:mod:`millflow.mill.nonlinear`).
     """
 
     name: str
@@ -169,9 +173,10 @@ class MillUnit:
         if self.breakage_basis == "energy" and not (self.power is not None and self.power > 0):
             raise InputError(f"units.{self.name}: the rates are per energy (S = S^E P / H, A_E_<unit> or "
                              "per_energy); give the mill's power (power_kW) or its dimensions")
-        if self.kinetics is not None and self.classification is not None:
-            raise InputError(f"units.{self.name}: non-linear kinetics with discharge classification is not "
-                             "supported; give one of kinetics, classification")
+        if self.kinetics is not None and self.classification is not None and (
+                self.transport not in _KINETIC_CLASSIFIED or self.classification.get("where") == "axis"):
+            raise InputError(f"units.{self.name}: non-linear kinetics take classification in well-mixed cells "
+                             f"({', '.join(_KINETIC_CLASSIFIED)}), not along the axis of {self.transport!r}")
 
     @property
     def breakage_basis(self) -> str:
@@ -234,14 +239,28 @@ class MillUnit:
         kin = self.nonlinear_kinetics(grid, tau, total)
         feed = np.asarray(inflow, float) / total
         unit = f"units.{self.name}"
-        if self.transport == "perfect_mixing":
-            r = nl.well_mixed(kin, feed, tau, unit=unit)
+        c = self.discharge_efficiency(grid)
+        d, where = None, "discharge"
+        if c is not None:  # as in blocks(): d* from the efficiency, retained classes floored at 1e-12
+            d = mill_discharge_rates(c)
+            trapped = np.flatnonzero((d <= 1e-12) & (kin.S <= 0))
+            if trapped.size:
+                raise SolverError(f"units.{self.name}: {grid.label(trapped[0])} is retained by the discharge "
+                                  "classification and never breaks (S = 0): it can never leave the mill")
+            d = np.maximum(d, 1e-12)
+            w = self.classification.get("where")
+            where = "discharge" if w is None else (tuple(w) if isinstance(w, list) else w)
+        if self.transport == "recirculating_cells":
+            tr = build_transport(self.transport, tau, self.transport_params)
+            r = nl.cells(kin, feed, tr, d, where)
+        elif self.transport == "perfect_mixing":
+            r = nl.well_mixed(kin, feed, tau, d, unit=unit)
         elif self.transport == "tanks_in_series":
             n = self.transport_params["n"]
             if not (isinstance(n, (int, float, np.integer, np.floating)) and float(n) == round(float(n)) and n >= 1):
                 raise InputError(f"units.{self.name}.transport.n = {n!r}: a mill with non-linear kinetics solves "
                                  "each tank in turn and needs an integer number of tanks >= 1")
-            r = nl.tanks_in_series(kin, feed, tau, int(round(float(n))))
+            r = nl.tanks_in_series(kin, feed, tau, int(round(float(n))), d, where)
         elif self.transport == "plug_flow":
             r = nl.plug_flow(kin, feed, tau)
         else:
@@ -253,7 +272,9 @@ class MillUnit:
                               f"of the size grid ({grid.x[0] * 1e6:.4g} um); expected at most {MAX_OVERFLOW:g}: "
                               "raise [grid] top_um so the aggregates are resolved")
         p[0] += overflow
-        info = {"method": f"non-linear kinetics ({kin.describe()}): {r.method}", "error_estimate": r.error_estimate,
+        placed = "" if d is None else ", discharge classification d*" + ("" if where == "discharge" else f" ({where})")
+        info = {"method": f"non-linear kinetics ({kin.describe()}): {r.method}{placed}",
+                "error_estimate": r.error_estimate,
                 "residual": r.residual, "runtime_s": time.perf_counter() - t0, "tau_s": tau,
                 "overflow_kg_s": total * overflow, **self._basis_info()}
         if overflow > 1e-12:  # above rounding

@@ -1,12 +1,15 @@
 """Continuous mills with non-linear kinetics (aggregation, population-dependent rates):
 the steady product of eq. 3 with R(M) of :mod:`millflow.nonlinear.kinetics` in place of
-the linear K M. No classification inside the mill (d* = 1): the hold-up composition is
-then the local mass fraction everywhere.
+the linear K M, with classification d* at the discharge or at cell outlets (perfect
+mixing, tanks in series, networks of cells; plug flow and axial dispersion without).
 
-- perfect mixing:   0 = f - M + tau R(M), by Newton with the analytic Jacobian
+- perfect mixing:   0 = f - d* y + tau R(y), y = hold-up / tau (p = d* y), by Newton with the analytic Jacobian
   -I + tau dR/dM, backtracking line search, and pseudo-transient continuation
   ((I/dt - J) dM = F, dt grown by the residual ratio) if Newton stalls;
-- tanks in series:  one cell at a time, cell k at tau/n fed by cell k - 1;
+- tanks in series:  one cell at a time, cell k at tau/n fed by cell k - 1 (d* at the
+  last cell, every cell or the listed ones);
+- networks of cells (recirculating cells, compartment networks): the cells' linear
+  exchange plus V_k R(c_k) per cell, Newton on the block system (:func:`cells`);
 - plug flow:        the batch ODE in contact time, product M(tau);
 - axial dispersion: the steady convection-dispersion-reaction equation with Danckwerts
   boundaries, discretised exactly as :mod:`millflow.mill.axial` (vertex-centred volumes,
@@ -40,6 +43,7 @@ from dataclasses import dataclass, field
 import numpy as np
 import scipy.linalg
 import scipy.sparse
+import scipy.sparse.linalg
 from scipy import special
 from scipy.integrate import quad_vec, solve_ivp
 
@@ -51,8 +55,8 @@ from millflow.nonlinear.batch import batch_nonlinear
 from millflow.nonlinear.kinetics import Kinetics
 from millflow.threads import limit_blas_threads
 
-__all__ = ["NonlinearSteady", "MicromixingBounds", "well_mixed", "tanks_in_series", "plug_flow", "axial_dispersion",
-           "micromixing_bounds"]
+__all__ = ["NonlinearSteady", "MicromixingBounds", "well_mixed", "tanks_in_series", "cells", "plug_flow",
+           "axial_dispersion", "micromixing_bounds"]
 
 
 @dataclass(frozen=True)
@@ -81,9 +85,9 @@ def _check(kin: Kinetics, feed, tau):
     return feed, float(tau)
 
 
-def residual_scale(kin: Kinetics, y_in, y, tau) -> float:
-    """The size of the terms the steady residual F = y_in - y + tau R(y) is made of:
-    s = max(sum|y_in|, max|y|, tau sum_i S_i[M] M_i) (the feed, the state, the breakage
+def residual_scale(kin: Kinetics, y_in, y, tau, d=None) -> float:
+    """The size of the terms the steady residual F = y_in - d* y + tau R(y) is made of:
+    s = max(sum|y_in|, max|y|, max|d* y|, tau sum_i S_i[M] M_i) (the feed, the state, the breakage
     flux through the cell). Rounding alone leaves |F| ~ N eps s, so the convergence test
     is relative to s: a residual of 1e-11 on a state of order 1 with tau S ~ 10 is
     converged, whatever units the feed rate is given in."""
@@ -92,7 +96,8 @@ def residual_scale(kin: Kinetics, y_in, y, tau) -> float:
         flux = float(np.abs(kin.rates(M) * M).sum())
     except SolverError:
         flux = 0.0
-    return float(max(np.abs(y_in).sum(), np.abs(y).max(), tau * flux, np.finfo(float).tiny))
+    out = max(np.abs(y_in).sum(), np.abs(y).max(), tau * flux, np.finfo(float).tiny)
+    return float(out if d is None else max(out, np.abs(d * y).max()))
 
 
 #: Relative tolerance of the non-linear Newton solves (see :func:`residual_scale`).
@@ -101,8 +106,9 @@ NEWTON_RTOL = 1e-11
 
 @limit_blas_threads  # small dense Newton systems: one BLAS thread (millflow.threads)
 def _newton_cell(kin: Kinetics, y_in, tau, y0, *, tol, max_iter, unit,
-                 phases=("newton", "pseudo-transient", "newton")):
-    """Solve F(y) = y_in - y + tau R(y) = 0; returns (y, residual, step, iterations, how).
+                 phases=("newton", "pseudo-transient", "newton"), d=None):
+    """Solve F(y) = y_in - d* y + tau R(y) = 0 (``d`` the (N + 1,) normalised discharge,
+    None for ones); returns (y, residual, step, iterations, how).
 
     Stated criterion: converged when max|F| <= tol * s, s = :func:`residual_scale` (the
     feed, the state and the breakage flux), or, when the line search can no longer
@@ -111,9 +117,11 @@ def _newton_cell(kin: Kinetics, y_in, tau, y0, *, tol, max_iter, unit,
     residual 1e-6 s, then Newton again."""
     n1 = y_in.size
     eye = np.eye(n1)
+    dd = np.ones(n1) if d is None else np.asarray(d, float)
+    out_op = np.diag(dd)
 
     def F(y):
-        return y_in - y + tau * kin.rate(y)
+        return y_in - dd * y + tau * kin.rate(y)
 
     def safe_F(y):
         try:
@@ -130,7 +138,7 @@ def _newton_cell(kin: Kinetics, y_in, tau, y0, *, tol, max_iter, unit,
     floor = False  # converged at the rounding floor (full step below tol * scale)
 
     def limit():
-        return tol * residual_scale(kin, y_in, y, tau)
+        return tol * residual_scale(kin, y_in, y, tau, d)
 
     for phase in phases:
         if res <= limit() or floor:
@@ -140,7 +148,7 @@ def _newton_cell(kin: Kinetics, y_in, tau, y0, *, tol, max_iter, unit,
         stalled = False
         while res > limit() and its < max_iter:
             its += 1
-            J = -eye + tau * kin.jacobian(y)
+            J = -out_op + tau * kin.jacobian(y)
             if phase == "newton":
                 lu = scipy.linalg.lu_factor(J, check_finite=False)
                 dy = scipy.linalg.lu_solve(lu, -f, check_finite=False)
@@ -164,7 +172,7 @@ def _newton_cell(kin: Kinetics, y_in, tau, y0, *, tol, max_iter, unit,
                     dt *= 0.25
                     continue
                 dt *= min(10.0, max(0.5, res / max(float(np.abs(ft).max()), 1e-300)))
-                if float(np.abs(ft).max()) < 1e-6 * residual_scale(kin, y_in, yt, tau):
+                if float(np.abs(ft).max()) < 1e-6 * residual_scale(kin, y_in, yt, tau, d):
                     y, f, res = yt, ft, float(np.abs(ft).max())
                     break
             y, f, res = yt, ft, float(np.abs(ft).max())
@@ -173,13 +181,13 @@ def _newton_cell(kin: Kinetics, y_in, tau, y0, *, tol, max_iter, unit,
         if phase == "newton" and not stalled and its >= max_iter:
             break
     how = " + ".join(ran) or "newton (start already converged)"
-    scale = residual_scale(kin, y_in, y, tau)
+    scale = residual_scale(kin, y_in, y, tau, d)
     if not np.isfinite(res) or (res > tol * scale and not floor):
-        raise SolverError(f"{unit}: the steady state did not converge: residual max|f - M + tau R(M)| = {res:.3g} "
+        raise SolverError(f"{unit}: the steady state did not converge: residual max|f - d* M + tau R(M)| = {res:.3g} "
                           f"> tol {tol:g} x scale {scale:.3g} after {its} iterations ({kin.describe()})")
     # one polishing Newton step at the answer: kept if it lowers max|F|; its size is the
     # error estimate (an over-estimate for the polished state: Newton converges quadratically)
-    lu = scipy.linalg.lu_factor(-eye + tau * kin.jacobian(y), check_finite=False)
+    lu = scipy.linalg.lu_factor(-out_op + tau * kin.jacobian(y), check_finite=False)
     dy = scipy.linalg.lu_solve(lu, -f, check_finite=False)
     step = float(np.abs(dy).max())
     ft = safe_F(y + dy)
@@ -188,48 +196,258 @@ def _newton_cell(kin: Kinetics, y_in, tau, y0, *, tol, max_iter, unit,
     return y, res, step, its, how
 
 
-def well_mixed(kin: Kinetics, feed, tau: float, *, tol: float = NEWTON_RTOL, max_iter: int = 60,
+def _discharge(kin: Kinetics, d):
+    """(N + 1,) normalised discharge d* of the state, or None for no classification. The
+    aggregation overflow (mass above the top class) leaves unclassified (d* = 1): the
+    kinetics do not break it, so a grate holding it back (d* -> 0) would accumulate it
+    without bound and leave no steady state; it is a grid artefact (``overflow_mass``,
+    kept small by a grid top above the aggregates), not a class the mill can retain."""
+    if d is None:
+        return None
+    d = checks.class_vector(d, kin.n, "d", "normalised discharge rate")
+    if not np.all(d > 0):
+        raise InputError("d: expected normalised discharge rates d_i* > 0 (d* = tau d_i)")
+    return np.append(d, 1.0)
+
+
+def well_mixed(kin: Kinetics, feed, tau: float, d=None, *, tol: float = NEWTON_RTOL, max_iter: int = 60,
                unit: str = "perfectly mixed mill") -> NonlinearSteady:
-    """Steady product of a perfectly mixed mill with non-linear kinetics (eq. 3 + R(M))."""
+    """Steady product of a perfectly mixed mill with non-linear kinetics (eq. 3 + R(M)).
+
+    ``d`` (N,): normalised discharge d_i* (classification at the discharge), None for
+    d* = 1. The state is y = m / tau, m the hold-up per unit feed rate [s] (y = M, the
+    hold-up mass fractions, for an unclassified mill fed at unit rate): eq. 1 with
+    p_i = d_i* y_i and H R(M) for the breakage and aggregation terms gives the steady
+    residual y_in - d* y + tau R(y); R acts on the hold-up, whose total exceeds the
+    feed's where coarse classes are retained (d* < 1). ``info["holdup"]`` is m."""
     feed, tau = _check(kin, feed, tau)
+    dx = _discharge(kin, d)
     start = time.perf_counter()
-    lin = solve_well_mixed(kin.S, kin.b, feed, tau)
+    lin = solve_well_mixed(kin.S, kin.b, feed, tau, None if dx is None else dx[:-1])
     if kin.is_linear:
         return NonlinearSteady(lin, 0.0, "exact linear (eq. 3)", 0.0, float(np.finfo(float).eps * feed.sum() * kin.n),
                                float(abs(lin.sum() - feed.sum())), 0, time.perf_counter() - start,
-                               {"kinetics": "linear"})
+                               {"kinetics": "linear", "holdup": tau * (lin if dx is None else lin / dx[:-1]),
+                                "holdup_overflow": 0.0})
     y_in = np.append(feed, 0.0)
-    y, res, step, its, how = _newton_cell(kin, y_in, tau, np.append(np.maximum(lin, 0.0), 0.0), tol=tol,
-                                          max_iter=max_iter, unit=unit)
-    return NonlinearSteady(y[:-1], float(y[-1]), how, res, step, float(abs(y.sum() - feed.sum())), its,
-                           time.perf_counter() - start, {"kinetics": kin.describe()})
+    guess = np.append(np.maximum(lin if dx is None else lin / dx[:-1], 0.0), 0.0)
+    y, res, step, its, how = _newton_cell(kin, y_in, tau, guess, tol=tol, max_iter=max_iter, unit=unit, d=dx)
+    p = y if dx is None else dx * y
+    err = step * (1.0 if dx is None else float(dx.max()))
+    return NonlinearSteady(p[:-1], float(p[-1]), how, res, err, float(abs(p.sum() - feed.sum())), its,
+                           time.perf_counter() - start, {"kinetics": kin.describe(), "holdup": tau * y[:-1],
+                                                         "holdup_overflow": float(tau * y[-1])})
 
 
-def tanks_in_series(kin: Kinetics, feed, tau: float, n: int, *, tol: float = NEWTON_RTOL, max_iter: int = 60
-                    ) -> NonlinearSteady:
-    """n equal perfect mixers in series (total mean residence time tau), one cell at a time."""
+def tanks_in_series(kin: Kinetics, feed, tau: float, n: int, d=None, where="discharge", *,
+                    tol: float = NEWTON_RTOL, max_iter: int = 60) -> NonlinearSteady:
+    """n equal perfect mixers in series (total mean residence time tau), one cell at a time.
+
+    ``d`` (N,) normalised discharge d_i* (None: none), acting where ``where`` says:
+    "discharge" (the last cell's outflow), "cells" (every cell's outflow) or a sequence
+    of 1-based cell numbers; each cell is :func:`well_mixed` at tau / n with its d*."""
     feed, tau = _check(kin, feed, tau)
     if int(n) != n or n < 1:
         raise InputError(f"n = {n!r}: expected an integer number of tanks >= 1")
+    n = int(n)
+    dx = _discharge(kin, d)
+    mask = _classified(n, where)
     start = time.perf_counter()
     if kin.is_linear:
-        p = feed
-        for _ in range(int(n)):
-            p = solve_well_mixed(kin.S, kin.b, p, tau / n)
+        p, held = feed, []
+        for k in range(n):
+            dk = dx[:-1] if dx is not None and mask[k] else None
+            p = solve_well_mixed(kin.S, kin.b, p, tau / n, dk)
+            held.append(tau / n * (p if dk is None else p / dk))
         return NonlinearSteady(p, 0.0, "exact linear (cells)", 0.0, float(np.finfo(float).eps * kin.n * n),
                                float(abs(p.sum() - feed.sum())), 0, time.perf_counter() - start,
-                               {"kinetics": "linear"})
+                               {"kinetics": "linear", "cells": np.array(held), "cells_overflow": np.zeros(n),
+                                "holdup": np.sum(held, axis=0)})
     y = np.append(feed, 0.0)
     its, res, step, cells = 0, 0.0, 0.0, []
-    for k in range(int(n)):
-        guess = np.append(np.maximum(solve_well_mixed(kin.S, kin.b, y[:-1], tau / n), 0.0), y[-1])
-        y, r, s, i, how = _newton_cell(kin, y, tau / n, guess, tol=tol, max_iter=max_iter,
-                                       unit=f"tanks in series, cell {k + 1} of {int(n)}")
+    for k in range(n):
+        dk = dx if dx is not None and mask[k] else None
+        lin = solve_well_mixed(kin.S, kin.b, y[:-1], tau / n, None if dk is None else dk[:-1])
+        guess = np.append(np.maximum(lin if dk is None else lin / dk[:-1], 0.0), y[-1])
+        c, r, s, i, how = _newton_cell(kin, y, tau / n, guess, tol=tol, max_iter=max_iter,
+                                       unit=f"tanks in series, cell {k + 1} of {n}", d=dk)
+        y = c if dk is None else dk * c
         its += i
-        res, step = max(res, r), max(step, s)
-        cells.append(y[:-1].copy())
+        # the step in cell k's content, carried to the product by the cells downstream (contractive)
+        res, step = max(res, r), max(step, s * (1.0 if dk is None else float(dk.max())))
+        cells.append(tau / n * c)
+    cells = np.array(cells)  # (n, N + 1): hold-up per unit feed rate [s], the overflow last
     return NonlinearSteady(y[:-1], float(y[-1]), f"cells ({how})", res, step, float(abs(y.sum() - feed.sum())), its,
-                           time.perf_counter() - start, {"kinetics": kin.describe(), "cells": np.array(cells)})
+                           time.perf_counter() - start, {"kinetics": kin.describe(), "cells": cells[:, :-1],
+                                                         "cells_overflow": cells[:, -1],
+                                                         "holdup": cells[:, :-1].sum(axis=0)})
+
+
+def _classified(n: int, where) -> np.ndarray:
+    """Cells (n,) whose outflow is classified: "discharge" the last (a chain's exit),
+    "cells" all, or the listed 1-based cells."""
+    if where in (None, "discharge"):
+        mask = np.zeros(n, dtype=bool)
+        mask[-1] = True
+        return mask
+    if where == "cells":
+        return np.ones(n, dtype=bool)
+    if isinstance(where, str):
+        raise InputError(f"where = {where!r}: expected 'discharge', 'cells' or 1-based cell numbers")
+    idx = np.asarray(list(where), dtype=int)
+    if idx.size == 0 or idx.min() < 1 or idx.max() > n:
+        raise InputError(f"where = {list(where)!r}: expected cell numbers in 1..{n}")
+    mask = np.zeros(n, dtype=bool)
+    mask[idx - 1] = True
+    return mask
+
+
+def cells(kin: Kinetics, feed, transport, d=None, where="discharge", *, tol: float = NEWTON_RTOL,
+          max_iter: int = 60) -> NonlinearSteady:
+    """Steady product of a network of well-mixed cells (``transport`` an rtd model with a
+    ``network()``, e.g. :class:`rtd.RecirculatingCells`, or an
+    :class:`rtd.CompartmentNetwork`) with non-linear kinetics and classification.
+
+    Cell k (volume V_k in time x feed flow, flows F[k, l] from l to k, exit flow o_k,
+    inlet fraction u_k, bypass beta) holds c_k = m_k / V_k per unit feed rate (the
+    state of :func:`well_mixed` for one cell). The steady balance of eq. 1 per cell,
+    with the transport of :mod:`millflow.mill.cells` and R per cell:
+
+        0 = (1 - beta) u_k f + sum_{l != k} G_l F[k, l] c_l
+            - (G_k sum_j F[j, k] + H_k o_k) c_k + V_k R(c_k),
+
+    G, H the classification factors on inter-cell and exit flows (d* or 1, by
+    ``where``: "discharge", "cells" or 1-based cell numbers). Product
+    p = beta f + sum_l H_l o_l c_l. Newton on all cells together with the analytic
+    Jacobian (the constant transport part plus the blocks V_k dR/dc, sparse LU), line
+    search, pseudo-transient continuation if Newton stalls; the stated criterion of
+    :func:`well_mixed` with the scale max(feed, transport flows x state, V_k breakage
+    flux). Error estimate: the product's change under one more Newton step."""
+    from millflow.mill.cells import _factors, network_of
+    feed, _ = _check(kin, feed, 1.0)
+    net = network_of(transport)
+    if net is None:
+        raise InputError(f"transport {transport!r}: expected a network of cells (e.g. rtd.RecirculatingCells)")
+    start = time.perf_counter()
+    dx = _discharge(kin, d)
+    n, n1 = int(net.n), kin.n + 1
+    if where not in (None, "discharge", "cells"):
+        _classified(n, where)  # checks the cell numbers
+    V = np.asarray(net.volumes, float)
+    Fl = np.asarray(net.flows, float)
+    o = np.asarray(net.outlet, float)
+    beta = float(net.bypass)
+    G, H = _factors(dx, n1, n, "discharge" if where is None else where)  # (n1, n)
+    if kin.is_linear:
+        from millflow.mill.cells import solve_cells
+        sol = solve_cells(kin.S, kin.b, feed, net, None if dx is None else dx[:-1],
+                          "discharge" if where is None else where)
+        return NonlinearSteady(sol.product, 0.0, "exact linear (cells)", 0.0, float(np.finfo(float).eps * kin.n * n),
+                               float(abs(sol.product.sum() - feed.sum())), 0, time.perf_counter() - start,
+                               {"kinetics": "linear", "cell_holdup": sol.holdup, "cell_overflow": np.zeros(n)})
+    # constant transport operator on the stacked state c (n cells x n1 components)
+    rows, cols, vals = [], [], []
+    idx = np.arange(n1)
+    for k in range(n):
+        for l in range(n):
+            if k != l and Fl[k, l] != 0.0:
+                rows.append(k * n1 + idx); cols.append(l * n1 + idx); vals.append(G[:, l] * Fl[k, l])  # noqa: E702
+        rows.append(k * n1 + idx); cols.append(k * n1 + idx)  # noqa: E702
+        vals.append(-(G[:, k] * Fl[:, k].sum() - G[:, k] * Fl[k, k] + H[:, k] * o[k]))
+    T = scipy.sparse.csr_matrix((np.concatenate(vals), (np.concatenate(rows), np.concatenate(cols))),
+                                shape=(n * n1, n * n1))
+    Tabs = abs(T)
+    src = ((1.0 - beta) * np.asarray(net.inlet, float)[:, None] * np.append(feed, 0.0)[None, :]).ravel()
+    feed_size = float(np.abs(feed).sum())
+
+    def F(c):
+        C = c.reshape(n, n1)
+        R = np.array([kin.rate(C[k]) for k in range(n)])
+        return src + T @ c + (V[:, None] * R).ravel()
+
+    def safe_F(c):
+        try:
+            return F(c)
+        except SolverError:
+            return None
+
+    def jac(c):
+        C = c.reshape(n, n1)
+        blocks = scipy.sparse.block_diag([V[k] * kin.jacobian(C[k]) for k in range(n)], format="csr")
+        return (T + blocks).tocsc()
+
+    def scale(c):
+        C = c.reshape(n, n1)
+        try:
+            flux = max(float(V[k] * np.abs(kin.rates(C[k, :-1]) * C[k, :-1]).sum()) for k in range(n))
+        except SolverError:
+            flux = 0.0
+        return float(max(feed_size, float((Tabs @ np.abs(c)).max()), flux, np.finfo(float).tiny))
+
+    def factor(A):
+        try:
+            return scipy.sparse.linalg.splu(A.tocsc())
+        except RuntimeError as exc:  # "Factor is exactly singular"
+            raise SolverError(f"recirculating cells: the Newton matrix is singular ({exc}; {kin.describe()})") from exc
+
+    from millflow.mill.cells import solve_cells
+    lin = solve_cells(kin.S, kin.b, feed, net, None if dx is None else dx[:-1],
+                      "discharge" if where is None else where)
+    c = np.concatenate([np.maximum(lin.holdup / V[:, None], 0.0), np.zeros((n, 1))], axis=1).ravel()
+    f = F(c)
+    res = float(np.abs(f).max())
+    its, floor, ran = 0, False, []
+    mass = scipy.sparse.diags(np.repeat(V, n1))
+    for phase in ("newton", "pseudo-transient", "newton"):
+        if res <= tol * scale(c) or floor:
+            break
+        ran.append(phase)
+        dt = 0.1 * float(V.sum())
+        while res > tol * scale(c) and its < max_iter:
+            its += 1
+            J = jac(c)
+            if phase == "newton":
+                dc = factor(J).solve(-f)
+                lam, ft = 1.0, None
+                while lam >= 1.0 / 256:
+                    trial = safe_F(c + lam * dc)
+                    if trial is not None and np.abs(trial).max() <= (1.0 - 1e-4 * lam) * res:
+                        ft = trial
+                        break
+                    lam *= 0.5
+                if ft is None:
+                    floor = bool(np.isfinite(dc).all() and np.abs(dc).max() <= tol * scale(c))
+                    break
+                c, f, res = c + lam * dc, ft, float(np.abs(ft).max())
+            else:
+                dc = factor(mass / dt - J).solve(f)
+                ft = safe_F(c + dc)
+                if ft is None or not np.isfinite(ft).all():
+                    dt *= 0.25
+                    continue
+                dt *= min(10.0, max(0.5, res / max(float(np.abs(ft).max()), 1e-300)))
+                c, f, res = c + dc, ft, float(np.abs(ft).max())
+                if res < 1e-6 * scale(c):
+                    break
+    if not np.isfinite(res) or (res > tol * scale(c) and not floor):
+        raise SolverError(f"recirculating cells: the steady state did not converge: residual {res:.3g} > tol "
+                          f"{tol:g} x scale {scale(c):.3g} after {its} iterations on {n} cells ({kin.describe()})")
+
+    def product(c):
+        C = c.reshape(n, n1)
+        return beta * np.append(feed, 0.0) + (H * o[None, :] * C.T).sum(axis=1)
+
+    # one polishing step: kept if it lowers max|F|; the product's change is the error estimate
+    dc = factor(jac(c)).solve(-f)
+    err = float(np.abs(product(c + dc) - product(c)).max())
+    ft = safe_F(c + dc)
+    if ft is not None and np.isfinite(ft).all() and float(np.abs(ft).max()) < res:
+        c, res = c + dc, float(np.abs(ft).max())
+    p = product(c)
+    return NonlinearSteady(p[:-1], float(p[-1]), "cells, Newton on all cells (" + (" + ".join(ran) or "start") + ")",
+                           res, err, float(abs(p.sum() - feed.sum())), its, time.perf_counter() - start,
+                           {"kinetics": kin.describe(), "cell_holdup": V[:, None] * c.reshape(n, n1)[:, :-1],
+                            "cell_overflow": V * c.reshape(n, n1)[:, -1]})
 
 
 def plug_flow(kin: Kinetics, feed, tau: float, *, rtol: float = 1e-8, atol: float = 1e-12) -> NonlinearSteady:

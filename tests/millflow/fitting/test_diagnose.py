@@ -32,9 +32,13 @@ def test_candidate_sets_for_batch_and_continuous_data():
     cont = candidate_specs(ModelSpec(mode="well_mixed", tau_column="tau_s"), data)
     assert list(cont) == ["linear", "cushioning", "aggregation", "tanks_2", "tanks_3", "classification"]
     assert cont["aggregation"].kinetics == ("aggregation",) and cont["tanks_3"].n_tanks == 3
-    # with classification in the user's model, no non-linear kinetics (refused with classification)
+    # with classification in the user's model, the non-linear candidates keep it (well-mixed tanks)
     cl = candidate_specs(ModelSpec(mode="well_mixed", classification="screen_power"), data)
-    assert "aggregation" not in cl and "classification" not in cl
+    assert cl["aggregation"].classification == "screen_power" and "classification" not in cl
+    # ... and stay out where the non-linear solves do not take it (along the axis)
+    ax = candidate_specs(ModelSpec(mode="mill", transport="plug_flow", tau_column="tau_s", where="axis",
+                                   classification="screen_power"), data)
+    assert "aggregation" not in ax and "cushioning" not in ax
 
 
 def _fit(**params):

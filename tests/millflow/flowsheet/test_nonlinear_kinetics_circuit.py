@@ -54,9 +54,36 @@ def test_linear_physics_through_the_kinetic_path_equals_the_linear_circuit():
     (('aggregation = "constant"', 'aggregation = "brownian"'), "units.ball_mill.kinetics.aggregation = 'brownian'"),
     (("x_ref_um = 10\n", ""), r"units.ball_mill.kinetics: missing parameter x_ref_<unit>"),
     (("fines_um = 75", "fines_um = 75\ncolour = 2"), "units.ball_mill.kinetics.colour: unknown key"),
-    (("power_kW = 3800", "power_kW = 3800\nclassification = {curve = \"screen\", d50_um = 500}"),
-     "non-linear kinetics with discharge classification"),
+    (("transport = {model = \"tanks_in_series\", n = 3}\npower_kW = 3800",
+      "transport = {model = \"plug_flow\"}\npower_kW = 3800\nclassification = {curve = \"screen\", d50_um = 500}"),
+     "non-linear kinetics take classification in well-mixed cells .* not along the axis of 'plug_flow'"),
 ])
 def test_bad_kinetics_tables(edit, match):
     with pytest.raises(InputError, match=match):
         loads(FILE.read_text().replace(*edit))
+
+
+CELLS = ('transport = {model = "tanks_in_series", n = 3}\npower_kW = 3800',
+         'transport = {model = "recirculating_cells", n = 3, r = 1.0}\npower_kW = 3800\n'
+         'classification = {curve = "screen", d50_um = 1500}')
+
+
+def test_classified_recirculating_mill_with_linear_physics_equals_the_linear_circuit():
+    """The kinetic path (Newton on all cells, classified exit) with zero aggregation and
+    cushioning against the linear circuit with the same cells and screen (one sparse solve)."""
+    text = FILE.read_text().replace(*CELLS)
+    zero = text.replace("aggregation_beta0_per_s = 1e-4", "aggregation_beta0_per_s = 0") \
+        .replace("cushion_lambda = -1.0", "cushion_lambda = 0.0")
+    sol = solve(loads(zero), tol=1e-13)
+    start = text.index("[units.ball_mill.kinetics]")
+    linear = text[:start] + text[text.index("[units.cyclones]"):]
+    lin = solve(loads(linear))
+    assert "discharge classification" in sol.units["ball_mill"]["method"]
+    assert np.abs(sol.flows - lin.flows).max() < 1e-9 * lin.flows.sum()
+    # the non-linear mill: balances close, and the screen changes the circuit
+    nl = solve(loads(text), tol=1e-12)
+    fresh = 250 / 3.6
+    assert abs(nl.flow("overflow").sum() - fresh) < 1e-9 * fresh
+    assert all(r["mass_balance_error"] < 1e-12 for r in nl.units.values())
+    open_mill = solve(loads(text.replace('\nclassification = {curve = "screen", d50_um = 1500}', "")), tol=1e-12)
+    assert abs(nl.flow("underflow").sum() - open_mill.flow("underflow").sum()) > 1e-3 * fresh
