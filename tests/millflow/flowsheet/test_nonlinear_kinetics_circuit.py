@@ -6,18 +6,18 @@ import pytest
 from millflow.errors import InputError
 from millflow.flowsheet import load, loads, solve
 from tests.paths import FLOWSHEETS
-from tests.closed_circuit import per_time_text
 
 FILE = FLOWSHEETS / "closed_circuit_aggregating_mill.toml"
 LINEAR = FLOWSHEETS / "closed_circuit_ball_mill.toml"
 
 
 def linear_circuit():
-    """The linear example on the aggregating example's grid (ratio 2^(1/4))."""
+    """The closed-circuit example (the same ore, rates per energy, hold-up and power) on the
+    aggregating example's grid: the aggregating circuit without its kinetics table."""
     import re
 
-    text = re.sub(r"(?m)^ratio = .*$", "ratio = 1.189207115", per_time_text())
-    return loads(text)
+    ratio = re.search(r"(?m)^ratio = (\S+)", FILE.read_text()).group(1)
+    return loads(re.sub(r"(?m)^ratio = .*$", f"ratio = {ratio}", LINEAR.read_text()))
 
 
 def test_circuit_solves_and_closes_its_balances():
@@ -84,6 +84,8 @@ def test_classified_recirculating_mill_with_linear_physics_equals_the_linear_cir
     nl = solve(loads(text), tol=1e-12)
     fresh = 250 / 3.6
     assert abs(nl.flow("overflow").sum() - fresh) < 1e-9 * fresh
-    assert all(r["mass_balance_error"] < 1e-12 for r in nl.units.values())
+    # the mill is torn on its throughput (rates per energy, tau = H / F): its balance holds
+    # to the tear's tolerance (1e-12 of the total) times the loop gain (~3)
+    assert all(r["mass_balance_error"] < 5e-12 for r in nl.units.values())
     open_mill = solve(loads(text.replace('\nclassification = {curve = "screen", d50_um = 1500}', "")), tol=1e-12)
     assert abs(nl.flow("underflow").sum() - open_mill.flow("underflow").sum()) > 1e-3 * fresh
