@@ -66,8 +66,32 @@ GRID_NOTE = ("none: S_i and b_ij given per class (the kinetics) are the discrete
              "the grid error their caller estimates by refining the grid (flowsheet grid check, batch.grind)")
 
 
+class _SplitError:
+    """The error report of a non-linear steady result: its solver part and its grid part.
+
+    The grid part is zero: the kinetics' S_i and b_ij per class are the discrete model itself.
+    """
+
+    grid_error_estimate = 0.0
+    grid_error_method = GRID_NOTE
+    #: What estimated the solver part (a class's own text, or its ``method`` field).
+    solver_error_method = None
+
+    @property
+    def solver_error_estimate(self) -> float:
+        """The solver part of the error (``error_estimate``)."""
+        return self.error_estimate
+
+    @property
+    def error_report(self) -> dict:
+        """``error_estimate`` split into its solver part and its grid part, each with its method."""
+        how = self.solver_error_method or getattr(self, "method", "")
+        return {"solver": {"value": float(self.error_estimate), "method": how},
+                "grid": {"value": 0.0, "method": GRID_NOTE}}
+
+
 @dataclass(frozen=True)
-class NonlinearSteady:
+class NonlinearSteady(_SplitError):
     """Steady product (mass flows per unit feed rate, sum = sum(feed) - overflow) with the
     diagnostics of the solve: ``residual`` max |F| at the answer, ``error_estimate`` the
     size of the next Newton step (or the ODE's estimate), ``iterations``."""
@@ -82,20 +106,6 @@ class NonlinearSteady:
     runtime_s: float
     info: dict = field(default_factory=dict)
 
-    @property
-    def solver_error_estimate(self) -> float:
-        """The solver part of the error (``error_estimate``)."""
-        return self.error_estimate
-
-    #: The grid part: zero, the kinetics' S_i and b_ij per class are the discrete model itself.
-    grid_error_estimate = 0.0
-    grid_error_method = GRID_NOTE
-
-    @property
-    def error_report(self) -> dict:
-        """``error_estimate`` split into its solver part and its grid part, each with its method."""
-        return {"solver": {"value": float(self.error_estimate), "method": self.method},
-                "grid": {"value": 0.0, "method": GRID_NOTE}}
 
 
 def _check(kin: Kinetics, feed, tau):
@@ -588,7 +598,7 @@ def _block_thomas(D, lower: float, upper: float, rhs):
 
 # ------------------------------------------------------------------ micromixing
 @dataclass(frozen=True)
-class MicromixingBounds:
+class MicromixingBounds(_SplitError):
     """Products of the two micromixing limits for one RTD: ``segregated`` and
     ``max_mixedness`` (N,), ``spread`` max |difference|, ``coincide`` True for linear
     kinetics (then both are the one exact answer), ``note`` what the user should know."""
@@ -602,20 +612,7 @@ class MicromixingBounds:
     runtime_s: float
     info: dict = field(default_factory=dict)
 
-    @property
-    def solver_error_estimate(self) -> float:
-        """The solver part of the error (``error_estimate``)."""
-        return self.error_estimate
-
-    #: The grid part: zero, the kinetics' S_i and b_ij per class are the discrete model itself.
-    grid_error_estimate = 0.0
-    grid_error_method = GRID_NOTE
-
-    @property
-    def error_report(self) -> dict:
-        """``error_estimate`` split into its solver part and its grid part, each with its method."""
-        return {"solver": {"value": float(self.error_estimate), "method": "the solves of the two limits"},
-                "grid": {"value": 0.0, "method": GRID_NOTE}}
+    solver_error_method = "the solves of the two limits"
 
 
 def _survival(model, t):

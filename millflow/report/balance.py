@@ -14,7 +14,7 @@ import hashlib
 from pathlib import Path
 
 from millflow.report.flowsheet import flowsheet_layout_of
-from millflow.report.html import esc, flowsheet_svg, fmt, line_plot, page, table
+from millflow.report.html import esc, flowsheet_svg, fmt, line_plot, page, read_input, table
 
 __all__ = ["balance_report", "write_balance_report"]
 
@@ -170,13 +170,7 @@ def balance_report(summary: dict, *, input_text: str | None = None, input_name: 
 def write_balance_report(path, summary: dict, *, input_path=None, command: str = "millflow balance") -> Path:
     """Write :func:`balance_report` to ``path`` (with the survey file's text when
     ``input_path`` is given); returns the path."""
-    text = name = None
-    if input_path is not None:
-        try:
-            text = Path(input_path).read_text(encoding="utf-8")
-            name = Path(input_path).name
-        except (OSError, UnicodeDecodeError):
-            text = None
+    text, name = read_input(input_path)
     path = Path(path)
     path.write_text(balance_report(summary, input_text=text, input_name=name, command=command), encoding="utf-8")
     return path

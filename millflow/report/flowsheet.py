@@ -11,7 +11,7 @@ from __future__ import annotations
 import hashlib
 from pathlib import Path
 
-from millflow.report.html import esc, flowsheet_svg, fmt, line_plot, page, table
+from millflow.report.html import esc, flowsheet_svg, fmt, line_plot, page, read_input, table
 from millflow.report.layout import layout
 
 __all__ = ["flowsheet_report", "write_report", "partition_curves", "flowsheet_layout_of"]
@@ -179,13 +179,7 @@ def write_report(path, summary: dict, *, input_path=None, partition: dict | None
                  command: str = "millflow run") -> Path:
     """Write :func:`flowsheet_report` to ``path`` (with the input file's text when
     ``input_path`` is given); returns the path."""
-    text = name = None
-    if input_path is not None:
-        try:
-            text = Path(input_path).read_text(encoding="utf-8")
-            name = Path(input_path).name
-        except (OSError, UnicodeDecodeError):
-            text = None
+    text, name = read_input(input_path)
     path = Path(path)
     path.write_text(flowsheet_report(summary, partition=partition, input_text=text, input_name=name,
                                      command=command), encoding="utf-8")

@@ -237,3 +237,16 @@ def page(title: str, sections: list, *, data: dict | None = None) -> str:
             f"<meta name=\"viewport\" content=\"width=device-width, initial-scale=1\"><title>{esc(title)}</title>"
             f"<style>{CSS}</style><script>{SCRIPT}</script></head><body>" + "".join(body) + blob
             + "</body></html>\n")
+
+
+def read_input(input_path) -> tuple[str | None, str | None]:
+    """(text, file name) of the input file a report shows, or (None, None) when there is
+    none or it cannot be read as UTF-8 text (the report then says so instead of failing)."""
+    if input_path is None:
+        return None, None
+    from pathlib import Path
+
+    try:
+        return Path(input_path).read_text(encoding="utf-8"), Path(input_path).name
+    except (OSError, UnicodeDecodeError):
+        return None, None
