@@ -106,7 +106,7 @@ def flowsheet_drawing(sol, ds=None):
     fs = sol.flowsheet
     labels = _flowsheet_labels(sol, ds)
     lay = layout({u: x.type for u, x in fs.units.items()}, {n: (s.source, s.target) for n, s in fs.streams.items()},
-                 max(len(v) for v in labels.values()))
+                 label_text=labels)
     return lay, labels
 
 

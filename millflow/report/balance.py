@@ -13,15 +13,16 @@ from __future__ import annotations
 import hashlib
 from pathlib import Path
 
-from millflow.report.flowsheet import flowsheet_layout_of
-from millflow.report.html import esc, flowsheet_svg, fmt, line_plot, page, read_input, table
+from millflow.report.flowsheet import drawing
+from millflow.report.html import esc, fmt, line_plot, page, read_input, table
+from millflow.report.textsize import Strong, name_lines
 
 __all__ = ["balance_report", "write_balance_report"]
 
 
 def _label(name: str, s: dict) -> list:
     k = f"streams.{name}."
-    lines = [esc(name)]
+    lines = [Strong(esc(t)) for t in name_lines(name)]
     if s.get("solids_observable", True):
         lines.append((f"{fmt(s.get('solids_tph'))} &#177; {fmt(s.get('solids_sd_tph'), 2)} t/h solids",
                       k + "solids_tph"))
@@ -121,10 +122,7 @@ def balance_report(summary: dict, *, input_text: str | None = None, input_name: 
         line = '<p class="chi">No redundancy (0 degrees of freedom): nothing to test; every value is as measured.</p>'
     sections.append(("Chi-square test", line + table(["quantity", "value"], chi_rows, cls="chi-square")))
 
-    lay = flowsheet_layout_of(summary)
-    unit_text = {u: [esc(u), esc(r.get("type", ""))] for u, r in summary["units"].items()}
-    sections.append(("Flowsheet (adjusted values)",
-                     flowsheet_svg(lay, unit_text, {n: _label(n, s) for n, s in streams.items()})))
+    sections.append(("Flowsheet (adjusted values)", drawing(summary, {n: _label(n, s) for n, s in streams.items()})))
     head, rows = _stream_rows(summary, wet)
     sections.append(("Streams: measured and adjusted", table(head, rows, cls="streams")))
 

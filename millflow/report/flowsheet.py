@@ -12,26 +12,51 @@ import hashlib
 from pathlib import Path
 
 from millflow.report.html import esc, flowsheet_svg, fmt, line_plot, page, read_input, table
-from millflow.report.layout import layout
+from millflow.report.layout import LAYERS_PER_ROW, layout
+from millflow.report.textsize import Strong, name_lines
 
-__all__ = ["flowsheet_report", "write_report", "partition_curves", "flowsheet_layout_of"]
+__all__ = ["flowsheet_report", "write_report", "partition_curves", "flowsheet_layout_of", "drawing", "stream_label",
+           "unit_lines"]
 
 
 def _unit_of(port: str) -> str:
     return port.rsplit(".", 1)[0]
 
 
-def flowsheet_layout_of(summary: dict, label_lines: int | None = None):
-    """The drawing's layout for a summary's units and streams (see :mod:`millflow.report.layout`)."""
+def unit_lines(name: str, kind: str) -> list:
+    """The lines of a unit's box: its name (bold; a long one on two lines, shortened
+    beyond) and its type."""
+    return [Strong(esc(t)) for t in name_lines(name, 170.0)] + [esc(kind)]
+
+
+def flowsheet_layout_of(summary: dict, label_text: dict | None = None, *, layers_per_row: int = LAYERS_PER_ROW):
+    """The drawing's layout for a summary's units and streams (see :mod:`millflow.report.layout`),
+    each label box sized to its text (``label_text``: stream -> lines; default :func:`stream_label`)."""
     units = {u: r.get("type", "") for u, r in summary["units"].items()}
     streams = {n: (_unit_of(s["from"]), s["to"]) for n, s in summary["streams"].items()}
-    wet = any(s.get("water_tph") is not None for s in summary["streams"].values())
-    return layout(units, streams, label_lines or (4 if wet else 3))
+    if label_text is None:
+        label_text = {n: stream_label(n, s) for n, s in summary["streams"].items()}
+    return layout(units, streams, label_text=label_text, unit_text={u: unit_lines(u, k) for u, k in units.items()},
+                  layers_per_row=layers_per_row)
+
+
+def drawing(summary: dict, label_text: dict | None = None, *, layers_per_row: int = LAYERS_PER_ROW,
+            standalone: bool = False) -> str:
+    """The flowsheet drawing (SVG) of a summary: units, routes and each stream's label
+    (``label_text``: stream -> lines; default :func:`stream_label`)."""
+    if label_text is None:
+        label_text = {n: stream_label(n, s) for n, s in summary["streams"].items()}
+    lay = flowsheet_layout_of(summary, label_text, layers_per_row=layers_per_row)
+    unit_text = {u: unit_lines(u, r.get("type", "")) for u, r in summary["units"].items()}
+    return flowsheet_svg(lay, unit_text, label_text, standalone=standalone,
+                         title=f"flowsheet: {summary.get('title') or summary.get('source_file') or ''}")
 
 
 def stream_label(name: str, s: dict) -> list[str]:
-    """The lines of a stream's label: name; solids t/h; water t/h and % solids (wet); P80."""
-    lines = [esc(name), f"{fmt(s.get('solids_tph'))} t/h solids"]
+    """The lines of a stream's label: name (a long one on two lines, shortened beyond,
+    :func:`~millflow.report.textsize.name_lines`); solids t/h; water t/h and % solids
+    (wet); P80."""
+    lines = [Strong(esc(t)) for t in name_lines(name)] + [f"{fmt(s.get('solids_tph'))} t/h solids"]
     if s.get("water_tph") is not None:
         lines.append(f"{fmt(s.get('water_tph'))} t/h water, {fmt(s.get('solids_pct'))} % solids")
     lines.append(f"P80 {fmt(s.get('p80_um'))} um")
@@ -139,9 +164,7 @@ def flowsheet_report(summary: dict, *, partition: dict | None = None, input_text
 
     streams = summary["streams"]
     wet = any(s.get("water_tph") is not None for s in streams.values())
-    lay = flowsheet_layout_of(summary)
-    unit_text = {u: [esc(u), esc(r.get("type", ""))] for u, r in summary["units"].items()}
-    svg = flowsheet_svg(lay, unit_text, {n: stream_label(n, s) for n, s in streams.items()})
+    svg = drawing(summary)
     sections = []
     sha = summary.get("input_sha256")
     if input_text is not None and not sha:

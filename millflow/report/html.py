@@ -3,9 +3,11 @@
 No network: styles and the one small script are inline, plots are inline SVG. Every
 number shown in a table cell carries ``data-key`` (its path in the summary the page was
 made from, e.g. ``streams.overflow.p80_um``) so a reader or a test can map it back. The
-page's script records JavaScript errors in ``#js-errors``, counts overlapping boxes of
-the flowsheet drawing as the browser lays them out (``data-overlaps`` on ``<body>``) and
-marks the page ``data-rendered="ok"`` when every SVG has a non-empty size.
+page's script records JavaScript errors in ``#js-errors``; on the flowsheet drawing as
+the browser lays it out it counts the pairs of boxes (a unit or label box with its text)
+that overlap (``data-overlaps`` on ``<body>``) and the lines of text that spill out of
+their box (``data-spills``); it marks the page ``data-rendered="ok"`` when every SVG has
+a non-empty size and no script failed.
 
 Numbers are shown to :data:`SIG` significant digits (integers above that keep all their
 digits: 1287 um, not 1.287e+03).
@@ -17,6 +19,7 @@ import json
 import math
 
 from millflow.report.layout import FlowsheetLayout
+from millflow.report.textsize import LINE_H, Strong
 
 __all__ = ["SIG", "fmt", "table", "line_plot", "flowsheet_svg", "page"]
 
@@ -133,41 +136,56 @@ def line_plot(series: list, *, xlabel: str, ylabel: str, ylim=None, xlog: bool =
     return "".join(parts)
 
 
-def flowsheet_svg(lay: FlowsheetLayout, unit_text: dict, label_text: dict) -> str:
+#: Style of the flowsheet drawing (in the page's CSS, and inside a standalone SVG file).
+#: Its text asks for DejaVu Sans first: the face the boxes are sized for (:mod:`millflow.report.textsize`).
+FLOWSHEET_CSS = (".flowsheet text{font-family:'DejaVu Sans',Verdana,system-ui,sans-serif;font-size:12px;fill:#222}"
+                 ".flowsheet .b{font-weight:600}"
+                 ".flowsheet .unit rect{fill:#e8f0fa;stroke:#3060a0;stroke-width:1.5}"
+                 ".flowsheet .stream{fill:none;stroke:#303030;stroke-width:1.4}.flowsheet .recycle{stroke:#a03030}"
+                 ".flowsheet .stream-label rect{fill:#fff;fill-opacity:.92;stroke:#bbb}")
+
+
+def flowsheet_svg(lay: FlowsheetLayout, unit_text: dict, label_text: dict, *, standalone: bool = False,
+                  title: str = "flowsheet") -> str:
     """The flowsheet drawing: unit boxes (``unit_text``: name -> lines), stream routes with
-    arrow heads (recycles in red) and label boxes (``label_text``: name -> lines)."""
+    arrow heads (recycles in red) and label boxes (``label_text``: name -> lines), each box
+    with its whole name as a tooltip. ``standalone``: a file of its own (its style inside,
+    white background)."""
     w, h = lay.width, lay.height
     parts = [f'<svg xmlns="http://www.w3.org/2000/svg" class="flowsheet" viewBox="0 0 {w:.0f} {h:.0f}" '
-             f'width="{w:.0f}" height="{h:.0f}" role="img" aria-label="flowsheet">',
-             '<defs><marker id="arr" viewBox="0 0 10 10" refX="10" refY="5" markerWidth="7" markerHeight="7" '
-             'orient="auto-start-reverse"><path d="M0,0 L10,5 L0,10 z" fill="#303030"/></marker>'
-             '<marker id="arr-r" viewBox="0 0 10 10" refX="10" refY="5" markerWidth="7" markerHeight="7" '
-             'orient="auto-start-reverse"><path d="M0,0 L10,5 L0,10 z" fill="#a03030"/></marker></defs>']
+             f'width="{w:.0f}" height="{h:.0f}" role="img" aria-label="{esc(title)}">']
+    if standalone:
+        parts.append(f'<style>{FLOWSHEET_CSS}</style><rect width="100%" height="100%" fill="#fff"/>')
+    parts.append('<defs><marker id="arr" viewBox="0 0 10 10" refX="10" refY="5" markerWidth="7" markerHeight="7" '
+                 'orient="auto-start-reverse"><path d="M0,0 L10,5 L0,10 z" fill="#303030"/></marker>'
+                 '<marker id="arr-r" viewBox="0 0 10 10" refX="10" refY="5" markerWidth="7" markerHeight="7" '
+                 'orient="auto-start-reverse"><path d="M0,0 L10,5 L0,10 z" fill="#a03030"/></marker></defs>')
     for n, route in lay.routes.items():
         red = lay.recycle[n]
         d = " ".join(f"{x:.1f},{y:.1f}" for x, y in route)
         parts.append(f'<polyline class="stream{" recycle" if red else ""}" data-stream="{esc(n)}" points="{d}" '
                      f'marker-end="url(#{"arr-r" if red else "arr"})"/>')
     for u, b in lay.units.items():
-        lines = unit_text.get(u, [u])
-        parts.append(f'<g class="unit" data-unit="{esc(u)}"><rect x="{b.x - b.w / 2:.1f}" y="{b.y - b.h / 2:.1f}" '
-                     f'width="{b.w:.0f}" height="{b.h:.0f}" rx="6"/>' + _lines(b, lines) + "</g>")
+        lines = unit_text.get(u, [esc(u)])
+        parts.append(f'<g class="unit" data-unit="{esc(u)}"><title>{esc(u)}</title><rect x="{b.x - b.w / 2:.1f}" '
+                     f'y="{b.y - b.h / 2:.1f}" width="{b.w:.1f}" height="{b.h:.1f}" rx="6"/>' + _lines(b, lines)
+                     + "</g>")
     for n, b in lay.labels.items():
-        parts.append(f'<g class="stream-label" data-stream="{esc(n)}"><rect x="{b.x - b.w / 2:.1f}" '
-                     f'y="{b.y - b.h / 2:.1f}" width="{b.w:.0f}" height="{b.h:.0f}" rx="3"/>'
-                     + _lines(b, label_text.get(n, [n])) + "</g>")
+        parts.append(f'<g class="stream-label" data-stream="{esc(n)}"><title>{esc(n)}</title><rect '
+                     f'x="{b.x - b.w / 2:.1f}" y="{b.y - b.h / 2:.1f}" width="{b.w:.1f}" height="{b.h:.1f}" rx="3"/>'
+                     + _lines(b, label_text.get(n, [esc(n)])) + "</g>")
     parts.append("</svg>")
     return "".join(parts)
 
 
 def _lines(b, lines) -> str:
-    y0 = b.y - 7.5 * (len(lines) - 1) + 4
+    y0 = b.y - LINE_H / 2 * (len(lines) - 1) + 4
     out = []
     for k, line in enumerate(lines):
         text, key = (line if isinstance(line, tuple) else (line, None))
         attr = f' data-key="{esc(key)}"' if key else ""
-        cls = ' class="b"' if k == 0 else ""
-        out.append(f'<text x="{b.x:.1f}" y="{y0 + 15 * k:.1f}" text-anchor="middle"{cls}{attr}>{text}</text>')
+        cls = ' class="b"' if k == 0 or isinstance(text, Strong) else ""
+        out.append(f'<text x="{b.x:.1f}" y="{y0 + LINE_H * k:.1f}" text-anchor="middle"{cls}{attr}>{text}</text>')
     return "".join(out)
 
 
@@ -197,9 +215,7 @@ th{background:#eef2f7;text-align:left}td.num{text-align:right;font-variant-numer
 .meta td:first-child{font-weight:600}
 svg{max-width:100%;height:auto;font-size:12px}svg text{fill:#222}svg .ttl{font-weight:600}
 svg .b{font-weight:600}svg .frame{fill:none;stroke:#888}svg .grid{stroke:#e4e4e4}
-.flowsheet .unit rect{fill:#e8f0fa;stroke:#3060a0;stroke-width:1.5}
-.flowsheet .stream{fill:none;stroke:#303030;stroke-width:1.4}.flowsheet .recycle{stroke:#a03030}
-.flowsheet .stream-label rect{fill:#fff;fill-opacity:.92;stroke:#bbb}
+""" + FLOWSHEET_CSS + """
 pre{background:#f6f6f6;padding:.6em;overflow:auto;font-size:.8em}
 .warn{color:#a03030}#js-errors:empty{display:none}
 @media print{body{max-width:none}h2{page-break-after:avoid}}
@@ -210,14 +226,19 @@ SCRIPT = """
 var errs=[];function rec(m){errs.push(m);var e=document.getElementById('js-errors');
 if(e){e.textContent=errs.join('\\n');}}
 window.addEventListener('error',function(ev){rec('error: '+ev.message);});
+function hit(a,b){return a.x<b.x+b.width&&b.x<a.x+a.width&&a.y<b.y+b.height&&b.y<a.y+a.height;}
+function inside(t,r){return t.x>=r.x-0.5&&t.y>=r.y-0.5&&t.x+t.width<=r.x+r.width+0.5&&t.y+t.height<=r.y+r.height+0.5;}
 window.addEventListener('load',function(){
  var ok=true;document.querySelectorAll('svg').forEach(function(s){var r=s.getBoundingClientRect();
   if(!(r.width>0&&r.height>0)){ok=false;rec('empty svg');}});
- var n=0;document.querySelectorAll('svg.flowsheet').forEach(function(svg){var bs=[];
-  svg.querySelectorAll('.unit rect, .stream-label rect').forEach(function(r){bs.push(r.getBBox());});
-  for(var i=0;i<bs.length;i++){for(var j=i+1;j<bs.length;j++){var a=bs[i],b=bs[j];
-   if(a.x<b.x+b.width&&b.x<a.x+a.width&&a.y<b.y+b.height&&b.y<a.y+a.height){n++;}}}});
+ var n=0,spill=0;document.querySelectorAll('svg.flowsheet').forEach(function(svg){var gs=[];
+  svg.querySelectorAll('g.unit, g.stream-label').forEach(function(g){var r=g.querySelector('rect').getBBox();
+   var bs=[r];g.querySelectorAll('text').forEach(function(t){var b=t.getBBox();bs.push(b);
+    if(!inside(b,r)){spill++;}});gs.push(bs);});
+  for(var i=0;i<gs.length;i++){for(var j=i+1;j<gs.length;j++){var o=false;
+   gs[i].forEach(function(a){gs[j].forEach(function(b){if(hit(a,b)){o=true;}});});if(o){n++;}}}});
  document.body.setAttribute('data-overlaps',String(n));
+ document.body.setAttribute('data-spills',String(spill));
  document.body.setAttribute('data-rendered',ok&&errs.length===0?'ok':'failed');
 });})();
 """

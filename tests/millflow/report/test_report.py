@@ -109,7 +109,8 @@ def render(page) -> str:
     p = Cells()
     p.feed(proc.stdout)
     assert p.body.get("data-rendered") == "ok", proc.stdout[:2000]
-    assert p.body.get("data-overlaps") == "0"  # boxes as the browser laid them out
+    assert p.body.get("data-overlaps") == "0"  # boxes and their text as the browser laid them out
+    assert p.body.get("data-spills") == "0"  # no line of text outside its box
     return proc.stdout
 
 
