@@ -3,8 +3,11 @@ side by side.
 
 Solves both and prints one table of the streams they share (by name): t/h, P80 and P50
 in A and in B, and the differences; the circulating loads and specific energies of
-both. Writes ``compare.csv``, ``compare.json`` and ``compare.png`` (cumulative passing
-of every shared stream, A solid, B dashed) into ``--out`` (default ``<A>-vs-<B>/``).
+both. Writes ``compare.csv`` (solids and water t/h, % solids, P80 and P50 of the shared
+streams in A and B), ``compare.json`` (the same, and both flowsheets' summaries),
+``report.html`` (its numbers those of compare.json) and ``compare.png`` (cumulative
+passing of every shared stream, A solid, B dashed) into ``--out`` (default
+``<A>-vs-<B>/``).
 """
 from __future__ import annotations
 
@@ -53,21 +56,28 @@ def run(args) -> int:
     rows = []
     for n in shared:
         a, b = sa["streams"][n], sb["streams"][n]
-        rows.append({"stream": n, "tph_a": a["solids_tph"], "tph_b": b["solids_tph"],
-                     "p80_um_a": a["p80_um"], "p80_um_b": b["p80_um"], "d_p80_um": _d(a["p80_um"], b["p80_um"]),
-                     "p50_um_a": a["p50_um"], "p50_um_b": b["p50_um"], "d_p50_um": _d(a["p50_um"], b["p50_um"])})
+        row = {"stream": n}
+        for key in ("solids_tph", "water_tph", "solids_content_pct", "p80_um", "p50_um"):
+            row[f"{key}_a"], row[f"{key}_b"] = a.get(key), b.get(key)
+            if key in ("p80_um", "p50_um"):
+                row[f"d_{key}"] = _d(a[key], b[key])
+        rows.append(row)
     result = {"a": str(pa), "b": str(pb), "streams": rows,
               "circulating_load": {"a": sa["circulating_load"], "b": sb["circulating_load"]},
               "specific_energy_kWh_per_t": {"a": sa["specific_energy_kWh_per_t"],
-                                            "b": sb["specific_energy_kWh_per_t"]}}
+                                            "b": sb["specific_energy_kWh_per_t"]},
+              "summaries": {"a": sa, "b": sb}}
+    from millflow.report.html import finite
+
+    result = finite(result)  # strict JSON: a number that is not finite is null
     with staged_folder(out, overwrite=args.overwrite, input_path=pa, command="compare") as tmp:
         import pandas as pd
 
-        pd.DataFrame(rows).to_csv(tmp / "compare.csv", index=False, float_format="%.6g")
-        (tmp / "compare.json").write_text(json.dumps(result, indent=1) + "\n", encoding="utf-8")
+        pd.DataFrame(rows).dropna(axis=1, how="all").to_csv(tmp / "compare.csv", index=False, float_format="%.6g")
+        (tmp / "compare.json").write_text(json.dumps(result, indent=1, allow_nan=False) + "\n", encoding="utf-8")
         from millflow.report.studies import compare_report, write_page
 
-        write_page(tmp / "report.html", compare_report(result, sa, sb))
+        write_page(tmp / "report.html", compare_report(result, inputs=(pa, pb)))
         if not args.no_plots:
             _plot(sa, sb, shared, pa.stem, pb.stem, tmp / "compare.png")
     if args.json:
@@ -76,10 +86,11 @@ def run(args) -> int:
         def f(v, fmt="{:.4g}"):
             return "-" if v is None or not math.isfinite(v) else fmt.format(v)
 
+
         head = f"{'stream':<20}{'t/h A':>9}{'t/h B':>9}{'P80 A':>9}{'P80 B':>9}{'dP80':>9}{'P50 A':>9}{'P50 B':>9}"
         print(f"A = {pa}\nB = {pb}\n{head}\n{'-' * len(head)}")
         for r in rows:
-            print(f"{r['stream']:<20}{f(r['tph_a'], '{:.1f}'):>9}{f(r['tph_b'], '{:.1f}'):>9}"
+            print(f"{r['stream']:<20}{f(r['solids_tph_a'], '{:.1f}'):>9}{f(r['solids_tph_b'], '{:.1f}'):>9}"
                   f"{f(r['p80_um_a'], '{:.0f}'):>9}{f(r['p80_um_b'], '{:.0f}'):>9}{f(r['d_p80_um'], '{:+.0f}'):>9}"
                   f"{f(r['p50_um_a'], '{:.0f}'):>9}{f(r['p50_um_b'], '{:.0f}'):>9}")
         def loads(cl):

@@ -49,6 +49,24 @@ def ranking_table(table: list, fitted: str) -> str:
     return "\n".join(lines)
 
 
+def data_files(config) -> list:
+    """The data files a fit config reads (the existing files named in its [data] table,
+    relative to the config), for the report's list of inputs and their SHA-256."""
+    import tomllib
+
+    try:
+        data = tomllib.loads(Path(config).read_text(encoding="utf-8")).get("data") or {}
+    except (OSError, UnicodeDecodeError, tomllib.TOMLDecodeError):
+        return []
+    out = []
+    for v in data.values():
+        if isinstance(v, str):
+            p = Path(v) if Path(v).is_absolute() else Path(config).parent / v
+            if p.is_file():
+                out.append(p)
+    return out
+
+
 def run(args) -> int:
     from millflow.commands.output import check_target, relocate, staged_folder
     from millflow.fitting.config import load_config
@@ -107,12 +125,15 @@ def run(args) -> int:
         sys.stdout.flush()
     with staged_folder(out_dir, overwrite=args.overwrite, input_path=args.config, command="fit") as tmp:
         written = write_report(result, tmp, prediction, plots=cfg.plots and not args.no_plots)
-        from millflow.report.studies import fit_report, write_page
+        from millflow.report.html import finite
+        from millflow.report.studies import fit_curves, fit_report, write_page
 
-        pngs = [f for f in written if str(f).endswith(".png")]
+        js = finite(json.loads(json.dumps(out, default=float)))
+        (Path(tmp) / "fit.json").write_text(json.dumps(js, indent=1, allow_nan=False) + "\n", encoding="utf-8")
+        written.append(str(Path(tmp) / "fit.json"))
         written.append(str(write_page(Path(tmp) / "report.html",
-                                      fit_report(json.loads(json.dumps(out, default=float)), input_path=args.config,
-                                                 images=pngs))))
+                                      fit_report(js, input_path=args.config, data_files=data_files(args.config),
+                                                 curves=fit_curves(result)))))
         files = relocate(written, tmp, out_dir)
     print("wrote " + ", ".join(files), file=sys.stderr if args.json else sys.stdout)
     return 0

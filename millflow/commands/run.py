@@ -46,7 +46,7 @@ def format_summary(s: dict, out_dir: str | None, written: list[str] | None = Non
         + [f"%-{x}um" for x in sizes]
     rows = []
     for name, st in streams.items():
-        slurry = [_f(st.get("water_tph"), "{:.1f}"), _f(st.get("solids_pct"), "{:.1f}")] if wet else []
+        slurry = [_f(st.get("water_tph"), "{:.1f}"), _f(st.get("solids_content_pct"), "{:.1f}")] if wet else []
         rows.append([name, f"{st['from']} -> {st['to']}", _f(st["solids_tph"], "{:.1f}")] + slurry
                     + [_f(st["p80_um"], "{:.0f}"), _f(st["p50_um"], "{:.0f}")]
                     + [_f(st["passing_pct"][x], "{:.1f}") for x in sizes])

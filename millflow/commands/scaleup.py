@@ -54,14 +54,14 @@ def format_summary(s: dict) -> str:
              + (f", gross {s['power_gross_kW']:.4g} kW" if s.get("power_gross_kW") else "")
              + f", hold-up {s['holdup_kg']:.4g} kg, A factor {s['A_factor']:.4g}",
              f"at {s['feed_tph']:.4g} t/h: P80 {s['p80_um']:.4g} um (95 %: {_band(s['bands']['p80_um'], 'um')}), "
-             f"specific energy {s['specific_energy_kWh_t']:.4g} kWh/t, tau {s['tau_s']:.4g} s, "
+             f"specific energy {s['specific_energy_kWh_per_t']:.4g} kWh/t, tau {s['tau_s']:.4g} s, "
              f"circulating load {100 * s['circulating_load']:.1f} %"]
     if "throughput_tph" in s:
         lines.append(f"target P80 {s['target_p80_um']:.4g} um: throughput {s['throughput_tph']:.4g} t/h "
                      f"(95 %: {_band(s['bands']['throughput_tph'], 't/h')}; "
                      f"residual {s['throughput_residual_rel']:.1e}), "
-                     f"specific energy {s['specific_energy_at_target_kWh_t']:.4g} kWh/t "
-                     f"(95 %: {_band(s['bands']['specific_energy_kWh_t'], 'kWh/t', '{:.3g}')})")
+                     f"specific energy {s['specific_energy_at_target_kWh_per_t']:.4g} kWh/t "
+                     f"(95 %: {_band(s['bands']['specific_energy_kWh_per_t'], 'kWh/t', '{:.3g}')})")
     for q, d in s.get("disagreement", {}).items():
         if isinstance(d, dict) and d["nonlinear"]:
             lines.append(f"note: {q}: delta method and Monte Carlo disagree (band widths differ by "
@@ -110,7 +110,7 @@ def run(args) -> int:
         res = predict_plant(su, target, methods=methods, n_draws=args.draws)  # SolverError: exit 1 (cli.main)
         progress.stage("model-form contributions (power models, scaling rule, halved grid)")
         model_form = _model_form(args, fit, su, target, res.summary)
-    s = dict(res.summary)
+    s = file_names(res.summary)
     s["model_form"] = model_form
     s["power_models"] = notes["power_models"]
     s["runtime_s"] = time.perf_counter() - t0
@@ -120,8 +120,9 @@ def run(args) -> int:
              mu_factor=sc["mu"], transport=notes["transport"], transport_params=notes["transport_params"],
              transport_source=notes["transport_source"])
     s["plant_file"] = str(args.plant)
+    s["circuit"] = circuit_summary(su, s)
     with staged_folder(out, overwrite=args.overwrite, input_path=args.plant, command="scaleup") as tmp:
-        files = _write(res, s, tmp, plots=not args.no_plots)
+        files = _write(res, s, tmp, plots=not args.no_plots, fit_path=args.fit)
         files += _write_contributions(s, tmp, plots=not args.no_plots)
     s["files_written"] = [f.name for f in files]
     if args.json:
@@ -175,18 +176,93 @@ def _model_form(args, fit, su, target, summary):
     return contributions(su, target, band, refined)
 
 
+#: Names of the scale-up's results in its files (scaleup.json, the CSVs, report.html) where
+#: the Python summary (:func:`millflow.scaleup.api.predict_plant`) names them otherwise:
+#: one name per quantity in every command's files (docs/cli.md).
+FILE_NAMES = {"specific_energy_kWh_t": "specific_energy_kWh_per_t",
+              "specific_energy_at_target_kWh_t": "specific_energy_at_target_kWh_per_t"}
+
+
+def file_names(summary: dict) -> dict:
+    """A copy of the scale-up summary with the names of :data:`FILE_NAMES` (also in its
+    bands and in the delta-vs-Monte-Carlo comparison)."""
+    def rename(d):
+        return {FILE_NAMES.get(k, k): v for k, v in d.items()}
+
+    s = rename(summary)
+    for key in ("bands", "disagreement"):
+        if isinstance(s.get(key), dict):
+            s[key] = rename(s[key])
+    return s
+
+
+def circuit_summary(su, s: dict) -> dict:
+    """The plant circuit at the estimate as a flowsheet summary (streams with solids t/h,
+    P80, P50 and cumulative passing; units with power, kWh/t, tau and hold-up) for report.html: the
+    mill's transfer matrix at the solved mill flow (fresh feed x (1 + circulating load))
+    applied to the mill feed of the closed loop, m = (I - C T)^-1 f."""
+    import numpy as np
+
+    from millflow.psd import percentile_size
+
+    x = np.asarray(su.x, float)
+    S, b = su.plant_rates(su.fit.theta)
+    c = su.circuit.partition(x)
+    feed = np.asarray(su.feed, float)
+    F = s["feed_tph"] / 3.6
+    load = float(s.get("circulating_load") or 0.0)
+    T, tau = su.circuit._mill_matrix(S, b, F * (1.0 + load))
+    if c is None:
+        m = feed
+    else:
+        m = np.linalg.solve(np.eye(x.size) - c[:, None] * T, feed)
+    d = T @ m
+    if c is None:
+        flows = {"fresh_feed": ("fresh_feed.out", "mill", feed), "product": ("mill.out", "product", d)}
+    else:
+        flows = {"fresh_feed": ("fresh_feed.out", "mixer", feed), "mill_feed": ("mixer.out", "mill", m),
+                 "mill_discharge": ("mill.out", "classifier", d),
+                 "classifier_coarse": ("classifier.coarse", "mixer", c * d),
+                 "product": ("classifier.fine", "product", (1 - c) * d)}
+    streams = {}
+    for n, (src, tgt, f) in flows.items():
+        tot = float(f.sum())
+        frac = f / tot if tot > 0 else f
+        streams[n] = {"from": src, "to": tgt, "solids_tph": tot * s["feed_tph"],
+                      "p80_um": percentile_size(x, frac, 80.0, validate=False) * 1e6,
+                      "p50_um": percentile_size(x, frac, 50.0, validate=False) * 1e6,
+                      "size_um": list(x * 1e6), "cum_passing": list(np.cumsum(frac[::-1])[::-1])}
+    mill_tph = streams["mill_feed" if c is not None else "fresh_feed"]["solids_tph"]
+    units = {"fresh_feed": {"type": "feed"}}
+    if c is not None:
+        units["mixer"] = {"type": "mixer"}
+    units["mill"] = {"type": "mill", "solids_in_tph": mill_tph, "power_kW": s.get("power_net_kW"),
+                     "specific_energy_kWh_per_t": s.get("power_net_kW") / mill_tph, "tau_s": tau,
+                     "holdup_kg": s.get("holdup_kg"), "method": f"{su.circuit.transport} {su.circuit.transport_params}"}
+    if c is not None:
+        params = {k: v for k, v in su.circuit.classifier.items() if k != "curve"}
+        units["classifier"] = {"type": "classifier", "solids_in_tph": streams["mill_discharge"]["solids_tph"],
+                               "d50c_m": params.get("d50c"), "method": f"{su.circuit.classifier['curve']} curve"}
+    units["product"] = {"type": "product"}
+    return {"title": s.get("title"), "streams": streams, "units": units,
+            "mass_balance_error": abs(streams["product"]["solids_tph"] - s["feed_tph"]) / s["feed_tph"]}
+
+
 def _write_contributions(s, out: Path, plots: bool):
+    """scaleup_contributions.csv (6 significant digits, values in the quantity's unit:
+    ``_um`` for P80, ``_tph`` for a throughput) and scaleup_contributions.png."""
     import pandas as pd
 
     mf = s["model_form"]
-    rows = [{"source": k, "half_width": r["half_width"], "relative": r["rel"], "how": r["how"],
-             **{f"at_{a}": v for a, v in r["alternatives"].items()}} for k, r in mf["contributions"].items()]
-    for row, r in zip(rows, mf["contributions"].values()):
-        row["log_factor"] = r["log_factor"]
-    rows.append({"source": "total", "log_factor": mf["total"]["log_factor"], "at_lo": mf["total"]["lo"],
-                 "at_hi": mf["total"]["hi"], "how": mf["total"]["how"]})
+    u = "tph" if mf["quantity"] == "throughput_tph" else "um"
+    rows = [{"source": k, f"half_width_{u}": r["half_width"], "half_width_pct": 100 * r["rel"],
+             "log_factor": r["log_factor"], f"low_{u}": None, f"high_{u}": None,
+             **{f"at_{a}_{u}": v for a, v in r["alternatives"].items()}, "how": r["how"]}
+            for k, r in mf["contributions"].items()]
+    rows.append({"source": "total", "log_factor": mf["total"]["log_factor"], f"low_{u}": mf["total"]["lo"],
+                 f"high_{u}": mf["total"]["hi"], "how": mf["total"]["how"]})
     files = [out / "scaleup_contributions.csv"]
-    pd.DataFrame(rows).to_csv(files[0], index=False)
+    pd.DataFrame(rows).to_csv(files[0], index=False, float_format="%.6g")
     if plots:
         from millflow.plotting import figure
 
@@ -203,7 +279,7 @@ def _write_contributions(s, out: Path, plots: bool):
     return files
 
 
-def _write(res, s, out: Path, plots: bool):
+def _write(res, s, out: Path, plots: bool, fit_path=None):
     import pandas as pd
 
     files = [out / "scaleup.nc", out / "scaleup_psd.csv", out / "scaleup.json"]
@@ -225,11 +301,13 @@ def _write(res, s, out: Path, plots: bool):
     cols["passing_pct"] = np.clip(cols["passing_pct"], 0.0, 100.0)  # rounding above 100 % only
     s["band_edges_at_physical_bounds"] = clipped
     pd.DataFrame(cols).to_csv(files[1], index=False, float_format="%.6g")
-    files[2].write_text(json.dumps(s, indent=1, default=float))
+    from millflow.report.html import finite
+
+    files[2].write_text(json.dumps(finite(s), indent=1, default=float, allow_nan=False) + "\n", encoding="utf-8")
     from millflow.report.studies import scaleup_report, write_page
 
-    files.append(write_page(out / "report.html", scaleup_report(json.loads(json.dumps(s, default=float)), ds,
-                                                                input_path=s.get("plant_file"))))
+    files.append(write_page(out / "report.html", scaleup_report(json.loads(files[2].read_text(encoding="utf-8")), ds,
+                                                                input_path=s.get("plant_file"), fit_path=fit_path)))
     if plots:
         from millflow.plotting import figure
 

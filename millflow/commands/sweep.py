@@ -56,10 +56,14 @@ def run(args) -> int:
         ds.to_netcdf(tmp / "sweep.nc")
         cases = ds.to_dataframe().reset_index()
         cases.to_csv(tmp / "sweep.csv", index=False, float_format="%.6g")
-        from millflow.report.studies import sweep_report, write_page
+        from millflow.report.html import finite
+        from millflow.report.studies import SWEEP_ROWS, sweep_report, write_page
 
-        write_page(tmp / "report.html", sweep_report(summary, cases, input_path=path))
-        (tmp / "summary.json").write_text(json.dumps(summary, indent=1) + "\n", encoding="utf-8")
+        # summary.json: the summary, and the first rows of sweep.csv that report.html shows
+        page_data = dict(summary, keys=[a.key for a in axes], columns=[str(c) for c in cases.columns],
+                         rows=finite(cases.head(SWEEP_ROWS).values.tolist()), n_rows=len(cases))
+        (tmp / "summary.json").write_text(json.dumps(page_data, indent=1, allow_nan=False) + "\n", encoding="utf-8")
+        write_page(tmp / "report.html", sweep_report(page_data, ds, input_path=path))
         if not args.no_plots:
             _plots(ds, axes, tmp / "sweep.png")
     if args.json:

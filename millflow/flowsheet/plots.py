@@ -94,7 +94,7 @@ def _flowsheet_labels(sol, ds=None):
         if wet:
             water = float(sol.water_flow(n)) * 3.6
             total = s["solids_tph"] + water
-            s.update(water_tph=water, solids_pct=100 * s["solids_tph"] / total if total > 0 else float("nan"))
+            s.update(water_tph=water, solids_content_pct=100 * s["solids_tph"] / total if total > 0 else float("nan"))
         out[n] = stream_label(n, s)
     return out
 

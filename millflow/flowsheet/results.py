@@ -332,7 +332,7 @@ def summary(sol, props=None, grid_check=None) -> dict:
             streams[n].update(p80_grid_error=gs["p80_grid_error"], p50_grid_error=gs["p50_grid_error"],
                               p80_converged_um=gs["p80_converged_um"], p50_converged_um=gs["p50_converged_um"])
         if "water_kg_s" in p:
-            streams[n].update(water_tph=p["water_kg_s"] * TPH, solids_pct=p["solids_content"] * 100)
+            streams[n].update(water_tph=p["water_kg_s"] * TPH, solids_content_pct=p["solids_content"] * 100)
             if "volume_flow_m3_s" in p:
                 streams[n].update(volume_flow_m3_h=p["volume_flow_m3_s"] * 3600,
                                   pulp_density_t_m3=p["pulp_density_kg_m3"] / 1000)
@@ -402,7 +402,7 @@ def stream_table(sol, props=None):
         p, s = props[n], fs.streams[n]
         row = {"stream": n, "from": f"{s.source}.{s.port}", "to": s.target, "solids_tph": p["solids_kg_s"] * TPH}
         if "water_kg_s" in p:
-            row.update(water_tph=p["water_kg_s"] * TPH, solids_pct=p["solids_content"] * 100)
+            row.update(water_tph=p["water_kg_s"] * TPH, solids_content_pct=p["solids_content"] * 100)
             if "volume_flow_m3_s" in p:
                 row.update(volume_flow_m3_h=p["volume_flow_m3_s"] * 3600,
                            pulp_density_t_m3=p["pulp_density_kg_m3"] / 1000)

@@ -162,7 +162,8 @@ def balance_report(summary: dict, *, input_text: str | None = None, input_name: 
         psd, xlabel="sieve size [um]", ylabel="cumulative passing [%]", ylim=(0, 100))))
     if input_text is not None:
         sections.append((f"Input file {input_name or ''}", f"<pre>{esc(input_text)}</pre>"))
-    return page(summary.get("title") or summary.get("source_file") or "survey balance", sections, data=summary)
+    return page(summary.get("title") or summary.get("source_file") or "survey balance", sections, data=summary,
+                source="summary.json")
 
 
 def write_balance_report(path, summary: dict, *, input_path=None, command: str = "millflow balance") -> Path:

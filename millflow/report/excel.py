@@ -52,6 +52,7 @@ def write_workbook(path, summary: dict, class_tph: dict | None = None) -> Path:
     except ImportError:
         raise InputError("results.xlsx needs openpyxl: pip install 'millflow[report]'") from None
     from millflow.report.flowsheet import UNIT_COLUMNS
+    from millflow.report.html import method_text
 
     wb = Workbook()
     bold = Font(bold=True)
@@ -68,7 +69,7 @@ def write_workbook(path, summary: dict, class_tph: dict | None = None) -> Path:
     for n, s in streams.items():
         row = [n, s["from"], s["to"], _num(s.get("solids_tph"))]
         if wet:
-            row += [_num(s.get("water_tph")), _num(s.get("solids_pct"))]
+            row += [_num(s.get("water_tph")), _num(s.get("solids_content_pct"))]
         row += [_num(s.get("p80_um")), _num(s.get("p50_um"))] + [_num(s.get("passing_pct", {}).get(x))
                                                                   for x in sizes]
         ws.append(row)
@@ -94,7 +95,7 @@ def write_workbook(path, summary: dict, class_tph: dict | None = None) -> Path:
     ws.append(["unit", "type"] + [c[0] for c in cols] + ["method"])
     for u, r in summary["units"].items():
         ws.append([u, r.get("type")] + [None if _num(r.get(k)) is None else r[k] * scale for _, k, scale in cols]
-                  + [r.get("method")])
+                  + [method_text(r.get("method"))])
     _style(ws, bold, {})
 
     ws = wb.create_sheet("About")

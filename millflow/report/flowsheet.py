@@ -11,7 +11,7 @@ from __future__ import annotations
 import hashlib
 from pathlib import Path
 
-from millflow.report.html import esc, flowsheet_svg, fmt, line_plot, page, read_input, table
+from millflow.report.html import esc, flowsheet_svg, fmt, line_plot, method_text, page, read_input, table
 from millflow.report.layout import LAYERS_PER_ROW, layout
 from millflow.report.textsize import Strong, name_lines
 
@@ -58,7 +58,7 @@ def stream_label(name: str, s: dict) -> list[str]:
     (wet); P80."""
     lines = [Strong(esc(t)) for t in name_lines(name)] + [f"{fmt(s.get('solids_tph'))} t/h solids"]
     if s.get("water_tph") is not None:
-        lines.append(f"{fmt(s.get('water_tph'))} t/h water, {fmt(s.get('solids_pct'))} % solids")
+        lines.append(f"{fmt(s.get('water_tph'))} t/h water, {fmt(s.get('solids_content_pct'))} % solids")
     lines.append(f"P80 {fmt(s.get('p80_um'))} um")
     return lines
 
@@ -79,17 +79,19 @@ def partition_curves(sol) -> dict:
     return out
 
 
-def _stream_rows(summary: dict, wet: bool) -> tuple[list, list]:
+def _stream_rows(summary: dict, wet: bool, prefix: str = "") -> tuple[list, list]:
+    """Head and rows of the stream table; ``prefix``: where the summary sits in the page's
+    JSON (``summaries.a.`` in compare.json, ``circuit.`` in scaleup.json)."""
     streams = summary["streams"]
     sizes = list(next(iter(streams.values())).get("passing_pct", {})) if streams else []
     head = ["stream", "from", "to", "solids t/h"] + (["water t/h", "% solids"] if wet else []) \
         + ["P80 um", "P50 um"] + [f"% passing {x} um" for x in sizes]
     rows = []
     for n, s in streams.items():
-        k = f"streams.{n}."
+        k = f"{prefix}streams.{n}."
         row = [n, s["from"], s["to"], (s.get("solids_tph"), k + "solids_tph")]
         if wet:
-            row += [(s.get("water_tph"), k + "water_tph"), (s.get("solids_pct"), k + "solids_pct")]
+            row += [(s.get("water_tph"), k + "water_tph"), (s.get("solids_content_pct"), k + "solids_content_pct")]
         row += [(s.get("p80_um"), k + "p80_um"), (s.get("p50_um"), k + "p50_um")]
         row += [(s.get("passing_pct", {}).get(x), f"{k}passing_pct.{x}") for x in sizes]
         rows.append(row)
@@ -105,15 +107,24 @@ UNIT_COLUMNS = [("solids in t/h", "solids_in_tph", 1.0), ("water in t/h", "water
                 ("water balance error", "water_balance_error", 1.0), ("error estimate", "error_estimate", 1.0)]
 
 
-def _unit_rows(summary: dict) -> tuple[list, list]:
+def _unit_rows(summary: dict, prefix: str = "") -> tuple[list, list]:
+    """Head and rows of the unit table (the method with its numbers at 4 digits)."""
     units = summary["units"]
     cols = [c for c in UNIT_COLUMNS if any(r.get(c[1]) is not None for r in units.values())]
     head = ["unit", "type"] + [c[0] for c in cols] + ["method"]
     rows = []
     for u, r in units.items():
-        rows.append([u, r.get("type", "")] + [(r.get(key), f"units.{u}.{key}", 4, scale) for _, key, scale in cols]
-                    + [r.get("method", "")])
+        rows.append([u, r.get("type", "")] + [(r.get(key), f"{prefix}units.{u}.{key}", 4, scale)
+                                              for _, key, scale in cols] + [method_text(r.get("method", ""))])
     return head, rows
+
+
+def stream_and_unit_sections(summary: dict, prefix: str = "", title: str = "") -> list:
+    """The (heading, html) sections of a flowsheet's streams and units, keys under ``prefix``."""
+    wet = any(s.get("water_tph") is not None for s in summary["streams"].values())
+    head, rows = _stream_rows(summary, wet, prefix)
+    uhead, urows = _unit_rows(summary, prefix)
+    return [(f"Streams{title}", table(head, rows, cls="streams")), (f"Units{title}", table(uhead, urows, cls="units"))]
 
 
 def _solver_rows(summary: dict) -> list:
@@ -163,7 +174,6 @@ def flowsheet_report(summary: dict, *, partition: dict | None = None, input_text
     from millflow import __version__
 
     streams = summary["streams"]
-    wet = any(s.get("water_tph") is not None for s in streams.values())
     svg = drawing(summary)
     sections = []
     sha = summary.get("input_sha256")
@@ -178,10 +188,7 @@ def flowsheet_report(summary: dict, *, partition: dict | None = None, input_text
         meta.append(["grid check", g["status"]])
     sections.append(("", table(["", ""], meta, cls="meta")))
     sections.append(("Flowsheet", svg))
-    head, rows = _stream_rows(summary, wet)
-    sections.append(("Streams", table(head, rows, cls="streams")))
-    head, rows = _unit_rows(summary)
-    sections.append(("Units", table(head, rows, cls="units")))
+    sections += stream_and_unit_sections(summary)
     sections.append(("Balances, solver and grid errors", table(["quantity", "value"], _solver_rows(summary),
                                                               cls="solver")))
     psd = [(f"{n} (P80 {fmt(s.get('p80_um'))} um)", s.get("size_um", []), [None if v is None else 100 * v
@@ -195,7 +202,8 @@ def flowsheet_report(summary: dict, *, partition: dict | None = None, input_text
                                                       ylabel="fraction to the coarse stream [-]", ylim=(0, 1))))
     if input_text is not None:
         sections.append((f"Input file {input_name or ''}", f"<pre>{esc(input_text)}</pre>"))
-    return page(summary.get("title") or summary.get("source_file") or "millflow results", sections, data=summary)
+    return page(summary.get("title") or summary.get("source_file") or "millflow results", sections, data=summary,
+                source="summary.json")
 
 
 def write_report(path, summary: dict, *, input_path=None, partition: dict | None = None,

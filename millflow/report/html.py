@@ -17,11 +17,12 @@ from __future__ import annotations
 import html
 import json
 import math
+import re
 
 from millflow.report.layout import FlowsheetLayout
 from millflow.report.textsize import LINE_H, Strong
 
-__all__ = ["SIG", "fmt", "table", "line_plot", "flowsheet_svg", "page"]
+__all__ = ["SIG", "fmt", "table", "line_plot", "flowsheet_svg", "page", "details", "method_text"]
 
 #: Significant digits of the numbers in a report.
 SIG = 4
@@ -40,6 +41,18 @@ def fmt(v, sig: int = SIG, *, pct: bool = False) -> str:
     if a < 1e-3:
         return f"{v:.{sig - 1}e}" if sig > 2 else f"{v:.1e}"
     return f"{v:.{sig}g}"
+
+
+_LONG_NUMBER = re.compile(r"(?<![\w.])[-+]?\d+\.\d{5,}(?:[eE][-+]?\d+)?(?![\w.])"
+                          r"|(?<![\w.])[-+]?\d+(?:\.\d+)?[eE][-+]?\d+")
+
+
+def method_text(text, sig: int = SIG) -> str:
+    """A method description with its long numbers at ``sig`` significant digits
+    ("tau=393.49708243757686" -> "tau=393.5"); other text as it is."""
+    if not isinstance(text, str):
+        return "" if text is None else str(text)
+    return _LONG_NUMBER.sub(lambda m: fmt(float(m.group(0)), sig), text)
 
 
 def esc(s) -> str:
@@ -85,27 +98,56 @@ def _ticks_log(lo: float, hi: float) -> list[float]:
     return out
 
 
+def _ticks_lin(lo: float, hi: float, n: int = 5) -> list[float]:
+    """Round ticks (1, 2 or 5 times a power of ten apart) covering [lo, hi], about ``n`` of them."""
+    raw = (hi - lo) / n
+    mag = 10.0 ** math.floor(math.log10(raw))
+    step = next(m * mag for m in (1, 2, 5, 10) if m * mag >= raw)
+    first = math.ceil(lo / step - 1e-9)
+    return [k * step for k in range(first, math.floor(hi / step + 1e-9) + 1)]
+
+
 def line_plot(series: list, *, xlabel: str, ylabel: str, ylim=None, xlog: bool = True,
               width: int = 760, height: int = 380, title: str = "") -> str:
-    """An SVG line plot. ``series``: (label, xs, ys) with finite positive xs on a log axis."""
-    pts = [(lab, [(x, y) for x, y in zip(xs, ys) if x is not None and y is not None and math.isfinite(x)
-                  and math.isfinite(y) and (x > 0 or not xlog)]) for lab, xs, ys in series]
-    pts = [(lab, p) for lab, p in pts if p]
-    left, right, top, bottom = 64, 220, 16 + (18 if title else 0), 48
+    """An SVG line plot. ``series``: (label, xs, ys) or (label, xs, ys, style) with style
+    ``"line"`` (default), ``"dashed"`` or ``"points"`` (markers only), or a dict with keys
+    ``style`` and ``color`` (an index into :data:`COLORS`, to draw several series in one
+    colour); a series labelled None has no legend entry. On a log axis (``xlog``) only
+    finite positive xs are drawn."""
+    items = []
+    for item in series:
+        lab, xs, ys = item[:3]
+        style = item[3] if len(item) > 3 else "line"
+        style = style if isinstance(style, dict) else {"style": style}
+        p = [(x, y) for x, y in zip(xs, ys) if x is not None and y is not None and math.isfinite(x)
+             and math.isfinite(y) and (x > 0 or not xlog)]
+        if p:
+            items.append((lab, p, style.get("style", "line"), style.get("color", len(items))))
+    legend = [it for it in items if it[0] is not None]
+    left, right, top, bottom = 64, 220 if legend else 24, 16 + (18 if title else 0), 48
+    height = max(height, top + 18 * len(legend) + 8)
     pw, ph = width - left - right, height - top - bottom
     parts = [f'<svg xmlns="http://www.w3.org/2000/svg" class="plot" viewBox="0 0 {width} {height}" '
              f'width="{width}" height="{height}" role="img" aria-label="{esc(title or ylabel)}">']
     if title:
         parts.append(f'<text x="{left}" y="16" class="ttl">{esc(title)}</text>')
-    if not pts:
+    if not items:
         parts.append(f'<text x="{width / 2}" y="{height / 2}" text-anchor="middle">no data</text></svg>')
         return "".join(parts)
-    xs = [x for _, p in pts for x, _ in p]
-    ys = [y for _, p in pts for _, y in p]
+    xs = [x for _, p, _, _ in items for x, _ in p]
+    ys = [y for _, p, _, _ in items for _, y in p]
     x0, x1 = min(xs), max(xs)
     if x1 <= x0:
-        x1 = x0 * 10 if xlog else x0 + 1
-    y0, y1 = ylim if ylim else (min(ys), max(ys) if max(ys) > min(ys) else min(ys) + 1)
+        x0, x1 = (x0 / 2, x0 * 2) if xlog else (x0 - 0.5 * (abs(x0) or 1), x0 + 0.5 * (abs(x0) or 1))
+    if ylim:
+        y0, y1 = ylim
+    else:
+        y0, y1 = min(ys), max(ys)
+        pad = 0.05 * (y1 - y0) if y1 > y0 else 0.5 * (abs(y0) or 1)
+        y0, y1 = y0 - pad, y1 + pad
+        t = _ticks_lin(y0, y1)
+        step = t[1] - t[0] if len(t) > 1 else (y1 - y0)
+        y0, y1 = step * math.floor(y0 / step), step * math.ceil(y1 / step)  # the axis from tick to tick
 
     def X(x):
         f = (math.log10(x) - math.log10(x0)) / (math.log10(x1) - math.log10(x0)) if xlog else (x - x0) / (x1 - x0)
@@ -115,23 +157,36 @@ def line_plot(series: list, *, xlabel: str, ylabel: str, ylim=None, xlog: bool =
         return top + (1 - (y - y0) / (y1 - y0)) * ph
 
     parts.append(f'<rect x="{left}" y="{top}" width="{pw}" height="{ph}" class="frame"/>')
-    for t in (_ticks_log(x0, x1) if xlog else [x0 + k * (x1 - x0) / 5 for k in range(6)]):
+    for t in (_ticks_log(x0, x1) if xlog else _ticks_lin(x0, x1)):
         parts.append(f'<line x1="{X(t):.1f}" x2="{X(t):.1f}" y1="{top}" y2="{top + ph}" class="grid"/>'
                      f'<text x="{X(t):.1f}" y="{top + ph + 16}" text-anchor="middle">{fmt(t, 3)}</text>')
-    for k in range(6):
-        t = y0 + k * (y1 - y0) / 5
+    for t in _ticks_lin(y0, y1):
         parts.append(f'<line x1="{left}" x2="{left + pw}" y1="{Y(t):.1f}" y2="{Y(t):.1f}" class="grid"/>'
                      f'<text x="{left - 6}" y="{Y(t) + 4:.1f}" text-anchor="end">{fmt(t, 3)}</text>')
     parts.append(f'<text x="{left + pw / 2}" y="{height - 10}" text-anchor="middle">{esc(xlabel)}</text>'
                  f'<text transform="translate(16 {top + ph / 2}) rotate(-90)" text-anchor="middle">'
                  f'{esc(ylabel)}</text>')
-    for k, (lab, p) in enumerate(pts):
-        c = COLORS[k % len(COLORS)]
-        d = " ".join(f"{X(x):.1f},{Y(min(max(y, y0), y1)):.1f}" for x, y in p)
-        parts.append(f'<polyline points="{d}" fill="none" stroke="{c}" stroke-width="1.8"/>')
-        ly = top + 8 + 18 * k
-        parts.append(f'<line x1="{left + pw + 12}" x2="{left + pw + 34}" y1="{ly}" y2="{ly}" stroke="{c}" '
-                     f'stroke-width="2.5"/><text x="{left + pw + 40}" y="{ly + 4}">{esc(lab)}</text>')
+    k_leg = 0
+    for lab, p, style, ci in items:
+        c = COLORS[ci % len(COLORS)]
+        pts = [(X(x), Y(min(max(y, y0), y1))) for x, y in p]
+        if style == "points":
+            parts.append("".join(f'<circle cx="{a:.1f}" cy="{b:.1f}" r="2.6" fill="{c}"/>' for a, b in pts))
+        else:
+            dash = ' stroke-dasharray="6 4"' if style == "dashed" else ""
+            d = " ".join(f"{a:.1f},{b:.1f}" for a, b in pts)
+            parts.append(f'<polyline points="{d}" fill="none" stroke="{c}" stroke-width="1.8"{dash}/>')
+        if lab is None:
+            continue
+        ly = top + 8 + 18 * k_leg
+        k_leg += 1
+        xl = left + pw + 12
+        if style == "points":
+            parts.append(f'<circle cx="{xl + 11}" cy="{ly}" r="3" fill="{c}"/>')
+        else:
+            dash = ' stroke-dasharray="6 4"' if style == "dashed" else ""
+            parts.append(f'<line x1="{xl}" x2="{xl + 22}" y1="{ly}" y2="{ly}" stroke="{c}" stroke-width="2.5"{dash}/>')
+        parts.append(f'<text x="{xl + 28}" y="{ly + 4}">{esc(lab)}</text>')
     parts.append("</svg>")
     return "".join(parts)
 
@@ -244,20 +299,32 @@ window.addEventListener('load',function(){
 """
 
 
-def page(title: str, sections: list, *, data: dict | None = None) -> str:
+def page(title: str, sections: list, *, data: dict | None = None, source: str | None = None) -> str:
     """The whole page. ``sections``: (heading, html) pairs; ``data``: embedded as JSON in
-    ``<script type="application/json" id="summary">`` (the numbers the page shows)."""
+    ``<script type="application/json" id="summary">`` (the numbers the page shows: every
+    ``data-key`` is a path into it); ``source``: the file of the folder that ``data`` is
+    (``summary.json``, ``compare.json`` ...), named on the page (``data-source``)."""
     body = [f"<h1>{esc(title)}</h1>", '<pre id="js-errors" class="warn"></pre>']
+    if source:
+        body.append(f'<p class="source">Every number on this page is one of <code>{esc(source)}</code> '
+                    "(in this folder, and embedded at the end of the page), shown to 4 significant digits.</p>")
     for heading, content in sections:
         body.append(f"<h2>{esc(heading)}</h2>{content}" if heading else content)
     blob = ""
     if data is not None:
         text = json.dumps(finite(data), allow_nan=False).replace("</", "<\\/")
-        blob = f'<script type="application/json" id="summary">{text}</script>'
+        src = f' data-source="{esc(source)}"' if source else ""
+        blob = f'<script type="application/json" id="summary"{src}>{text}</script>'
+    src = f' data-source="{esc(source)}"' if source else ""
     return ("<!DOCTYPE html>\n<html lang=\"en\"><head><meta charset=\"utf-8\">"
             f"<meta name=\"viewport\" content=\"width=device-width, initial-scale=1\"><title>{esc(title)}</title>"
-            f"<style>{CSS}</style><script>{SCRIPT}</script></head><body>" + "".join(body) + blob
+            f"<style>{CSS}</style><script>{SCRIPT}</script></head><body{src}>" + "".join(body) + blob
             + "</body></html>\n")
+
+
+def details(summary: str, content: str) -> str:
+    """A section shown folded (an input file's text)."""
+    return f"<details><summary>{esc(summary)}</summary>{content}</details>"
 
 
 def read_input(input_path) -> tuple[str | None, str | None]:

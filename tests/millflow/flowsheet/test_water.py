@@ -133,13 +133,13 @@ def test_hydrocyclone_water_split_defaults_to_bypass():
 def test_wet_results_carry_slurry_columns():
     sol = solve(wet())
     table = stream_table(sol)
-    for col in ("water_tph", "solids_pct", "volume_flow_m3_h", "pulp_density_t_m3"):
+    for col in ("water_tph", "solids_content_pct", "volume_flow_m3_h", "pulp_density_t_m3"):
         assert col in table.columns
     row = table.loc["underflow"]
     rho = 100 / (75 / 2.8 + 25 / 1.0)  # pulp density of 75 % solids, rho_s 2.8 t/m3
     assert row["pulp_density_t_m3"] == pytest.approx(rho, rel=1e-12)
     js = summary(sol)
-    assert js["water_balance_error"] < 1e-12 and js["streams"]["fresh"]["solids_pct"] == pytest.approx(95)
+    assert js["water_balance_error"] < 1e-12 and js["streams"]["fresh"]["solids_content_pct"] == pytest.approx(95)
     assert js["units"]["ball_mill"]["tau_s"] == pytest.approx(240)
     assert js["units"]["ball_mill"]["holdup_kg"] == pytest.approx(240 * sol.flow("mill_feed").sum())
 

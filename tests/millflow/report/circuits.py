@@ -65,7 +65,7 @@ def random_circuit(seed: int, n_units: int = 20):
     for n in streams:
         solids = 10 ** r.uniform(0, 3.2)
         water = 10 ** r.uniform(0, 3.2)
-        s = {"solids_tph": solids, "water_tph": water, "solids_pct": 100 * solids / (solids + water),
+        s = {"solids_tph": solids, "water_tph": water, "solids_content_pct": 100 * solids / (solids + water),
              "p80_um": 10 ** r.uniform(1, 4)}
         labels[n] = stream_label(n, s)
     return units, streams, labels

@@ -13,7 +13,7 @@ from millflow.report.textsize import box_size, name_lines, text_width
 from tests.millflow.report.circuits import random_circuit
 from tests.millflow.report.test_report import render
 
-WET = {"solids_tph": 524.1226, "water_tph": 128.7627, "solids_pct": 80.27790, "p80_um": 792.65}
+WET = {"solids_tph": 524.1226, "water_tph": 128.7627, "solids_content_pct": 80.27790, "p80_um": 792.65}
 
 
 def test_text_width_is_the_font_advance():

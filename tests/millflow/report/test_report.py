@@ -87,7 +87,7 @@ def test_page_numbers_are_summary_json(result):
         label = text.split(f'<g class="stream-label" data-stream="{name}">')[1].split("</g>")[0]
         assert f"{fmt(s['solids_tph'])} t/h solids" in label and f"P80 {fmt(s['p80_um'])} um" in label
         if wet:
-            assert f"{fmt(s['water_tph'])} t/h water, {fmt(s['solids_pct'])} % solids" in label
+            assert f"{fmt(s['water_tph'])} t/h water, {fmt(s['solids_content_pct'])} % solids" in label
 
 
 def _browser():
@@ -131,7 +131,7 @@ def test_workbook_numbers_are_summary_json(result):
     for row in rows[1:]:
         s = summary["streams"][row[0]]
         got = dict(zip(head, row))
-        for col, key in (("solids t/h", "solids_tph"), ("water t/h", "water_tph"), ("% solids", "solids_pct"),
+        for col, key in (("solids t/h", "solids_tph"), ("water t/h", "water_tph"), ("% solids", "solids_content_pct"),
                          ("P80 um", "p80_um"), ("P50 um", "p50_um")):
             if key in s:
                 assert got[col] == pytest.approx(s[key], rel=1e-12)

@@ -67,7 +67,7 @@ def test_example_end_to_end_json_and_files(tmp_path, fit_json, capsys):
     assert s["power_gross_kW"] == pytest.approx(s["power_net_kW"] / 0.93, rel=1e-12)
     lo, hi = s["bands"]["throughput_tph"]["delta"].values()
     assert lo < s["throughput_tph"] < hi
-    assert s["specific_energy_at_target_kWh_t"] == pytest.approx(s["power_net_kW"] / s["throughput_tph"], rel=1e-12)
+    assert s["specific_energy_at_target_kWh_per_t"] == pytest.approx(s["power_net_kW"] / s["throughput_tph"], rel=1e-12)
 
 
 @pytest.mark.parametrize("edit,match", [
