@@ -90,7 +90,7 @@ def run(args) -> int:
     with staged_folder(out, overwrite=args.overwrite, input_path=args.config, command="diagnose") as tmp:
         ds = _dataset(diag)
         ds.to_netcdf(tmp / "results.nc")
-        ds.to_dataframe().to_csv(tmp / "table.csv")
+        ds.to_dataframe().to_csv(tmp / "table.csv", float_format="%.6g")  # 6 significant digits (docs/cli.md)
         files = ["results.nc", "table.csv"]
         if not args.no_plots:
             _plot(diag, tmp / "fits.png")

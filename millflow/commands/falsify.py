@@ -40,7 +40,7 @@ def run(args) -> int:
         res.dataset.to_netcdf(tmp / "results.nc")
         (tmp / "summary.json").write_text(json.dumps(summary, indent=2) + "\n", encoding="utf-8")
         table = res.dataset[["truth", "mean_estimate", "bias", "bias_se", "bias_pct", "coverage", "se_ratio"]]
-        table.to_dataframe().to_csv(tmp / "summary.csv")
+        table.to_dataframe().to_csv(tmp / "summary.csv", float_format="%.6g")  # 6 significant digits (docs/cli.md)
         files = ["results.nc", "summary.json", "summary.csv"]
         if not args.no_plots:
             plot_sweep(res.dataset, tmp / "bias_coverage.png")

@@ -18,8 +18,8 @@ Tables and keys (paths relative to the config file)::
     [params.NAME] value, min, max, vary
     [optimizer]   global = true, starts = 20, popsize = 15, maxiter = 200, seed = 0
     [validation]  hold_out = "each" | ["cond", ...] | [["a", "b"], ...]
-    [output]      dir = "fit-results", plots = true   (relative to the config file; without
-                  dir: <config stem>-fit in the current folder, as every command)
+    [output]      dir = "fit-results", plots = true   (dir relative to the current folder, as
+                  --out; without dir: <config stem>-fit in the current folder, as every command)
     [[candidates]] label = "...", plus any [model] keys: extra forms to rank (AIC/BIC, F)
 """
 from __future__ import annotations
@@ -287,8 +287,9 @@ def load_config(path, data_dir: str | None = None) -> FitConfig:
         raise InputError(f"{path} [data] tracer: tracer data need [model] mode = 'mill' (mode is {spec.mode!r})")
     wt = table_of(cfg, "weights", where)
     weights = {str(k): number(wt, k, f"{path} [weights]", lo=0.0) for k in wt}
-    return FitConfig(path, data, spec, params, grid, opt, val.get("hold_out"),
-                     rel(out_dir) if out_dir is not None else str(Path.cwd() / f"{Path(path).stem}-fit"),
+    # in the current folder, as --out and every command's default (docs/cli.md)
+    out_dir = str(Path(out_dir).absolute()) if out_dir is not None else str(Path.cwd() / f"{Path(path).stem}-fit")
+    return FitConfig(path, data, spec, params, grid, opt, val.get("hold_out"), out_dir,
                      plots, cands, label, tracer, weights)
 
 

@@ -417,9 +417,12 @@ def unit_table(sol):
     """pandas DataFrame: one row per unit (type, method, error estimate, run time, mass balance, energy)."""
     import pandas as pd
 
+    from millflow.report.html import method_text  # numbers in the text at the CSV's 10 digits
+
     rows = []
     for u, r in sol.units.items():
-        rows.append({"unit": u, "type": r["type"], "method": r["method"], "solids_in_tph": r["solids_in_kg_s"] * TPH,
+        rows.append({"unit": u, "type": r["type"], "method": method_text(r["method"], 10),
+                     "solids_in_tph": r["solids_in_kg_s"] * TPH,
                      "mass_balance_error": r["mass_balance_error"], "error_estimate": r["error_estimate"],
                      "runtime_s": r["runtime_s"], "tau_min": r["tau_s"] / 60 if r.get("tau_s") else None,
                      "holdup_t": r["holdup_kg"] / 1e3 if r.get("holdup_kg") else None, "power_kW": r.get("power_kW"),

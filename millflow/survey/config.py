@@ -99,5 +99,5 @@ def survey_fit_config(path) -> SurveyFitConfig | None:
     d = out.get("dir")
     if d is not None and not isinstance(d, str):
         raise InputError(f"{where} [output] dir = {d!r}: expected a folder name")
-    out_dir = None if d is None else str(Path(d) if Path(d).is_absolute() else p.resolve().parent / d)
+    out_dir = None if d is None else str(Path(d).absolute())  # the current folder, as --out (docs/cli.md)
     return SurveyFitConfig(str(p), survey, {"names": names, "bounds": bounds, **options}, out_dir, plots, seed)

@@ -174,3 +174,66 @@ def test_progress_on_a_terminal_and_quiet_hides_it(tmp_path, monkeypatch, capsys
         assert err == ""
     else:
         assert "millflow run" in err and "grid check" in err and "write" in err
+
+
+def _where_it_would_write(monkeypatch, argv):
+    """The folder a command checks before its work (its output folder); the work is not done."""
+    import millflow.commands.output as output
+
+    seen = []
+
+    def stop(out, **kw):
+        seen.append(out)
+        raise KeyboardInterrupt
+
+    monkeypatch.setattr(output, "check_target", stop)
+    args = build_parser().parse_args(argv)
+    with pytest.raises(KeyboardInterrupt):
+        args.func(args)
+    return seen[0]
+
+
+@pytest.mark.parametrize("output", ["", '[output]\ndir = "my-fit"\n'])
+def test_fit_writes_into_the_current_folder(tmp_path, monkeypatch, output):
+    """An [output] dir of a config is relative to the current folder, as --out; without it
+    <config stem>-fit in the current folder: never into the folder of the config."""
+    import shutil
+
+    src = paths.EXAMPLES / "scaleup"
+    cfgdir, work = tmp_path / "configs", tmp_path / "work"
+    cfgdir.mkdir()
+    work.mkdir()
+    for f in ("lab_psd.csv", "lab_process.csv"):
+        shutil.copyfile(src / f, cfgdir / f)
+    (cfgdir / "lab.toml").write_text((src / "lab_fit.toml").read_text() + output)
+    monkeypatch.chdir(work)
+    out = _where_it_would_write(monkeypatch, ["fit", str(cfgdir / "lab.toml")])
+    assert out.resolve() == (work / ("my-fit" if output else "lab-fit")).resolve()
+
+
+@pytest.mark.parametrize("argv,folder", [
+    (["run", "{fs}/open_circuit_ball_mill.toml"], "open_circuit_ball_mill-results"),
+    (["compare", "{fs}/open_circuit_ball_mill.toml", "{fs}/closed_circuit_ball_mill.toml"],
+     "open_circuit_ball_mill-vs-closed_circuit_ball_mill"),
+    (["sweep", "{fs}/open_circuit_ball_mill.toml", "--vary", "units.ball_mill.power_kW=1:2:2"],
+     "open_circuit_ball_mill-sweep"),
+    (["balance", "{ex}/survey/survey.toml"], "survey-balance"),
+    (["fit", "{ex}/scaleup/lab_fit.toml"], "lab_fit-fit"),
+    (["diagnose", "{ex}/scaleup/lab_fit.toml"], "lab_fit-diagnose"),
+    (["falsify", "{docs}/examples/falsify/tanks.toml"], "tanks-falsify"),
+    (["scaleup", "fit.json", "--to", "{ex}/scaleup/plant.toml"], "plant-scaleup"),
+    (["fit-rtd", "{docs}/examples/tracer_tis.csv"], "tracer_tis-rtd"),
+])
+def test_every_command_defaults_to_stem_kind_in_the_current_folder(tmp_path, monkeypatch, argv, folder):
+    monkeypatch.chdir(tmp_path)
+    argv = [a.format(fs=paths.FLOWSHEETS, ex=paths.EXAMPLES, docs=paths.DOCS) for a in argv]
+    assert _where_it_would_write(monkeypatch, argv).resolve() == (tmp_path / folder).resolve()
+
+
+def test_shipped_configs_name_no_output_folder():
+    import tomllib
+
+    for toml in [*paths.REPO.glob("examples/**/*.toml"), *paths.REPO.glob("docs/**/*.toml"),
+                 *paths.FLOWSHEETS.glob("*.toml")]:
+        doc = tomllib.loads(toml.read_text(encoding="utf-8"))
+        assert "dir" not in (doc.get("output") or {}), f"{toml}: [output] dir in a shipped example"
