@@ -382,16 +382,21 @@ def grid_independence(refinements=GRID_REFINEMENTS) -> list[dict]:
 # ------------------------------------------------------------------------- the suite
 def run(quick: bool = False) -> list[dict]:
     """All rows: work precision per case and size, targets at N = 100, grid independence."""
+    from millflow.progress import note
+
     sizes = SIZES_QUICK if quick else SIZES_FULL
     rows = []
     for n in sizes:
-        for case in core_cases(n).values():
+        for name, case in core_cases(n).items():
+            note(f"work precision: {name}, N = {n}")  # shown by millflow bench on a terminal
             rows.extend(work_precision(case, n, quick))
     missing = sorted({r["reference"] for r in rows if "reference" in r})
     for msg in missing:
         print(f"millflow bench core: no reference ({msg}); errors are left blank. Make them with "
               "python benchmarks/reference_core.py or millflow bench core --make-references", file=sys.stderr)
+    note("targets at N = 100")
     rows.extend(targets(rows))
+    note("grid independence")
     rows.extend(grid_independence(GRID_REFINEMENTS[:4] if quick else GRID_REFINEMENTS))
     return rows
 

@@ -12,7 +12,6 @@ from __future__ import annotations
 
 import json
 import math
-import sys
 from pathlib import Path
 
 from millflow.commands.output import add_output_flags
@@ -128,29 +127,34 @@ def balance_and_fit(args, survey, path: Path, out: Path, fit_spec: dict | None, 
     from millflow.survey import reconcile
     from millflow.survey.results import save, summary
 
-    bal = reconcile(survey)
-    s = summary(bal)
-    cf = None
-    if fit_spec:
-        from millflow.survey.fit import fit_circuit
+    from millflow.progress import progress
 
-        f = fit_spec
-        if not args.quiet and not args.json:
-            print(f"fitting {len(f['names'])} circuit parameters to the reconciled survey ...", file=sys.stderr)
-        cf = fit_circuit(bal, f["names"], f["bounds"], starts=f["starts"], global_search=f["global_search"],
-                         leave_one_out=f["leave_one_out"], quiet=args.quiet or args.json, seed=seed)
-        s["fit"] = cf.to_dict()
-    with staged_folder(out, overwrite=args.overwrite, input_path=path, command=command) as tmp:
-        files = relocate(save(bal, tmp, plots=plots and not args.no_plots).values(), tmp, out)
-        if cf is not None:
-            from millflow.survey.fit import to_toml
+    names = ["reconcile"] + (["fit circuit"] if fit_spec else []) + ["write"]
+    with progress(f"millflow {command}", names, enabled=not args.quiet) as stage:
+        stage("reconcile")
+        bal = reconcile(survey)
+        s = summary(bal)
+        cf = None
+        if fit_spec:
+            from millflow.survey.fit import fit_circuit
 
-            (tmp / "fitted_circuit.toml").write_text(
-                f"# {survey.flowsheet.title or 'circuit'}: parameters fitted to the survey "
-                f"{Path(survey.source).name} by millflow {command}\n" + to_toml(cf.document()), encoding="utf-8")
-            (tmp / "fit.json").write_text(json.dumps(s["fit"], indent=2, default=float), encoding="utf-8")
-            files += relocate([tmp / "fitted_circuit.toml", tmp / "fit.json"], tmp, out)
-        files += relocate(write_reports(tmp, s, path).values(), tmp, out)
+            f = fit_spec
+            stage("fit circuit")
+            cf = fit_circuit(bal, f["names"], f["bounds"], starts=f["starts"], global_search=f["global_search"],
+                             leave_one_out=f["leave_one_out"], quiet=True, seed=seed)
+            s["fit"] = cf.to_dict()
+        stage("write")
+        with staged_folder(out, overwrite=args.overwrite, input_path=path, command=command) as tmp:
+            files = relocate(save(bal, tmp, plots=plots and not args.no_plots).values(), tmp, out)
+            if cf is not None:
+                from millflow.survey.fit import to_toml
+
+                (tmp / "fitted_circuit.toml").write_text(
+                    f"# {survey.flowsheet.title or 'circuit'}: parameters fitted to the survey "
+                    f"{Path(survey.source).name} by millflow {command}\n" + to_toml(cf.document()), encoding="utf-8")
+                (tmp / "fit.json").write_text(json.dumps(s["fit"], indent=2, default=float), encoding="utf-8")
+                files += relocate([tmp / "fitted_circuit.toml", tmp / "fit.json"], tmp, out)
+            files += relocate(write_reports(tmp, s, path).values(), tmp, out)
     s["output_dir"] = str(out)
     s["files_written"] = [Path(f).name for f in files]
     if args.json:

@@ -58,7 +58,9 @@ def add_parser(subparsers) -> None:
     )
     p.add_argument("suite", help="suite name, e.g. core")
     p.add_argument("--json", action="store_true", help="print the rows as a JSON array instead of a table")
-    p.add_argument("--quiet", action="store_true", help="no notes on stderr (the table or JSON still prints)")
+    from millflow.commands.output import QUIET_HELP
+
+    p.add_argument("--quiet", action="store_true", help=QUIET_HELP)
     p.add_argument("--plot", default=None, metavar="FILE.png",
                    help="also draw error against run time for every method on one log-log axis")
     p.add_argument("--quick", action="store_true", help="fewer sizes and repeats (a few seconds)")
@@ -110,9 +112,9 @@ def run_command(args) -> int:
         if code is not None:
             return code
         threads = "default"
-        if not getattr(args, "quiet", False):
-            print("millflow bench: BLAS threads not limited (set OPENBLAS_NUM_THREADS=1 OMP_NUM_THREADS=1 "
-                  "MKL_NUM_THREADS=1 before starting Python); timings may differ", file=sys.stderr)
+        # a warning on the timings, not progress: --quiet does not hide it
+        print("millflow bench: BLAS threads not limited (set OPENBLAS_NUM_THREADS=1 OMP_NUM_THREADS=1 "
+              "MKL_NUM_THREADS=1 before starting Python); timings may differ", file=sys.stderr)
     if args.make_references:
         maker = getattr(suite, "make_references", None)
         if maker is None:
@@ -120,10 +122,12 @@ def run_command(args) -> int:
         maker()
     if args.plot and os.path.exists(args.plot):  # checked before the run, not after it
         raise InputError(f"--plot {args.plot}: exists; give a new file name (or remove it)")
-    from millflow.progress import stages
+    from millflow.progress import progress
 
     label = f"suite {args.suite}" + (" (quick)" if args.quick else "")
-    with stages("millflow bench", [label], enabled=not getattr(args, "quiet", False)) as stage:
+    # one stage; the suite says which case it runs with millflow.progress.note, and the
+    # elapsed time ticks meanwhile
+    with progress("millflow bench", [label], enabled=not getattr(args, "quiet", False)) as stage:
         stage(label)
         rows = suite.run(quick=args.quick)
     kernels = kernel_status()

@@ -10,7 +10,6 @@ output folder (default ``<config stem>-diagnose/`` in the current folder).
 from __future__ import annotations
 
 import json
-import sys
 from pathlib import Path
 
 from millflow.commands.output import add_output_flags
@@ -21,8 +20,7 @@ def add_parser(subparsers) -> None:
                               "aggregation, RTDs) on a fit config's data", description=__doc__.splitlines()[0])
     p.add_argument("config", help="TOML fit configuration (see docs/fitting.md)")
     add_output_flags(p, out="output folder (default <config stem>-diagnose in the current folder)",
-                     json="print one JSON object instead of the table", plots="do not write the plot",
-                     quiet="no progress messages")
+                     json="print one JSON object instead of the table", plots="do not write the plot")
     p.add_argument("--no-loco", action="store_true", help="skip the leave-one-condition-out refits")
     p.set_defaults(func=run)
 
@@ -81,11 +79,14 @@ def run(args) -> int:
     from millflow.fitting.config import load_config
     from millflow.fitting.diagnose import diagnose
 
-    say = (lambda msg: None) if args.quiet else (lambda msg: print(f"[diagnose] {msg}", file=sys.stderr, flush=True))
+    from millflow.progress import note, progress
+
     cfg = load_config(args.config)
     out = Path(args.out) if args.out else Path.cwd() / f"{Path(args.config).stem}-diagnose"
     check_target(out, overwrite=args.overwrite, input_path=args.config)  # before the fits, not after
-    diag = diagnose(cfg, progress=say, quiet=args.quiet, loco=not args.no_loco)
+    with progress("millflow diagnose", ["candidate fits"], enabled=not args.quiet) as stage:
+        stage("candidate fits")
+        diag = diagnose(cfg, progress=note, quiet=False, loco=not args.no_loco)
     summary = diag.to_dict()
     with staged_folder(out, overwrite=args.overwrite, input_path=args.config, command="diagnose") as tmp:
         ds = _dataset(diag)

@@ -9,7 +9,6 @@ non-empty DIR is refused unless --overwrite. See docs/model-error.md.
 from __future__ import annotations
 
 import json
-import sys
 from pathlib import Path
 
 from millflow.commands.output import add_output_flags
@@ -30,11 +29,14 @@ def run(args) -> int:
     from millflow.falsify.config import load_config
     from millflow.falsify.plots import plot_sweep
 
-    say = (lambda msg: None) if args.quiet else (lambda msg: print(f"[falsify] {msg}", file=sys.stderr, flush=True))
+    from millflow.progress import note, progress
+
     cfg = load_config(args.config)
     out = Path(args.out) if args.out else Path.cwd() / f"{Path(args.config).stem}-falsify"
     check_target(out, overwrite=args.overwrite, input_path=args.config)  # before the study, not after
-    res = cfg.run(progress=say)
+    with progress("millflow falsify", ["study"], enabled=not args.quiet) as stage:
+        stage("study")
+        res = cfg.run(progress=note)
     summary = res.summary()
     with staged_folder(out, overwrite=args.overwrite, input_path=args.config, command="falsify") as tmp:
         res.dataset.to_netcdf(tmp / "results.nc")

@@ -6,7 +6,7 @@ flowsheet parameters of a whole circuit to the reconciled survey instead (docs/s
 Reads the TOML config (:mod:`millflow.fitting.config`), runs the global fit, ranks
 candidate forms if any, predicts held-out conditions, writes the parameter table,
 summary and plots into the output folder, and prints a summary (or, with --json, one
-JSON object). Progress goes to stderr.
+JSON object). Progress goes to stderr on a terminal (not with --quiet: millflow.progress).
 """
 from __future__ import annotations
 
@@ -84,32 +84,38 @@ def run(args) -> int:
         check_target(out_dir, overwrite=args.overwrite, input_path=args.config)
         return balance_and_fit(args, sc.survey, Path(args.config), out_dir, sc.fit, command="fit",
                                plots=sc.plots, seed=sc.seed)
-    say = (lambda msg: None) if args.quiet else (lambda msg: print(f"[fit] {msg}", file=sys.stderr, flush=True))
+    from millflow.progress import note, progress
+
     cfg = load_config(args.config, data_dir=args.data_dir)
     out_dir = Path(args.out or cfg.out_dir)
     check_target(out_dir, overwrite=args.overwrite, input_path=args.config)  # before a long fit, not after
     model = cfg.model()
-    say(f"{model}")
-    result = fit(model, cfg.params, progress=say, **cfg.optimizer)
-    out = result.to_dict()
-    if len(set(model.data_kind)) > 1:  # several data kinds: how much each constrains each parameter
-        from millflow.fitting.information import information_shares
-        out["information_share"] = information_shares(result)
-    if cfg.candidates:
-        models = {cfg.label: model}
-        params = {cfg.label: cfg.params}
-        for label, spec, par in cfg.candidates:
-            models[label] = cfg.model(spec, model.grid)
-            params[label] = par
-        say(f"ranking {len(models)} candidate models")
-        cmp = compare_models(models, params, **cfg.optimizer)
-        out["discrimination"] = {"table": cmp["table"], "f_tests": cmp["f_tests"]}
-    prediction = None
-    if cfg.hold_out:
-        say("predictive validation")
-        prediction = leave_out(model, cfg.params, cfg.hold_out, progress=say, **cfg.optimizer)
-        out["prediction"] = {c: {"rmse": v} for c, v in prediction["rmse"].items()}
-        out["prediction_mean_rmse"] = prediction["mean_rmse"]
+    names = ["fit"] + (["rank candidates"] if cfg.candidates else []) + (["predictive validation"]
+                                                                         if cfg.hold_out else [])
+    with progress("millflow fit", names, enabled=not args.quiet) as stage:
+        stage("fit")
+        note(str(model))
+        result = fit(model, cfg.params, progress=note, **cfg.optimizer)
+        out = result.to_dict()
+        if len(set(model.data_kind)) > 1:  # several data kinds: how much each constrains each parameter
+            from millflow.fitting.information import information_shares
+            out["information_share"] = information_shares(result)
+        if cfg.candidates:
+            models = {cfg.label: model}
+            params = {cfg.label: cfg.params}
+            for label, spec, par in cfg.candidates:
+                models[label] = cfg.model(spec, model.grid)
+                params[label] = par
+            stage("rank candidates")
+            note(f"{len(models)} candidate models")
+            cmp = compare_models(models, params, progress=note, **cfg.optimizer)
+            out["discrimination"] = {"table": cmp["table"], "f_tests": cmp["f_tests"]}
+        prediction = None
+        if cfg.hold_out:
+            stage("predictive validation")
+            prediction = leave_out(model, cfg.params, cfg.hold_out, progress=note, **cfg.optimizer)
+            out["prediction"] = {c: {"rmse": v} for c, v in prediction["rmse"].items()}
+            out["prediction_mean_rmse"] = prediction["mean_rmse"]
     # print first: a failed write never loses a finished fit
     if args.json:
         print(json.dumps(out, default=float), flush=True)

@@ -32,6 +32,11 @@ def add_parser(subparsers) -> None:
                     "(columns time_<unit>, concentration or F, optional inlet).",
         epilog="example: millflow fit-rtd docs/examples/tracer_tis.csv --model tis --out tis-fit")
     rtd_cli.add_arguments(p, several_models=True)
+    from millflow.commands.output import QUIET_HELP
+
+    for action in p._actions:  # --quiet means what it means in every millflow command
+        if "--quiet" in action.option_strings:
+            action.help = QUIET_HELP
     p.add_argument("--out", default=None, metavar="DIR",
                    help="output folder for fit.json and fit.png (default <csv stem>-rtd/)")
     p.add_argument("--overwrite", action="store_true",
@@ -102,6 +107,8 @@ def run(args) -> int:
     if out is not None:
         check_target(out, overwrite=args.overwrite, input_path=args.csv)
     fits = {}
+    from millflow.progress import progress
+
     try:
         path, curve = rtd_cli.load_curve(args.csv, args.kind, args.baseline)
         mom = tracer_moments(curve)
@@ -109,10 +116,12 @@ def run(args) -> int:
 
         if args.cells is not None and not any(canonical_name(m) == "recirculating_cells" for m in models):
             raise rtd.RTDError(f"--cells {args.cells}: applies to --model recirculating_cells (or cells) only")
-        for name in models:  # --cells belongs to the recirculating-cells model among several
-            cells = args.cells if canonical_name(name) == "recirculating_cells" else None
-            result = rtd_cli.fit_curve(path, curve, name, cells)
-            fits[name] = (result, params_at_bounds(result, mom["mean"]))
+        with progress("millflow fit-rtd", [f"fit {m}" for m in models], enabled=not args.quiet) as stage:
+            for name in models:  # --cells belongs to the recirculating-cells model among several
+                stage(f"fit {name}")
+                cells = args.cells if canonical_name(name) == "recirculating_cells" else None
+                result = rtd_cli.fit_curve(path, curve, name, cells)
+                fits[name] = (result, params_at_bounds(result, mom["mean"]))
     except rtd.RTDError as err:
         raise InputError(str(err)) from None
     unit = curve.time_unit or "time unit"

@@ -9,15 +9,13 @@ Beside the parameter band, the band's model-form contributions (power model, sca
 size grid; :mod:`millflow.scaleup.modelform`), each its own line, and the total band with
 how it is formed. Writes scaleup.nc, scaleup_psd.csv, scaleup.json, scaleup_contributions.csv,
 scaleup.png and scaleup_contributions.png into the output folder (default
-``<plant stem>-scaleup``). A run longer than 2 s says on stderr what it is doing. Bad input:
-exit 2; a failed solve: exit 1.
+``<plant stem>-scaleup``). On a terminal, progress goes to stderr (not with --quiet). Bad
+input: exit 2; a failed solve: exit 1.
 """
 from __future__ import annotations
 
 import json
 import math
-import sys
-import threading
 import time
 from pathlib import Path
 
@@ -89,7 +87,7 @@ def format_summary(s: dict) -> str:
 
 
 def run(args) -> int:
-    from millflow.commands.output import check_target, staged_folder
+    from millflow.commands.output import check_target
     from millflow.scaleup.api import predict_plant
     from millflow.scaleup.fitted import load_fit
     from millflow.scaleup.plantfile import load_plant
@@ -103,13 +101,31 @@ def run(args) -> int:
         from millflow.errors import InputError
         raise InputError(f"--draws {args.draws}: expected >= 10")
     methods = {"both": ("delta", "mc"), "delta": ("delta",), "mc": ("mc",)}[args.band_method]
+    from millflow.progress import progress
+
     t0 = time.perf_counter()
-    with _Progress(enabled=not args.quiet) as progress:
-        progress.stage(f"parameter bands ({', '.join(methods)}"
-                       + (f", Monte Carlo {args.draws} draws" if "mc" in methods else "") + ")")
+    bands = (f"parameter bands ({', '.join(methods)}"
+             + (f", Monte Carlo {args.draws} draws" if "mc" in methods else "") + ")")
+    contrib = "model-form contributions (power models, scaling rule, halved grid)"
+    with progress("millflow scaleup", [bands, contrib, "write"], enabled=not args.quiet) as stage:
+        stage(bands)
         res = predict_plant(su, target, methods=methods, n_draws=args.draws)  # SolverError: exit 1 (cli.main)
-        progress.stage("model-form contributions (power models, scaling rule, halved grid)")
+        stage(contrib)
         model_form = _model_form(args, fit, su, target, res.summary)
+        stage("write")
+        s = _finish(args, res, model_form, notes, su, t0, out)
+    if args.json:
+        print(json.dumps(s, default=float))
+    else:
+        print(format_summary(s))
+        print(f"wrote {out}/ ({', '.join(s['files_written'])})")
+    return 0
+
+
+def _finish(args, res, model_form, notes, su, t0, out):
+    """The summary of the files (scaleup.json) and the files written."""
+    from millflow.commands.output import staged_folder
+
     s = file_names(res.summary)
     s["model_form"] = model_form
     s["power_models"] = notes["power_models"]
@@ -125,43 +141,7 @@ def run(args) -> int:
         files = _write(res, s, tmp, plots=not args.no_plots, fit_path=args.fit)
         files += _write_contributions(s, tmp, plots=not args.no_plots)
     s["files_written"] = [f.name for f in files]
-    if args.json:
-        print(json.dumps(s, default=float))
-    else:
-        print(format_summary(s))
-        print(f"wrote {out}/ ({', '.join(s['files_written'])})")
-    return 0
-
-
-class _Progress:
-    """After 2 s, one line on stderr every 2 s: what the run is doing and for how long."""
-
-    def __init__(self, enabled: bool, first: float = 2.0, every: float = 2.0):
-        self.enabled, self.first, self.every = enabled, first, every
-        self.text, self._stop = "starting", threading.Event()
-
-    def stage(self, text: str) -> None:
-        self.text = text
-
-    def _run(self):
-        t0 = time.perf_counter()
-        if self._stop.wait(self.first):
-            return
-        while not self._stop.is_set():
-            print(f"millflow scaleup: {self.text} ... {time.perf_counter() - t0:.0f} s", file=sys.stderr, flush=True)
-            self._stop.wait(self.every)
-
-    def __enter__(self):
-        if self.enabled:
-            self._thread = threading.Thread(target=self._run, daemon=True)
-            self._thread.start()
-        return self
-
-    def __exit__(self, *exc):
-        self._stop.set()
-        if self.enabled:
-            self._thread.join()
-        return False
+    return s
 
 
 def _model_form(args, fit, su, target, summary):

@@ -48,8 +48,11 @@ def run(args) -> int:
         raise InputError(f"--workers {args.workers}: expected a whole number >= 1")
     out = Path(args.out) if args.out else Path.cwd() / f"{path.stem}-sweep"
     check_target(out, overwrite=args.overwrite, input_path=path)
+    from millflow.progress import shown
+
+    # sweep's bar of cases, under the one rule of millflow.progress: on a terminal, not with --quiet
     ds = run_sweep(path, axes, samples=args.samples, seed=args.seed, scheduler=args.scheduler,
-                   workers=args.workers, progress=not args.quiet)
+                   workers=args.workers, progress=shown(not args.quiet))
     summary = {"file": str(path), "cases": int(ds.attrs["n_cases"]), "failed": int(ds.attrs["n_failed"]),
                "design": ds.attrs["design"], "varied": ds.attrs["varied"], "out": str(out)}
     with staged_folder(out, overwrite=args.overwrite, input_path=path, command="sweep") as tmp:

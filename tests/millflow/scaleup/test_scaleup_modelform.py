@@ -1,10 +1,8 @@
 """The scale-up band's model-form contributions (millflow.scaleup.modelform), the power-model
 family shared by lab and plant, and the progress of ``millflow scaleup``."""
 import dataclasses
-import io
 import json
 import math
-import time
 
 import numpy as np
 import pytest
@@ -87,19 +85,3 @@ def test_cli_prints_each_contribution_the_total_and_the_draws(tmp_path, fit_json
     assert main(["scaleup", str(fit_json), "--to", str(mixed), "--draws", "20", "--method", "mc", "--out",
                  str(tmp_path / "m")]) == 0
     assert "note: mixed power models: lab hogg_fuerstenau, plant austin" in capsys.readouterr().out
-
-
-def test_progress_speaks_after_its_delay(monkeypatch):
-    from millflow.commands import scaleup as cmd
-
-    err = io.StringIO()
-    monkeypatch.setattr(cmd.sys, "stderr", err)
-    with cmd._Progress(enabled=True, first=0.05, every=0.05) as p:
-        p.stage("Monte Carlo 400 draws")
-        time.sleep(0.3)
-    assert "millflow scaleup: Monte Carlo 400 draws ..." in err.getvalue()
-    quiet = io.StringIO()
-    monkeypatch.setattr(cmd.sys, "stderr", quiet)
-    with cmd._Progress(enabled=True, first=5.0):
-        pass  # a short run says nothing
-    assert quiet.getvalue() == ""
