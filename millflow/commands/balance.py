@@ -105,6 +105,10 @@ def write_reports(folder: Path, s: dict, input_path) -> dict:
     files = {"report_html": write_balance_report(folder / "report.html", s, input_path=input_path)}
     if excel_available():
         files["results_xlsx"] = write_balance_workbook(folder / "results.xlsx", s)
+    else:
+        from millflow.commands.output import excel_missing_note
+
+        excel_missing_note()
     return files
 
 

@@ -173,7 +173,20 @@ def write_extras(sol, summary: dict, folder, *, input_path=None, command: str = 
         from millflow.report.excel import class_flows_tph
 
         files["results_xlsx"] = write_workbook(folder / "results.xlsx", summary, class_flows_tph(sol))
+    else:
+        excel_missing_note()
     return files
+
+
+#: The one note when results.xlsx cannot be written (docs/cli.md).
+EXCEL_NOTE = "results.xlsx not written: pip install 'millflow[report]'"
+
+
+def excel_missing_note() -> None:
+    """Say on stderr, once per command, that results.xlsx was not written and how to get it."""
+    import sys
+
+    print(f"millflow: note: {EXCEL_NOTE}", file=sys.stderr)
 
 
 def deprecated_alias(p, old: str, new: str, dest: str) -> None:
