@@ -39,7 +39,7 @@ def test_gallery_shows_every_example_with_its_input_and_report():
         assert f"(downloads/{toml.name})" in page, toml.name  # the input, downloadable
         assert f"(gallery/reports/{toml.stem}.html)" in page, toml.name
         assert (paths.DOCS / "gallery" / "reports" / f"{toml.stem}.html").is_file()
-        assert (paths.DOCS / "gallery" / "img" / f"{toml.stem}-flowsheet.png").is_file()
+        assert (paths.DOCS / "gallery" / "img" / f"{toml.stem}-flowsheet.svg").is_file()  # the report's drawing
     for job in ("run", "tracer", "fit", "scaleup", "sweep", "survey"):  # one run per daily job, its output shown
         assert (paths.DOCS / "gallery" / "out" / f"{job}.txt").read_text().startswith("$ millflow ")
     # the survey balance: its inputs downloadable, its report published

@@ -4,7 +4,8 @@
 
 Runs every job of :data:`JOBS` (the commands a user types, in a temporary folder, from
 the repository root's files), and solves every flowsheet of ``flowsheets/``; writes
-docs/gallery/img/<example>-flowsheet.png and -psd.png, docs/gallery/reports/<example>.html
+docs/gallery/img/<example>-flowsheet.svg (the report's drawing, two layers of units to a
+row so its text reads at the width the site shows it) and -psd.png, docs/gallery/reports/<example>.html
 (the run's report.html), docs/gallery/out/<job>.txt (what the job printed) and
 docs/gallery.md itself, whose captions carry the numbers of these runs. The files are
 committed, so the site builds without running the solver; the inputs are downloads
@@ -37,18 +38,21 @@ JOBS = [
       ["run", "{tmp}/tracer_mill.toml", "--no-grid-check", "--out", "{tmp}/tracer_mill"]],
      ["tracer_tis.csv", "tracer_mill.toml"]),
     ("fit", "Fit breakage parameters to batch tests",
-     "Eq. 5 rates and eq. 6 breakage fitted to synthetic lab batch tests (stated so), with standard errors.",
+     "Eq. 5 rates and eq. 6 breakage fitted to synthetic lab batch tests (stated so), with standard errors "
+     "([the fit's report](gallery/reports/lab_fit.html)).",
      [["fit", "examples/scaleup/lab_fit.toml", "--out", "{tmp}/fit"]],
      ["lab_fit.toml", "lab_psd.csv", "lab_process.csv"]),
     ("scaleup", "Carry the lab fit to a plant circuit",
      "The fit above drives a closed ball-mill circuit at plant scale; the throughput that meets a P80 "
-     "target, with delta-method bands.",
+     "target, with delta-method bands and the model-form contributions "
+     "([the scale-up's report](gallery/reports/plant_scaleup.html): the plant circuit drawn, its streams and units).",
      [["fit", "examples/scaleup/lab_fit.toml", "--json", "--quiet", "--out", "{tmp}/fit2", ">", "{tmp}/fit.json"],
       ["scaleup", "{tmp}/fit.json", "--to", "examples/scaleup/plant.toml", "--target-p80-um", "150",
        "--band-method", "delta", "--out", "{tmp}/plant"]],
      ["lab_fit.toml", "plant.toml"]),
     ("sweep", "Sweep a circuit over mill power and feed rate",
-     "20 cases of the closed ball-mill circuit (serial here; a Dask cluster with `--scheduler`).",
+     "20 cases of the closed ball-mill circuit (serial here; a Dask cluster with `--scheduler`); "
+     "[the sweep's report](gallery/reports/sweep.html) plots P80, circulating load and kWh/t against both keys.",
      [["sweep", "flowsheets/closed_circuit_ball_mill.toml", "--vary", "units.ball_mill.power_kW=3000:4600:5",
        "--vary", "units.fresh_feed.solids_tph=150:300:4", "--scheduler", "serial", "--out", "{tmp}/sweep"]],
      ["closed_circuit_ball_mill.toml"]),
@@ -64,7 +68,13 @@ JOBS = [
 ]
 
 #: job name -> (report.html under the job's folder, published name in docs/gallery/reports/)
-JOB_REPORTS = {"survey": ("survey/report.html", "survey_balance.html")}
+JOB_REPORTS = {"survey": ("survey/report.html", "survey_balance.html"), "fit": ("fit/report.html", "lab_fit.html"),
+               "scaleup": ("plant/report.html", "plant_scaleup.html"), "sweep": ("sweep/report.html", "sweep.html")}
+
+#: Width [px] at which the site shows a gallery image (the content column of the theme),
+#: and the layers of units per row of the gallery's drawings: two keep a drawing narrow
+#: enough that its 12 px text is at least 9 px high at that width.
+SHOWN_PX, GALLERY_LAYERS = 688, 2
 
 
 def _shown(cmd, tmp) -> str:
@@ -99,7 +109,9 @@ def run_jobs(tmp: Path) -> dict:
         if name in JOB_REPORTS:
             src, dst = JOB_REPORTS[name]
             (HERE / "reports").mkdir(exist_ok=True)
-            shutil.copyfile(tmp / src, HERE / "reports" / dst)
+            # published without this machine's temporary folder (the sweep's summary names its output)
+            text = (tmp / src).read_text(encoding="utf-8").replace(str(tmp) + "/", "")
+            (HERE / "reports" / dst).write_text(text, encoding="utf-8")
         (HERE / "out" / f"{name}.txt").write_text(printed[name])
     return printed
 
@@ -108,6 +120,7 @@ def solve_examples(tmp: Path) -> list:
     from millflow.commands.output import write_extras
     from millflow.flowsheet import load, save, solve, summary
     from millflow.flowsheet.results import stream_properties
+    from millflow.report.flowsheet import drawing
 
     img = HERE / "img"
     reports = HERE / "reports"
@@ -122,8 +135,10 @@ def solve_examples(tmp: Path) -> list:
         s["source_file"] = f"flowsheets/{toml.name}"  # not this machine's path in the published page
         save(sol, out, plots=True, props=props)
         write_extras(sol, s, out, input_path=toml)
-        for kind in ("psd", "flowsheet"):
-            shutil.copyfile(out / f"{kind}.png", img / f"{toml.stem}-{kind}.png")
+        shutil.copyfile(out / "psd.png", img / f"{toml.stem}-psd.png")
+        # the drawing of report.html, narrow enough to read at the width the site shows it
+        (img / f"{toml.stem}-flowsheet.svg").write_text(
+            drawing(s, layers_per_row=GALLERY_LAYERS, standalone=True), encoding="utf-8")
         shutil.copyfile(out / "report.html", reports / f"{toml.stem}.html")
         rows.append((toml, s))
         print(toml.stem, file=sys.stderr)
@@ -162,7 +177,7 @@ def write_page(printed: dict, rows: list) -> None:
         lines += [f"### {title}", "",
                   f"[{toml.name}](downloads/{toml.name}) ([report](gallery/reports/{stem}.html)): {_caption(s)}.", "",
                   f"![{title}: circuit, each stream with its solids (and water) t/h and P80]"
-                  f"(gallery/img/{stem}-flowsheet.png)", "",
+                  f"(gallery/img/{stem}-flowsheet.svg)", "",
                   f"![{title}: cumulative passing of every stream](gallery/img/{stem}-psd.png)", ""]
     lines += ["## Model error: falsification studies", "",
               "Bias and coverage of a linear, perfectly mixed fit against truths with model error "

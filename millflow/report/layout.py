@@ -109,6 +109,9 @@ def layout(units: dict, streams: dict, label_lines: int = 4, *, label_text: dict
            unit_text: dict | None = None, layers_per_row: int = LAYERS_PER_ROW) -> FlowsheetLayout:
     """Lay out a flowsheet.
 
+    When the first placement leaves a label overlapping a box, or a route through a unit,
+    the spacing grows by a quarter and the layout is made again (up to four times).
+
     Parameters
     ----------
     units : dict
@@ -127,9 +130,6 @@ def layout(units: dict, streams: dict, label_lines: int = 4, *, label_text: dict
         :data:`UNIT_W` by :data:`UNIT_H` and as large as its text.
     layers_per_row : int
         Layers of units per row before the drawing wraps (fewer: a narrower, taller drawing).
-
-    When the first placement leaves a label overlapping a box, or a route through a unit,
-    the spacing grows by a quarter and the layout is made again (up to four times).
     """
     if label_text is None:
         lsize = {n: (LABEL_W, LINE_H * label_lines + 6) for n in streams}
