@@ -96,11 +96,10 @@ def _fit_plots(curves: dict) -> str:
     return "".join(out)
 
 
-def fit_report(out: dict, *, input_path=None, data_files=(), curves: dict | None = None, images=()) -> str:
+def fit_report(out: dict, *, input_path=None, data_files=(), curves: dict | None = None) -> str:
     """The page of a breakage fit: ``out`` is fit.json (the dict ``millflow fit --json``
     prints), ``data_files`` the data files the config reads, ``curves`` the fit's plots as
-    numbers (:func:`fit_curves`). ``images`` is accepted for old callers and ignored: the
-    plots are SVG drawn from ``curves``."""
+    numbers (:func:`fit_curves`), drawn as SVG."""
     meta, inputs = input_rows([("config file", input_path)] + [("data file", p) for p in data_files],
                               "millflow fit", [["model", out.get("model", "")],
                                                ["covariance", out.get("covariance_kind", "")]])

@@ -73,8 +73,9 @@ def _write_batch_case(tmp_path):
     return tmp_path / "fit.toml", theta
 
 
-def test_cli_fit_json_and_plots(tmp_path, capsys):
+def test_cli_fit_json_and_plots(tmp_path, capsys, monkeypatch):
     cfg, theta = _write_batch_case(tmp_path)
+    monkeypatch.chdir(tmp_path)  # the config's [output] dir is relative to the current folder
     assert main(["fit", str(cfg), "--json", "--quiet"]) == 0
     out = json.loads(capsys.readouterr().out)
     for key in ("params", "ssr", "ser", "n_data", "n_params", "starts", "spread", "prediction"):
