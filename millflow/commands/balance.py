@@ -75,6 +75,13 @@ def format_summary(s: dict) -> str:
                                                   if c["observable"] else "unobservable"))
     bad = s["observability"]["unobservable"]
     lines.append("unobservable (not determined by the survey; no value is given): " + (", ".join(bad) or "none"))
+    neg = s.get("outside_physical_range") or []
+    if neg:
+        lines.append(f"{len(neg)} reconciled values below 0 within their errors (not clipped; summary.json "
+                     "outside_physical_range): " + ", ".join(
+                         f"{v.get('stream', v.get('unit'))} {v['quantity']} "
+                         + (f"{v['value_pct']:.3g} %" if "value_pct" in v else f"{v['value_tph']:.3g} t/h")
+                         for v in neg[:3]) + (" ..." if len(neg) > 3 else ""))
     lines.append(f"balances close to {s['balance_error']:.1e} (relative); {s['iterations']} evaluations, "
                  f"{1e3 * s['runtime_s']:.0f} ms")
     return "\n".join(lines)

@@ -137,12 +137,16 @@ class CircuitModel:
                 continue
             M, _, ok = bal.solids(n)
             p, _, pok = bal.passing(n)
-            if not (ok and pok.all()):
+            if not (ok and pok.any()):
                 raise InputError(f"fit: the feed stream {n} is not determined by the survey (unobservable)")
             u = self.doc["units"][s.source]
             u["solids_tph"] = float(M * TPH)
-            sizes = [float(x) for x in bal.structure.sieves * 1e6]
-            passing = [float(x) for x in np.clip(p, 0.0, 1.0) * 100]
+            # only the sieves the survey determines for this feed (analyses on different ranges of
+            # one series leave some open); the feed reader interpolates between them
+            sizes = [float(x) for x in bal.structure.sieves[pok] * 1e6]
+            # within its errors a reconciled passing may pass 100 % by ~1e-4 (summary.json lists it under
+            # outside_physical_range); a feed PSD must lie in [0, 100] %
+            passing = [float(x) for x in np.clip(p[pok], 0.0, 1.0) * 100]
             top = fs.grid.x[0] * 1e6
             if passing[0] < 100.0 - 1e-9 and sizes[0] < top * (1 - 1e-9):
                 sizes, passing = [top] + sizes, [100.0] + passing

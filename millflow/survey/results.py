@@ -206,6 +206,8 @@ def summary(bal) -> dict:
         "exact": [k for k, _ in bal.structure.exact],
         "balance_error": bal.balance_error,
         "iterations": bal.nfev, "runtime_s": bal.runtime_s,
+        "starts_tried": bal.meta.get("starts_tried", 1), "start": bal.meta.get("start"),
+        "outside_physical_range": _outside(bal),
     }
     extra = _report_fields(bal)
     for n, v in extra.pop("stream_topology").items():
@@ -214,16 +216,26 @@ def summary(bal) -> dict:
     return _clean(d)
 
 
+def _outside(bal) -> list:
+    """Reconciled values below 0 within their errors (a size class, a water flow), as they are:
+    the reconciliation does not impose positivity and nothing is clipped."""
+    from millflow.survey.reconcile import negatives
+
+    return negatives(bal)
+
+
 def _p80_p50(sieves, passing) -> tuple[float, float]:
     """P80 and P50 [m] read from cumulative passing at the sieves (coarse -> fine), linear
-    in log size between the two sieves that bracket it; NaN where the percentile lies above
-    the top sieve or below the finest, or the analysis is unobservable."""
+    in log size between the two observable sieves that bracket it; NaN where the percentile
+    lies above the top sieve or below the finest, or the analysis is unobservable."""
     x = np.asarray(sieves, float)
     P = np.asarray(passing, float)
+    keep = np.isfinite(P)  # sieves the survey does not determine for this stream are left out
+    x, P = x[keep], P[keep]
     out = []
     for q in (0.8, 0.5):
         val = math.nan
-        if np.isfinite(P).all():
+        if P.size:
             for k in range(P.size - 1):
                 if P[k] >= q > P[k + 1]:
                     f = (P[k] - q) / (P[k] - P[k + 1])
