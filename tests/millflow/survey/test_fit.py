@@ -13,10 +13,10 @@ from tests import paths
 
 CIRCUIT = paths.REPO / "examples" / "survey" / "circuit.toml"
 ERRORS = ErrorModel(solids_rel=0.02, water_rel=0.05, solids_content_sd=0.01, psd_sd=0.01, psd_floor=0.001)
-NAMES = ["materials.ore.rate.A_per_min", "units.cyclones.d50c_um", "units.cyclones.bypass",
+NAMES = ["materials.ore.rate.A_E_t_per_kWh", "units.cyclones.d50c_um", "units.cyclones.bypass",
          "units.cyclones.water_to_coarse"]
-TRUTH = [0.9, 140.0, 0.30, 0.30]
-BOUNDS = {NAMES[0]: (0.2, 3.0), NAMES[1]: (60.0, 300.0), NAMES[2]: (0.05, 0.6), NAMES[3]: (0.05, 0.6)}
+TRUTH = [0.675, 140.0, 0.30, 0.30]
+BOUNDS = {NAMES[0]: (0.3, 2.0), NAMES[1]: (80.0, 300.0), NAMES[2]: (0.05, 0.6), NAMES[3]: (0.05, 0.6)}
 
 
 class _Zero:
