@@ -295,12 +295,35 @@ class CircuitFit:
             out[n] = {"value": v, "se": s["se"] * k, "se_eq9": s["se"],
                       "ci95": [v - (v - lo) * k, v + (hi - v) * k],
                       "flags": list(s.get("flags", s.get("reasons", [])))}
+        st = self.result.stats
+        corr = np.asarray(st["correlation"], float)
         return {"parameters": out, "ssr": self.result.ssr, "n_data": self.result.n_data,
                 "dof": self.result.n_data - self.result.n_params, "spread": self.result.spread,
                 "starts": self.result.starts, "runtime_s": self.result.runtime_s,
                 "weights": "reconciled covariance (whitened, pseudo-inverse)",
                 "se_rule": "the larger of eq. 9 (scaled by SER^2) and the known-variance covariance (SER^2 = 1)",
+                "cluster_robust": CLUSTER_NOTE,
+                "correlation": {"names": list(self.model.names),
+                                "matrix": [[float(x) if math.isfinite(x) else None for x in r]
+                                           for r in np.round(corr, 4)]},
+                "condition_number": _finite(st["condition_number"]),
+                "condition_number_raw": _finite(st["condition_number_raw"]),
+                "singular": bool(st.get("singular", False)),
+                "correlated_pairs": [list(p) for p in st.get("correlated_pairs", [])],
                 "leave_one_stream_out": self.leave_one_out}
+
+
+#: Why a circuit fit has no cluster-robust (sandwich) SEs, in fit.json.
+CLUSTER_NOTE = ("not used: the residuals are whitened by the reconciled covariance, which already carries the "
+                "correlation of each stream's analysis (the balances and the closure of its fractions), and "
+                "each whitened component mixes streams, so no grouping by stream is left to cluster on; a "
+                "survey has fewer than 10 streams besides (the sandwich needs 10 clusters or more). The "
+                "SEs are eq. 9's or the known-variance ones, whichever is larger")
+
+
+def _finite(v):
+    v = float(v)
+    return v if math.isfinite(v) else None
 
 
 def fit_circuit(balance, names, bounds: dict, *, starts: int = 3, global_search: bool = False,

@@ -49,6 +49,10 @@ __all__ = ["Balance", "reconcile", "GROSS_ERROR_ALPHA"]
 GROSS_ERROR_ALPHA = 0.05
 #: Singular values of the whitened Jacobian below this fraction of the largest are zero.
 RANK_RTOL = 1e-9
+#: Measurements whose normalised adjustments correlate by |rho| at least this much are reported as
+#: not separable by the measurement test: a 7-SD shift (a 10-SD error at redundancy 0.5) then names
+#: the wrong one of a pair in Phi(-7 sqrt(0.05)) = 6 % of cases or more.
+INSEPARABLE_RHO = 0.9
 #: A derived quantity is unobservable when its gradient's null-space part exceeds this fraction.
 OBSERVABLE_RTOL = 1e-6
 
@@ -146,11 +150,49 @@ class Balance:
         order = [int(i) for i in np.argsort(-np.nan_to_num(np.abs(n), nan=-1.0)) if np.isfinite(n[i])]
         return [self._describe(i) for i in order[:count]]
 
-    def _describe(self, i: int) -> dict:
+    def label(self, i: int) -> str:
         r = self.structure.rows[i]
-        return {"measurement": r["key"] + (f" {r['label']}" if "label" in r else ""), "row": i,
+        return r["key"] + (f" {r['label']}" if "label" in r else "")
+
+    def _describe(self, i: int) -> dict:
+        return {"measurement": self.label(i), "row": i,
                 "normalised_adjustment": float(self.normalised[i]),
-                "adjustment_in_sd": float(self.adjustment[i] / self.sd[i])}
+                "adjustment_in_sd": float(self.adjustment[i] / self.sd[i]),
+                "not_separable_from": [self.label(j) for j in self.inseparable(i)]}
+
+    def adjustment_correlation(self) -> np.ndarray:
+        """Correlation of the normalised adjustments (linearised): rho_ik = P_ik / sqrt(P_ii P_kk)
+        with P = I - H the projector onto the redundancy space of the whitened Jacobian; rows and
+        columns of measurements that are not redundant are 0.
+
+        A gross error of k SD in measurement i shifts the normalised adjustment of measurement j
+        by k sqrt(r_i) rho_ji, so measurements with |rho| near 1 respond to it almost alike and
+        the measurement test cannot tell them apart: in a node whose size class is measured in
+        every stream, an error in one stream's class moves the others' as much (an *equivalent
+        set* of the gross-error literature). The one that is named first among them is then
+        decided by the noise: P(j before i) = Phi(-k sqrt(r_i) sqrt((1 - |rho_ij|) / 2))."""
+        if "rho" not in self.meta:
+            J = self.meta["J"]
+            if J.size == 0:
+                self.meta["rho"] = np.zeros((self.sd.size, self.sd.size))
+            else:
+                U = linalg.svd(J, full_matrices=True)[0]
+                P = np.eye(J.shape[0]) - U[:, :self.rank] @ U[:, :self.rank].T
+                red = self.redundant
+                d = np.sqrt(np.where(red, np.clip(np.diag(P), 1e-300, None), 1.0))
+                C = P / d[:, None] / d[None, :]
+                C[~red, :] = 0.0
+                C[:, ~red] = 0.0
+                self.meta["rho"] = C
+        return self.meta["rho"]
+
+    def inseparable(self, i: int, rho_min: float = INSEPARABLE_RHO) -> list[int]:
+        """The other measurements whose normalised adjustments correlate with measurement i's by
+        |rho| >= ``rho_min``: a gross error in any of them looks like one in i to the test."""
+        C = self.adjustment_correlation()
+        row = np.abs(C[i]).copy()
+        row[i] = 0.0
+        return [int(j) for j in np.argsort(-row) if row[j] >= rho_min]
 
     # --------------------------------------------------------------- derived quantities
     def derived(self, gz: np.ndarray, value: float) -> tuple[float, float, bool]:
@@ -309,7 +351,10 @@ def reconcile(survey, *, max_iter: int = 100, reweight: int = 2) -> Balance:
     a weighted SSR so far beyond its chi-square distribution (more than
     ``ABSURD_SSR_PER_DOF`` per degree of freedom) that no gross error explains it; and
     SolverError when no start reaches a physical solution (every stream's solids flow
-    positive, no water flow or addition negative by more than 3 SD). Partly unobservable
+    positive, no water flow or addition negative by more than 3 SD), unless the least SSR
+    reached has only water below 0 at an SSR a gross error explains (not absurd): that
+    result is kept and ``meta["unphysical"]`` (the summary's ``physical_range_violations``)
+    says what is below 0, beside the gross-error candidates that cause it. Partly unobservable
     surveys are reconciled; :meth:`Balance.observability` lists what the data leave
     undetermined.
 
@@ -338,7 +383,7 @@ def reconcile(survey, *, max_iter: int = 100, reweight: int = 2) -> Balance:
     starts.append(("measured flows, typical elsewhere", naive_start(st, survey)))
     if derived is not None:
         starts += [(f"derived x {k:g}", derived * k) for k in (0.5, 2.0)]
-    tried, best, failures = 0, None, []
+    tried, best, least, failures = 0, None, None, []
     for label, z0 in starts:
         st.sd = sd_measured.copy()
         tried += 1
@@ -348,17 +393,25 @@ def reconcile(survey, *, max_iter: int = 100, reweight: int = 2) -> Balance:
             failures.append(f"{label}: {exc}")
             continue
         bal.meta["start"] = label
-        problems = unphysical(bal)
-        if problems:
-            failures.append(f"{label}: {problems[0]}")
+        bal.meta["unphysical"] = unphysical(bal)
+        if least is None or bal.chi_square["ssr"] < least.chi_square["ssr"] * (1 - 1e-9):
+            least = bal
+        if bal.meta["unphysical"]:
+            failures.append(f"{label}: {bal.meta['unphysical'][0]}")
         elif best is None or bal.chi_square["ssr"] < best.chi_square["ssr"] * (1 - 1e-9):
             best = bal
         if best is not None and (best.chi_square["p_value"] >= 1e-3 or best.chi_square["dof"] <= 0):
             break
+    if best is None and least is not None and not _absurd(least) and not any(
+            "solids" in p for p in least.meta["unphysical"]):
+        # every start ends with a water flow or addition below 0 beyond its errors, at an SSR a gross
+        # error explains: the result is kept, with the violation in the summary beside the candidates
+        best = least
     if best is None:
         raise SolverError(f"{survey.source}: the reconciliation reaches no physical solution from {tried} starts "
-                          f"({failures[0]}); check the flows and % solids of that stream and the units of "
-                          "the measured flows")
+                          f"({failures[0]}" + (f"; weighted SSR {least.chi_square['ssr']:.4g} on "
+                                               f"{least.chi_square['dof']} degrees of freedom" if least else "")
+                          + "); check the flows and % solids of that stream and the units of the measured flows")
     best.meta["starts_tried"] = tried
     best.runtime_s = time.perf_counter() - t0
     measured_flows = [n for n in st.streams if best.solids(n)[2]]
@@ -366,7 +419,7 @@ def reconcile(survey, *, max_iter: int = 100, reweight: int = 2) -> Balance:
         raise InputError(f"{survey.source}: unobservable system: no stream's solids flow is determined by the "
                          "survey (give at least one solids_tph, e.g. the fresh feed's weightometer)")
     chi = best.chi_square
-    if chi["dof"] > 0 and chi["ssr"] > ABSURD_SSR_PER_DOF * chi["dof"]:
+    if _absurd(best):
         top = ", ".join(f"{c['measurement']} ({c['normalised_adjustment']:+.3g})" for c in best.ranked(3))
         raise InputError(f"{survey.source}: the measurements contradict each other far beyond their SDs (weighted "
                          f"SSR {chi['ssr']:.4g} on {chi['dof']} degrees of freedom, more than "
@@ -379,6 +432,11 @@ def reconcile(survey, *, max_iter: int = 100, reweight: int = 2) -> Balance:
 #: error of k SD adds about k^2 r to the SSR, so reaching 100 per degree of freedom takes
 #: errors of hundreds of SDs (a wrong unit, a typo) or SDs understated tenfold throughout.
 ABSURD_SSR_PER_DOF = 100.0
+
+
+def _absurd(bal) -> bool:
+    chi = bal.chi_square
+    return chi["dof"] > 0 and chi["ssr"] > ABSURD_SSR_PER_DOF * chi["dof"]
 
 
 def unphysical(bal) -> list[str]:

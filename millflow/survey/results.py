@@ -194,7 +194,9 @@ def summary(bal) -> dict:
                                   "larger than the stated errors allow at 5 % (gross errors, or SDs too small)")),
         "gross_error_threshold": bal.threshold,
         "gross_error_rule": ("|normalised adjustment| > z(1 - 0.05 / (2 n_redundant)): a two-sided test at 5 % "
-                             "family-wise (Bonferroni) over the redundant measurements"),
+                             "family-wise (Bonferroni) over the redundant measurements; not_separable_from lists "
+                             "the measurements whose normalised adjustments correlate with a candidate's by "
+                             "|rho| >= 0.9: an error in any of them looks alike to the test"),
         "gross_error_candidates": bal.gross_errors,
         "largest_normalised_adjustments": bal.ranked(5),
         "gross_error_detectability": detectability(bal),
@@ -208,6 +210,7 @@ def summary(bal) -> dict:
         "iterations": bal.nfev, "runtime_s": bal.runtime_s,
         "starts_tried": bal.meta.get("starts_tried", 1), "start": bal.meta.get("start"),
         "outside_physical_range": _outside(bal),
+        "physical_range_violations": list(bal.meta.get("unphysical", [])),
     }
     extra = _report_fields(bal)
     for n, v in extra.pop("stream_topology").items():
