@@ -386,3 +386,19 @@ def test_a_near_duplicate_sieve_names_the_stream_that_brings_it(tmp_path, capsys
     assert main(["balance", str(p), "--out", str(tmp_path / "out"), "--no-fit"]) == 2
     err = capsys.readouterr().err.strip()
     assert "\n" not in err and "survey.toml: streams.underflow.psd: sieves do not nest: 4100 um" in err, err
+
+
+def test_an_absurd_ssr_is_refused_naming_the_largest_adjustments(tmp_path, capsys):
+    """SDs understated 20-fold (psd_sd 0.05 % instead of 1 %, floor 0.005 %): the weighted SSR
+    grows ~400-fold, beyond 100 per degree of freedom, which no single gross error explains; the
+    balance is refused in one line naming the largest normalised adjustments (exit 2), not
+    printed as a result."""
+    text = (EXAMPLE / "survey.toml").read_text()
+    text = text.replace("psd_sd_pct = 1 ", "psd_sd_pct = 0.05 ").replace("psd_floor_pct = 0.1 ", "psd_floor_pct = 0.005 ")
+    assert "psd_sd_pct = 0.05" in text and "psd_floor_pct = 0.005" in text
+    p = _write(tmp_path, text.replace('flowsheet = "circuit.toml"', ""))
+    assert main(["balance", str(p), "--out", str(tmp_path / "out"), "--no-fit"]) == 2
+    err = capsys.readouterr().err.strip()
+    assert "\n" not in err and "survey.toml: the measurements contradict each other far beyond their SDs" in err, err
+    assert "largest normalised adjustments: streams." in err
+    assert not (tmp_path / "out").exists()
