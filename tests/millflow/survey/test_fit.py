@@ -50,7 +50,9 @@ def test_noise_free_survey_recovers_the_circuit_and_the_toml_reproduces_it(tmp_p
 @pytest.mark.slow
 def test_coverage_and_second_operating_point():
     """Over replicates the 95 % intervals cover the true parameters in >= 85 % of cases, and the
-    prediction at +15 % feed (overflow % passing 75 um) lies within its 95 % band as often."""
+    prediction at +15 % feed (overflow % passing 75 um) lies within its 95 % band as often.
+    Measured (seed 11): 96.8 % of 400 intervals, 93 % of 100 predictions; with eq. 9's SEs alone
+    (no input-error term) 88.7 % and 72 %. ~7 min wall on 2 shared cores (~100 s of CPU)."""
     sol, sieves = _setup()
     doc = load(CIRCUIT).meta["document"]
     import copy
