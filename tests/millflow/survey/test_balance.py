@@ -394,7 +394,8 @@ def test_an_absurd_ssr_is_refused_naming_the_largest_adjustments(tmp_path, capsy
     balance is refused in one line naming the largest normalised adjustments (exit 2), not
     printed as a result."""
     text = (EXAMPLE / "survey.toml").read_text()
-    text = text.replace("psd_sd_pct = 1 ", "psd_sd_pct = 0.05 ").replace("psd_floor_pct = 0.1 ", "psd_floor_pct = 0.005 ")
+    text = text.replace("psd_sd_pct = 1 ", "psd_sd_pct = 0.05 ")
+    text = text.replace("psd_floor_pct = 0.1 ", "psd_floor_pct = 0.005 ")
     assert "psd_sd_pct = 0.05" in text and "psd_floor_pct = 0.005" in text
     p = _write(tmp_path, text.replace('flowsheet = "circuit.toml"', ""))
     assert main(["balance", str(p), "--out", str(tmp_path / "out"), "--no-fit"]) == 2
