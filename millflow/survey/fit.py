@@ -230,6 +230,8 @@ class CircuitModel:
         base = self.measurements(theta)[self.rows]
         G = np.zeros((self.rows.size, self.input_values.size))
         for k, v in enumerate(self.input_values):
+            if not math.sqrt(max(Cuu[k, k], 0.0)) > 1e-9 * max(abs(v), 1e-3):
+                continue  # fixed by the balances (the top sieve of a feed passing 100 %): no error to carry
             h = 1e-4 * abs(v) if self.input_labels[k].endswith("_tph") else (-1e-4 if v >= 1e-4 else 1e-4)
             h = h or 1e-6
             vals = self.input_values.copy()
@@ -388,6 +390,7 @@ class CircuitFit:
                 "se_rule": ("the larger of eq. 9 (scaled by SER^2) and the known-variance covariance (SER^2 = 1), "
                             "plus the errors of the reconciled feeds propagated through the model (se_inputs)"),
                 "cluster_robust": CLUSTER_NOTE,
+                "input_errors": getattr(self.model, "input_note", None),
                 "correlation": {"names": list(self.model.names),
                                 "matrix": [[float(x) if math.isfinite(x) else None for x in r]
                                            for r in np.round(corr, 4)]},
@@ -427,6 +430,7 @@ def fit_circuit(balance, names, bounds: dict, *, starts: int = 3, global_search:
 
 def _input_cov(model: CircuitModel, res):
     """A M A^T: the parameter covariance the input errors add (None when the fit is singular)."""
+    model.input_note = "not propagated: the fit is singular"
     if res.stats.get("singular"):
         return None
     th = np.array([res.params[n].value for n in model.names])
@@ -440,7 +444,12 @@ def _input_cov(model: CircuitModel, res):
     if not np.all(np.isfinite(J)):
         return None
     A = np.linalg.pinv(J.T @ J) @ J.T
-    M = model.input_covariance(th)
+    try:
+        M = model.input_covariance(th)
+    except MillflowError as exc:  # a perturbed feed the circuit cannot run: said in fit.json, not hidden
+        model.input_note = f"not propagated: {exc}"
+        return None
+    model.input_note = "propagated through the model (se_inputs)"
     return A @ M @ A.T
 
 

@@ -175,6 +175,9 @@ def test_residence_time_is_fitted_and_its_confounding_with_the_rate_is_reported(
     name = "units.ball_mill.tau_min"
     cf = fit_circuit(bal, [name], {name: (1.0, 8.0)}, starts=1, leave_one_out=False)
     assert cf.values[name] == pytest.approx(3.5, rel=1e-3)
+    one = cf.to_dict()
+    assert one["input_errors"].startswith("propagated") and one["parameters"][name]["se_inputs"] >= 0
+    assert one["parameters"][name]["se"] >= one["parameters"][name]["se_eq9"]
     names = ["materials.ore.rate.A_per_min", name]
     from millflow.survey.fit import CircuitModel
 
