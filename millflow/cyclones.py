@@ -563,36 +563,70 @@ def nageswararao_cyclone(geometry: CycloneGeometry, feed: CycloneFeed, *, flow_m
 
 @dataclass(frozen=True)
 class ValidityRange:
-    """Where a cyclone model is used with confidence: closed intervals (low, high).
+    """Where a cyclone model is used with confidence: closed intervals (low, high), each with
+    the basis it rests on (``basis``: quantity -> source, or "judgment").
 
     ``pressure_kPa`` inlet pressure drop; ``feed_solids_pct_v`` feed solids [% by volume];
     ``underflow_solids_pct_v`` the roping limit of the underflow: above about 50-55 % solids by
     volume the underflow no longer sprays but ropes, the air core collapses and coarse solids
     report to the overflow, which neither model describes (Plitt, Conil and Broussaud, Miner.
-    Eng. 3 (1990), put the roping onset near 56 % v/v; 50 % keeps a margin). Geometry ratios to
-    the cyclone diameter D_c: ``inlet_ratio`` D_i/D_c,
-    ``vortex_finder_ratio`` D_o/D_c, ``apex_ratio`` D_u/D_c; ``apex_to_vortex`` D_u/D_o.
+    Eng. 3 (1990), put the roping onset near 56 % v/v; 50 % keeps a margin); ``diameter_mm`` the
+    cyclone diameter D_c. Geometry ratios to D_c: ``inlet_ratio`` D_i/D_c, ``vortex_finder_ratio``
+    D_o/D_c, ``apex_ratio`` D_u/D_c; ``apex_to_vortex`` D_u/D_o.
 
-    The defaults are the envelope of conventional mineral-processing cyclones (Napier-Munn et al.
-    1996 ch. 10; King 2001 ch. 5), which both models were fitted within; they are a judgment, not
-    the fitted data's exact envelope. A plant survey of the cyclones themselves is the better
-    guide: pass a tighter or wider range where it is known.
+    Each model has its own range (:data:`VALIDITY`). A plant survey of the cyclones themselves is
+    the better guide: pass a tighter or wider range where it is known.
     """
 
     pressure_kPa: tuple = (40.0, 200.0)
     feed_solids_pct_v: tuple = (1.0, 35.0)
     underflow_solids_pct_v: tuple = (0.0, 50.0)
+    diameter_mm: tuple = (50.0, 800.0)
     inlet_ratio: tuple = (0.1, 0.4)
     vortex_finder_ratio: tuple = (0.2, 0.45)
     apex_ratio: tuple = (0.05, 0.35)
     apex_to_vortex: tuple = (0.2, 0.9)
+    basis: tuple = ()   # ((quantity, where the bounds come from), ...)
+
+    def source(self, quantity: str) -> str:
+        """Where the bounds of ``quantity`` come from ("judgment" when no source is given)."""
+        return dict(self.basis).get(quantity, "judgment")
 
 
-#: Range of use of each model (same envelope: both are fitted to conventional cyclones).
-VALIDITY = {"plitt": ValidityRange(), "nageswararao": ValidityRange()}
+_JUDGMENT_ENVELOPE = ("judgment: the envelope of conventional mineral-processing cyclones (Napier-Munn et al. "
+                      "1996 ch. 10; King 2001 ch. 5), not the fitted data's exact envelope")
+_ROPING = "roping onset near 56 % v/v (Plitt, Conil and Broussaud 1990), 50 % for a margin"
+
+#: Range of use of each model, with the basis of each bound. The two models were fitted to
+#: different data: Nageswararao's to Krebs cyclones of 102-381 mm (4-15 in) on limestone
+#: (Nageswararao 1978, as summarised by Napier-Munn et al. 1996 ch. 10 and Nageswararao, Wiseman
+#: and Napier-Munn 2004; recalled from those summaries, not re-read here), so its diameter range
+#: is that data base's, rounded outward; Plitt's revised model (Flintoff, Plitt and Turak 1987)
+#: was calibrated on laboratory to industrial cyclones, and its 50-800 mm is a judgment of that
+#: span, not a published bound. Pressure, feed solids and geometry ratios are judgments of
+#: conventional operation for both.
+VALIDITY = {
+    "plitt": ValidityRange(
+        diameter_mm=(50.0, 800.0),
+        basis=(("pressure_kPa", _JUDGMENT_ENVELOPE), ("feed_solids_pct_v", _JUDGMENT_ENVELOPE),
+               ("underflow_solids_pct_v", _ROPING),
+               ("diameter_mm", "judgment: the laboratory-to-industrial span of the revised model's calibration "
+                               "(Flintoff, Plitt and Turak 1987); no published bound"),
+               ("inlet_ratio", _JUDGMENT_ENVELOPE), ("vortex_finder_ratio", _JUDGMENT_ENVELOPE),
+               ("apex_ratio", _JUDGMENT_ENVELOPE), ("apex_to_vortex", _JUDGMENT_ENVELOPE))),
+    "nageswararao": ValidityRange(
+        diameter_mm=(100.0, 400.0),
+        basis=(("pressure_kPa", _JUDGMENT_ENVELOPE), ("feed_solids_pct_v", _JUDGMENT_ENVELOPE),
+               ("underflow_solids_pct_v", _ROPING),
+               ("diameter_mm", "the model's data base: Krebs cyclones of 102-381 mm (Nageswararao 1978; "
+                               "Napier-Munn et al. 1996 ch. 10), rounded outward"),
+               ("inlet_ratio", _JUDGMENT_ENVELOPE), ("vortex_finder_ratio", _JUDGMENT_ENVELOPE),
+               ("apex_ratio", _JUDGMENT_ENVELOPE), ("apex_to_vortex", _JUDGMENT_ENVELOPE))),
+}
 
 _RANGE_NAMES = {"pressure_kPa": ("pressure", "kPa"), "feed_solids_pct_v": ("feed solids", "% v/v"),
                 "underflow_solids_pct_v": ("underflow solids (roping limit)", "% v/v"),
+                "diameter_mm": ("cyclone diameter", "mm"),
                 "inlet_ratio": ("inlet diameter ratio D_i/D_c", ""),
                 "vortex_finder_ratio": ("vortex finder ratio D_o/D_c", ""),
                 "apex_ratio": ("apex ratio D_u/D_c", ""), "apex_to_vortex": ("apex to vortex finder D_u/D_o", "")}
@@ -609,10 +643,13 @@ def out_of_range(model: str, geometry: CycloneGeometry, *, pressure_Pa: float, f
     >>> g = CycloneGeometry(0.66, 0.19, 0.25, 0.15, 2.0)
     >>> [q for q, _, _ in out_of_range("plitt", g, pressure_Pa=14e3, feed_solids_volume_fraction=0.28)]
     ['pressure_kPa']
+    >>> [q for q, _, _ in out_of_range("nageswararao", g, pressure_Pa=80e3, feed_solids_volume_fraction=0.28)]
+    ['diameter_mm']
     """
     rng = validity or VALIDITY[model]
     dc = geometry.diameter_m
     values = {"pressure_kPa": pressure_Pa / 1e3, "feed_solids_pct_v": 100.0 * feed_solids_volume_fraction,
+              "diameter_mm": dc * 1e3,
               "inlet_ratio": geometry.inlet_diameter_m / dc, "vortex_finder_ratio": geometry.vortex_finder_m / dc,
               "apex_ratio": geometry.apex_m / dc, "apex_to_vortex": geometry.apex_m / geometry.vortex_finder_m}
     if underflow_solids_volume_fraction is not None:

@@ -50,9 +50,9 @@ def main():
             lines += [f"[water_additions.{unit}]", f"water_tph = {v * 3.6:.1f}", ""]
     lines += ["[fit]               # circuit parameters fitted to the reconciled survey (flowsheet keys)",
               "starts = 2", "", "[fit.parameters]",
-              '"materials.ore.rate.A_per_min" = {min = 0.2, max = 3.0}',
+              '"materials.ore.rate.A_E_t_per_kWh" = {min = 0.3, max = 2.0}',
               '"materials.ore.rate.alpha" = {min = 0.3, max = 2.0}',
-              '"units.cyclones.d50c_um" = {min = 60, max = 300}',
+              '"units.cyclones.d50c_um" = {min = 80, max = 300}',
               '"units.cyclones.alpha" = {min = 1.0, max = 6.0}',
               '"units.cyclones.bypass" = {min = 0.05, max = 0.6}',
               '"units.cyclones.water_to_coarse" = {min = 0.05, max = 0.6}', ""]

@@ -58,7 +58,9 @@ def format_summary(s: dict) -> str:
         lines.append("no redundancy (0 degrees of freedom): nothing to test; every value is as measured")
     cand = s["gross_error_candidates"]
     lines.append(f"gross-error candidates (|normalised adjustment| > {s['gross_error_threshold']:.2f}): "
-                 + (", ".join(f"{c['measurement']} ({c['normalised_adjustment']:+.1f})" for c in cand) or "none"))
+                 + (", ".join(f"{c['measurement']} ({c['normalised_adjustment']:+.1f}"
+                              + (f"; the test cannot tell it from {', '.join(c['not_separable_from'][:2])}"
+                                 if c.get("not_separable_from") else "") + ")" for c in cand) or "none"))
     if not cand and s["largest_normalised_adjustments"]:
         c = s["largest_normalised_adjustments"][0]
         lines.append(f"largest normalised adjustment: {c['measurement']} ({c['normalised_adjustment']:+.2f})")
@@ -74,6 +76,16 @@ def format_summary(s: dict) -> str:
                                                   if c["observable"] else "unobservable"))
     bad = s["observability"]["unobservable"]
     lines.append("unobservable (not determined by the survey; no value is given): " + (", ".join(bad) or "none"))
+    for v in s.get("physical_range_violations") or []:
+        lines.append(f"NOT PHYSICAL: {v}, beyond 3 SD, from every start: the gross-error candidates above are the "
+                     "likely cause; correct them (or give them large SDs) and balance again")
+    neg = s.get("outside_physical_range") or []
+    if neg:
+        lines.append(f"{len(neg)} reconciled values below 0 within their errors (not clipped; summary.json "
+                     "outside_physical_range): " + ", ".join(
+                         f"{v.get('stream', v.get('unit'))} {v['quantity']} "
+                         + (f"{v['value_pct']:.3g} %" if "value_pct" in v else f"{v['value_tph']:.3g} t/h")
+                         for v in neg[:3]) + (" ..." if len(neg) > 3 else ""))
     lines.append(f"balances close to {s['balance_error']:.1e} (relative); {s['iterations']} evaluations, "
                  f"{1e3 * s['runtime_s']:.0f} ms")
     return "\n".join(lines)
@@ -87,6 +99,12 @@ def format_fit(f: dict) -> str:
         lo, hi = p["ci95"]
         lines.append(f"  {n:<{w}}  {p['value']:.5g} +- {p['se']:.3g}  95 % [{lo:.4g}, {hi:.4g}]  "
                      + ("; ".join(p["flags"]) or "ok"))
+    if f.get("condition_number") is None or f.get("singular"):
+        lines.append("the parameters are not separately determined by the survey (singular: condition number "
+                     "infinite); fix one of each correlated set")
+    else:
+        lines.append(f"condition number {f['condition_number']:.3g}" + "".join(
+            f"; {a} and {b} correlate {c:+.3f}" for a, b, c in f.get("correlated_pairs", [])))
     loo = f.get("leave_one_stream_out") or {}
     if loo:
         lines.append("leave-one-stream-out prediction (RMS whitened error; about 1 = within its errors): " + ", ".join(

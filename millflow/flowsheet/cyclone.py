@@ -142,11 +142,13 @@ def report_operation(fs, flows, water, reports) -> None:
     Adds to ``reports[unit]``: ``cyclones`` (count), ``d50c_m``, ``pressure_Pa`` and
     ``flow_per_cyclone_m3_s`` (predicted cyclones; a fixed curve gives only its d50c), and in a
     wet circuit ``underflow_solids_content`` (mass fraction) and, with densities,
-    ``underflow_solids_volume_fraction``; ``out_of_range`` lists the phrases warned.
+    ``underflow_solids_volume_fraction``; ``out_of_range`` lists the phrases warned, each with
+    the basis of the bound (the model's data base, the roping onset, or a judgment:
+    :data:`millflow.cyclones.VALIDITY`).
     """
     import warnings
 
-    from millflow.cyclones import describe_out_of_range, illustrative_constants, out_of_range
+    from millflow.cyclones import VALIDITY, describe_out_of_range, illustrative_constants, out_of_range
     from millflow.errors import ModelRangeWarning
 
     names = fs.stream_names
@@ -171,8 +173,10 @@ def report_operation(fs, flows, water, reports) -> None:
         found = out_of_range(unit.model, unit.geometry, pressure_Pa=rep["pressure_Pa"],
                              feed_solids_volume_fraction=rep["solids_volume_fraction"],
                              underflow_solids_volume_fraction=rep.get("underflow_solids_volume_fraction"))
-        said = [f"units.{uname}: {phrase} (range of use of {unit.model}'s model, {unit.cyclones} cyclones)"
-                for phrase in describe_out_of_range(found)]
+        rng = VALIDITY[unit.model]
+        said = [f"units.{uname}: {phrase} (range of use of {unit.model}'s model, "
+                f"{rng.source(q).split(':')[0].split(' (')[0]}; {unit.cyclones} cyclones)"
+                for phrase, (q, _, _) in zip(describe_out_of_range(found), found)]
         if illustrative_constants(unit.model, unit.calibration):
             said.append(f"units.{uname}: Nageswararao's model runs on its default constants (K_D0, K_Q0, K_V1, "
                         "K_W1), which are illustrative magnitudes, not fitted values; give the plant's own "

@@ -16,7 +16,10 @@ SSR is sum (model - reconciled)^T C^+ (model - reconciled): to first order the s
 fitting the raw measurements with their own SDs, because a flowsheet's predictions
 satisfy the balances. The fit is :func:`millflow.fitting.estimate.fit` (global search or
 multi-start, eq. 9 SEs, non-uniqueness spread) on a forward model that solves the
-flowsheet for each parameter vector.
+flowsheet for each parameter vector. The parameter covariance adds the errors of the
+reconciled feeds propagated through the model (:meth:`CircuitModel.input_covariance`):
+with per-energy rates the feed rate sets the kWh/t, and eq. 9 alone understated the SE of
+the fitted S^E 2.4-fold.
 """
 from __future__ import annotations
 
@@ -130,37 +133,114 @@ class CircuitModel:
 
     # ------------------------------------------------------------------- the circuit
     def _feeds_from_survey(self) -> None:
+        """Set the feeds (solids, sieve analysis at the sieves the survey determines, water) and the
+        measured water additions to their reconciled values; record them as the model's inputs
+        (``input_values`` [SI], ``input_grads`` d input / dz) for :meth:`input_covariance`."""
         bal = self.balance
         fs = bal.survey.flowsheet
+        st = bal.structure
+        self.input_values, self.input_grads, self.input_labels, self._layout = [], [], [], []
+
+        def add(label, value, grad):
+            self.input_labels.append(label)
+            self.input_values.append(float(value))
+            self.input_grads.append(grad)
+            return len(self.input_values) - 1
+
         for n, s in fs.streams.items():
             if fs.units[s.source].type != "feed":
                 continue
             M, _, ok = bal.solids(n)
             p, _, pok = bal.passing(n)
-            if not (ok and pok.all()):
+            if not (ok and pok.any()):
                 raise InputError(f"fit: the feed stream {n} is not determined by the survey (unobservable)")
-            u = self.doc["units"][s.source]
-            u["solids_tph"] = float(M * TPH)
-            sizes = [float(x) for x in bal.structure.sieves * 1e6]
-            passing = [float(x) for x in np.clip(p, 0.0, 1.0) * 100]
+            k = st.streams.index(n)
+            m = bal.z[st.m_index(k)]
+            entry = {"unit": s.source, "solids": add(f"streams.{n}.solids_tph", M, st.solids_gradient(k)),
+                     "sizes": bal.structure.sieves[pok], "passing": [], "water": None}
+            # only the sieves the survey determines for this feed (analyses on different ranges of
+            # one series leave some open); the feed reader interpolates between them
+            for j in np.flatnonzero(pok):
+                below = (st.live > j).astype(float)  # classes below sieve j pass it
+                g = np.zeros(st.n_z)
+                g[st.m_index(k)] = (below - below @ m / M) / M
+                entry["passing"].append(add(f"streams.{n}.psd passing {st.sieves[j] * 1e6:.6g} um", p[j], g))
+            if st.wet:
+                W, _, wok = bal.water(n)
+                if wok:
+                    g = np.zeros(st.n_z)
+                    g[st.w_index(k)] = 1.0
+                    entry["water"] = add(f"streams.{n}.water_tph", W, g)
+            self._layout.append(entry)
+        self._additions = []
+        for k, unit in enumerate(bal.structure.additions):
+            v, _, ok = bal.addition(unit)
+            if ok:
+                g = np.zeros(st.n_z)
+                g[st.a_index(k)] = 1.0
+                self._additions.append((unit, add(f"water_additions.{unit}.water_tph", v, g)))
+        self.input_values = np.array(self.input_values)
+        self._write_inputs(self.doc, self.input_values)
+
+    def _write_inputs(self, doc: dict, values) -> None:
+        """Write input values (SI, in the order of ``input_labels``) into a flowsheet document."""
+        fs = self.balance.survey.flowsheet
+        for e in self._layout:
+            u = doc["units"][e["unit"]]
+            u["solids_tph"] = float(values[e["solids"]] * TPH)
+            sizes = [float(x) * 1e6 for x in e["sizes"]]
+            # within its errors a reconciled passing may pass 100 % by ~1e-4 (summary.json lists it under
+            # outside_physical_range); a feed PSD must lie in [0, 100] %
+            passing = [float(x) for x in np.clip(values[e["passing"]], 0.0, 1.0) * 100]
             top = fs.grid.x[0] * 1e6
             if passing[0] < 100.0 - 1e-9 and sizes[0] < top * (1 - 1e-9):
                 sizes, passing = [top] + sizes, [100.0] + passing
             passing = [float(x) for x in np.minimum.accumulate(passing)]  # reconciled passing is monotone to rounding
             u["psd"] = {"form": "sieves", "size_um": sizes, "passing_pct": passing}
-            for k in [k for k in u if k.startswith(("water_", "solids_content_"))]:
-                del u[k]
-            if bal.structure.wet:
-                W, _, wok = bal.water(n)
-                if wok:
-                    u["water_tph"] = float(W * TPH)
-        for unit in bal.structure.additions:
-            v, _, ok = bal.addition(unit)
-            if ok:
-                tbl = self.doc["units"][unit]
-                for key in [key for key in tbl if key.startswith("add_water_")]:
-                    del tbl[key]
-                tbl["add_water_tph"] = float(v * TPH)
+            for key in [key for key in u if key.startswith(("water_", "solids_content_"))]:
+                del u[key]
+            if e["water"] is not None:
+                u["water_tph"] = float(values[e["water"]] * TPH)
+        for unit, i in self._additions:
+            tbl = doc["units"][unit]
+            for key in [key for key in tbl if key.startswith("add_water_")]:
+                del tbl[key]
+            tbl["add_water_tph"] = float(values[i] * TPH)
+
+    def input_covariance(self, theta) -> np.ndarray:
+        """The part of the residuals' covariance (whitened) that the errors of the model's inputs add.
+
+        The model takes the reconciled feeds û (solids, sieve analysis, water, additions) as exact,
+        but they carry errors e_u, correlated with those of the data ŷ. To first order the residual
+        is e_y - G e_u - J dtheta, with G = d(model)/du; its covariance is C_yy - G C_uy - C_yu G^T +
+        G C_uu G^T, which exceeds the weighting's C_yy - K C_uu K^T (K = C_yu C_uu^+, the
+        conditioning on the feed measurements) by (G - K) C_uu (G - K)^T. That excess, whitened,
+        is returned (forward differences of G, one solve per input). It vanishes when the model
+        depends on its inputs as the reconciliation's regression does; with per-energy rates the
+        feed rate sets kWh/t, so it does not.
+        """
+        bal = self.balance
+        st = bal.structure
+        if not len(self.input_values):
+            return np.zeros((self.y.size, self.y.size))
+        U = np.array(self.input_grads) @ bal.N
+        Y = bal.meta["J"][self.rows] * st.sd[self.rows][:, None]
+        Cuu = U @ bal.cov_t @ U.T
+        K = (Y @ bal.cov_t @ U.T) @ np.linalg.pinv(Cuu, rcond=1e-12, hermitian=True)
+        base = self.measurements(theta)[self.rows]
+        G = np.zeros((self.rows.size, self.input_values.size))
+        for k, v in enumerate(self.input_values):
+            if not math.sqrt(max(Cuu[k, k], 0.0)) > 1e-9 * max(abs(v), 1e-3):
+                continue  # fixed by the balances (the top sieve of a feed passing 100 %): no error to carry
+            h = 1e-4 * abs(v) if self.input_labels[k].endswith("_tph") else (-1e-4 if v >= 1e-4 else 1e-4)
+            h = h or 1e-6
+            vals = self.input_values.copy()
+            vals[k] += h
+            doc = self.document(theta)
+            self._write_inputs(doc, vals)
+            G[:, k] = (self.measurements(theta, self.solve(theta, doc))[self.rows] - base) / h
+        D = self.W @ (G - K)
+        return D @ Cuu @ D.T
 
     def document(self, theta) -> dict:
         doc = copy.deepcopy(self.doc)
@@ -241,6 +321,7 @@ class CircuitFit:
     model: CircuitModel
     result: object
     leave_one_out: dict
+    input_cov: np.ndarray | None = None   # parameter covariance added by the errors of the inputs
 
     @property
     def cov_scale(self) -> float:
@@ -252,7 +333,11 @@ class CircuitFit:
 
     @property
     def covariance(self) -> np.ndarray:
-        return np.asarray(self.result.stats["covariance"]) * self.cov_scale
+        """Parameter covariance: eq. 9's (scaled as :attr:`cov_scale` says) plus the part the
+        errors of the reconciled feeds add through the model (:meth:`CircuitModel.input_covariance`,
+        propagated as A M A^T with A = (J^T J)^+ J^T of the whitened Jacobian)."""
+        base = np.asarray(self.result.stats["covariance"]) * self.cov_scale
+        return base if self.input_cov is None else base + self.input_cov
 
     @property
     def values(self) -> dict:
@@ -283,20 +368,50 @@ class CircuitFit:
 
     def to_dict(self) -> dict:
         out = {}
-        k = math.sqrt(self.cov_scale)
-        for n in self.model.names:
+        cov = self.covariance
+        se_all = np.sqrt(np.clip(np.diag(cov), 0.0, None))
+        for i, n in enumerate(self.model.names):
             s = self.result.stats["params"][n]
             lo, hi = s["ci95"]
             v = s["value"]
-            out[n] = {"value": v, "se": s["se"] * k, "se_eq9": s["se"],
-                      "ci95": [v - (v - lo) * k, v + (hi - v) * k],
+            tq = (hi - v) / s["se"] if s["se"] > 0 and math.isfinite(s["se"]) else math.nan
+            se = float(se_all[i]) if math.isfinite(s["se"]) else math.inf
+            out[n] = {"value": v, "se": se, "se_eq9": s["se"],
+                      "se_inputs": None if self.input_cov is None else float(math.sqrt(max(self.input_cov[i, i], 0))),
+                      "ci95": [v - tq * se, v + tq * se],
                       "flags": list(s.get("flags", s.get("reasons", [])))}
+        st = self.result.stats
+        with np.errstate(divide="ignore", invalid="ignore"):
+            corr = cov / np.outer(se_all, se_all)
         return {"parameters": out, "ssr": self.result.ssr, "n_data": self.result.n_data,
                 "dof": self.result.n_data - self.result.n_params, "spread": self.result.spread,
                 "starts": self.result.starts, "runtime_s": self.result.runtime_s,
                 "weights": "reconciled covariance (whitened, pseudo-inverse)",
-                "se_rule": "the larger of eq. 9 (scaled by SER^2) and the known-variance covariance (SER^2 = 1)",
+                "se_rule": ("the larger of eq. 9 (scaled by SER^2) and the known-variance covariance (SER^2 = 1), "
+                            "plus the errors of the reconciled feeds propagated through the model (se_inputs)"),
+                "cluster_robust": CLUSTER_NOTE,
+                "input_errors": getattr(self.model, "input_note", None),
+                "correlation": {"names": list(self.model.names),
+                                "matrix": [[float(x) if math.isfinite(x) else None for x in r]
+                                           for r in np.round(corr, 4)]},
+                "condition_number": _finite(st["condition_number"]),
+                "condition_number_raw": _finite(st["condition_number_raw"]),
+                "singular": bool(st.get("singular", False)),
+                "correlated_pairs": [list(p) for p in st.get("correlated_pairs", [])],
                 "leave_one_stream_out": self.leave_one_out}
+
+
+#: Why a circuit fit has no cluster-robust (sandwich) SEs, in fit.json.
+CLUSTER_NOTE = ("not used: the residuals are whitened by the reconciled covariance, which already carries the "
+                "correlation of each stream's analysis (the balances and the closure of its fractions), and "
+                "each whitened component mixes streams, so no grouping by stream is left to cluster on; a "
+                "survey has fewer than 10 streams besides (the sandwich needs 10 clusters or more). The "
+                "SEs are eq. 9's or the known-variance ones, whichever is larger")
+
+
+def _finite(v):
+    v = float(v)
+    return v if math.isfinite(v) else None
 
 
 def fit_circuit(balance, names, bounds: dict, *, starts: int = 3, global_search: bool = False,
@@ -310,7 +425,32 @@ def fit_circuit(balance, names, bounds: dict, *, starts: int = 3, global_search:
     res = fit(model, params, global_search=global_search, starts=starts, grid_check=False, quiet=quiet,
               seed=seed, popsize=6, maxiter=30)
     loo = leave_one_stream_out(balance, names, params, res) if leave_one_out else {}
-    return CircuitFit(model, res, loo)
+    return CircuitFit(model, res, loo, _input_cov(model, res))
+
+
+def _input_cov(model: CircuitModel, res):
+    """A M A^T: the parameter covariance the input errors add (None when the fit is singular)."""
+    model.input_note = "not propagated: the fit is singular"
+    if res.stats.get("singular"):
+        return None
+    th = np.array([res.params[n].value for n in model.names])
+    J = np.zeros((model.y.size, th.size))
+    for k in range(th.size):
+        h = 1e-4 * max(abs(th[k]), 1e-3)
+        tp, tm = th.copy(), th.copy()
+        tp[k] += h
+        tm[k] -= h
+        J[:, k] = (model.predict(tp)[0] - model.predict(tm)[0]) / (2 * h)
+    if not np.all(np.isfinite(J)):
+        return None
+    A = np.linalg.pinv(J.T @ J) @ J.T
+    try:
+        M = model.input_covariance(th)
+    except MillflowError as exc:  # a perturbed feed the circuit cannot run: said in fit.json, not hidden
+        model.input_note = f"not propagated: {exc}"
+        return None
+    model.input_note = "propagated through the model (se_inputs)"
+    return A @ M @ A.T
 
 
 def leave_one_stream_out(balance, names, params, res) -> dict:

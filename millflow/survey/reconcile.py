@@ -49,6 +49,10 @@ __all__ = ["Balance", "reconcile", "GROSS_ERROR_ALPHA"]
 GROSS_ERROR_ALPHA = 0.05
 #: Singular values of the whitened Jacobian below this fraction of the largest are zero.
 RANK_RTOL = 1e-9
+#: Measurements whose normalised adjustments correlate by |rho| at least this much are reported as
+#: not separable by the measurement test: a 7-SD shift (a 10-SD error at redundancy 0.5) then names
+#: the wrong one of a pair in Phi(-7 sqrt(0.05)) = 6 % of cases or more.
+INSEPARABLE_RHO = 0.9
 #: A derived quantity is unobservable when its gradient's null-space part exceeds this fraction.
 OBSERVABLE_RTOL = 1e-6
 
@@ -146,11 +150,49 @@ class Balance:
         order = [int(i) for i in np.argsort(-np.nan_to_num(np.abs(n), nan=-1.0)) if np.isfinite(n[i])]
         return [self._describe(i) for i in order[:count]]
 
-    def _describe(self, i: int) -> dict:
+    def label(self, i: int) -> str:
         r = self.structure.rows[i]
-        return {"measurement": r["key"] + (f" {r['label']}" if "label" in r else ""), "row": i,
+        return r["key"] + (f" {r['label']}" if "label" in r else "")
+
+    def _describe(self, i: int) -> dict:
+        return {"measurement": self.label(i), "row": i,
                 "normalised_adjustment": float(self.normalised[i]),
-                "adjustment_in_sd": float(self.adjustment[i] / self.sd[i])}
+                "adjustment_in_sd": float(self.adjustment[i] / self.sd[i]),
+                "not_separable_from": [self.label(j) for j in self.inseparable(i)]}
+
+    def adjustment_correlation(self) -> np.ndarray:
+        """Correlation of the normalised adjustments (linearised): rho_ik = P_ik / sqrt(P_ii P_kk)
+        with P = I - H the projector onto the redundancy space of the whitened Jacobian; rows and
+        columns of measurements that are not redundant are 0.
+
+        A gross error of k SD in measurement i shifts the normalised adjustment of measurement j
+        by k sqrt(r_i) rho_ji, so measurements with |rho| near 1 respond to it almost alike and
+        the measurement test cannot tell them apart: in a node whose size class is measured in
+        every stream, an error in one stream's class moves the others' as much (an *equivalent
+        set* of the gross-error literature). The one that is named first among them is then
+        decided by the noise: P(j before i) = Phi(-k sqrt(r_i) sqrt((1 - |rho_ij|) / 2))."""
+        if "rho" not in self.meta:
+            J = self.meta["J"]
+            if J.size == 0:
+                self.meta["rho"] = np.zeros((self.sd.size, self.sd.size))
+            else:
+                U = linalg.svd(J, full_matrices=True)[0]
+                P = np.eye(J.shape[0]) - U[:, :self.rank] @ U[:, :self.rank].T
+                red = self.redundant
+                d = np.sqrt(np.where(red, np.clip(np.diag(P), 1e-300, None), 1.0))
+                C = P / d[:, None] / d[None, :]
+                C[~red, :] = 0.0
+                C[:, ~red] = 0.0
+                self.meta["rho"] = C
+        return self.meta["rho"]
+
+    def inseparable(self, i: int, rho_min: float = INSEPARABLE_RHO) -> list[int]:
+        """The other measurements whose normalised adjustments correlate with measurement i's by
+        |rho| >= ``rho_min``: a gross error in any of them looks like one in i to the test."""
+        C = self.adjustment_correlation()
+        row = np.abs(C[i]).copy()
+        row[i] = 0.0
+        return [int(j) for j in np.argsort(-row) if row[j] >= rho_min]
 
     # --------------------------------------------------------------- derived quantities
     def derived(self, gz: np.ndarray, value: float) -> tuple[float, float, bool]:
@@ -229,60 +271,17 @@ class Balance:
         for n in st.streams:
             for key, res in (("solids_tph", self.solids(n)),) + ((("water_tph", self.water(n)),) if st.wet else ()):
                 (ok if res[2] else bad).append(f"streams.{n}.{key}")
-            (ok if self.passing(n)[2].all() else bad).append(f"streams.{n}.psd")
+            p_ok = self.passing(n)[2]
+            if p_ok.all() or not p_ok.any():
+                (ok if p_ok.all() else bad).append(f"streams.{n}.psd")
+            else:  # an analysis on a shorter range than the common series: the sieves it leaves open
+                bad.append(f"streams.{n}.psd at " + ", ".join(f"{x * 1e6:.6g}" for x in st.sieves[~p_ok]) + " um")
         for u in st.additions:
             (ok if self.addition(u)[2] else bad).append(f"water_additions.{u}.water_tph")
         return {"observable": ok, "unobservable": bad}
 
 
-def _start(st: Structure, survey) -> np.ndarray:
-    """A starting point: measured flows and fractions where given, typical ones elsewhere."""
-    K = st.K
-    fr = {}
-    for r, s, mask in zip(st.frac_rows, st.frac_stream, st.frac_mask):
-        fr.setdefault(int(s), []).append((st.y[r], mask))
-    full = [s for s, v in fr.items() if len(v) >= K - 1]
-    shape = np.full(K, 1.0 / K)
-    if full:
-        acc = []
-        for s in full:
-            f = np.zeros(K)
-            for val, mask in fr[s]:
-                f[mask > 0] = max(val, 0.0) / mask.sum()
-            f[-1] = max(1.0 - f[:-1].sum(), 0.0)
-            acc.append(f)
-        shape = np.mean(acc, axis=0) + 1e-6
-        shape /= shape.sum()
-    measured = [m.solids for m in survey.streams.values() if m.solids]
-    typical = float(np.median(measured)) if measured else 1.0
-    z0 = np.zeros(st.n_z)
-    for s, name in enumerate(st.streams):
-        m = survey.streams.get(name)
-        M = m.solids if m is not None and m.solids is not None else typical
-        f = shape.copy()
-        if s in fr:
-            covered = np.zeros(K, bool)
-            for val, mask in fr[s]:
-                sel = mask > 0
-                f[sel] = max(val, 1e-6) * shape[sel] / shape[sel].sum()
-                covered |= sel
-            rest = ~covered  # the pan of the stream's own series
-            f[rest] = max(1.0 - f[covered].sum(), 1e-6) * shape[rest] / max(shape[rest].sum(), 1e-300)
-        z0[st.m_index(s)] = M * f / f.sum()
-        if st.wet:
-            W = M
-            if m is not None and m.water is not None:
-                W = m.water
-            elif m is not None and m.solids_content is not None:
-                W = M * (1 - m.solids_content) / m.solids_content
-            z0[st.w_index(s)] = W
-    for k, u in enumerate(st.additions):
-        v = survey.water_additions[u][0]
-        z0[st.a_index(k)] = typical if v is None else v
-    return z0
-
-
-def _particular(st: Structure) -> tuple[np.ndarray, np.ndarray]:
+def _particular(st: Structure, source: str = "survey") -> tuple[np.ndarray, np.ndarray]:
     """z_p with A z_p = b and the null-space basis N of A; contradictory exact values raise."""
     A, b = st.A, st.b
     if A.shape[0] == 0:
@@ -296,7 +295,7 @@ def _particular(st: Structure) -> tuple[np.ndarray, np.ndarray]:
     if np.max(np.abs(resid), initial=0.0) > 1e-9 * scale:
         keys = ", ".join(k for k, _ in st.exact)
         worst = st.constraint_names[int(np.argmax(np.abs(resid)))]
-        raise InputError(f"survey: the exact values (SD 0) {keys} contradict the balances (they cannot all hold: "
+        raise InputError(f"{source}: the exact values (SD 0) {keys} contradict the balances (they cannot all hold: "
                          f"{worst} is off by {abs(resid).max() * 3.6:.4g} t/h); give them SDs > 0")
     return z_p, Vt[r:].T
 
@@ -348,9 +347,22 @@ def reconcile(survey, *, max_iter: int = 100, reweight: int = 2) -> Balance:
     """Reconcile ``survey`` (a :class:`~millflow.survey.reader.Survey`); see the module docstring.
 
     Raises InputError for a survey that cannot be balanced: exact values that contradict
-    the balances, or solids flows that no measurement determines (unobservable system).
-    Partly unobservable surveys are reconciled; :meth:`Balance.observability` lists what
-    the data leave undetermined.
+    the balances, solids flows that no measurement determines (unobservable system), or
+    a weighted SSR so far beyond its chi-square distribution (more than
+    ``ABSURD_SSR_PER_DOF`` per degree of freedom) that no gross error explains it; and
+    SolverError when no start reaches a physical solution (every stream's solids flow
+    positive, no water flow or addition negative by more than 3 SD), unless the least SSR
+    reached has only water below 0 at an SSR a gross error explains (not absurd): that
+    result is kept and ``meta["unphysical"]`` (the summary's ``physical_range_violations``)
+    says what is below 0, beside the gross-error candidates that cause it. Partly unobservable
+    surveys are reconciled; :meth:`Balance.observability` lists what the data leave
+    undetermined.
+
+    Starts (:mod:`millflow.survey.start`): the flows derived from the measured flows, water
+    meters and % solids by the linear n-product balance; when its solution is not physical
+    or fails the chi-square test at 0.1 %, also the measured-or-typical start and the derived
+    one scaled by 0.5 and 2. Of the physical solutions the one of least SSR is kept; the
+    summary says how many starts were tried.
 
     reweight : passes in which the SDs that come from the error model (relative flow
         SDs, the sqrt(p(1-p)) rule of sieve fractions) are re-evaluated at the reconciled
@@ -358,15 +370,132 @@ def reconcile(survey, *, max_iter: int = 100, reweight: int = 2) -> Balance:
         measured values a gross error inflates its own SD and hides; at the reconciled
         values it does not.
     """
+    from millflow.survey.start import derived_start, naive_start
+
     t0 = time.perf_counter()
     st = build_structure(survey)
     if st.y.size == 0:
         raise InputError(f"{survey.source}: nothing is measured with an SD > 0; there is nothing to reconcile")
-    z_p, N = _particular(st)
-    z0 = _start(st, survey)
-    t_start = N.T @ (z0 - z_p)
+    z_p, N = _particular(st, survey.source)
     sd_measured = st.sd.copy()
-    t, nfev = t_start, 0
+    derived = derived_start(st, survey)
+    starts = [("derived from the measured flows and % solids", derived)] if derived is not None else []
+    starts.append(("measured flows, typical elsewhere", naive_start(st, survey)))
+    if derived is not None:
+        starts += [(f"derived x {k:g}", derived * k) for k in (0.5, 2.0)]
+    tried, best, least, failures = 0, None, None, []
+    for label, z0 in starts:
+        st.sd = sd_measured.copy()
+        tried += 1
+        try:
+            bal = _solve_from(st, survey, z_p, N, z0, max_iter, reweight, sd_measured)
+        except SolverError as exc:
+            failures.append(f"{label}: {exc}")
+            continue
+        bal.meta["start"] = label
+        bal.meta["unphysical"] = unphysical(bal)
+        if least is None or bal.chi_square["ssr"] < least.chi_square["ssr"] * (1 - 1e-9):
+            least = bal
+        if bal.meta["unphysical"]:
+            failures.append(f"{label}: {bal.meta['unphysical'][0]}")
+        elif best is None or bal.chi_square["ssr"] < best.chi_square["ssr"] * (1 - 1e-9):
+            best = bal
+        if best is not None and (best.chi_square["p_value"] >= 1e-3 or best.chi_square["dof"] <= 0):
+            break
+    if best is None and least is not None and not _absurd(least) and not any(
+            "solids" in p for p in least.meta["unphysical"]):
+        # every start ends with a water flow or addition below 0 beyond its errors, at an SSR a gross
+        # error explains: the result is kept, with the violation in the summary beside the candidates
+        best = least
+    if best is None:
+        raise SolverError(f"{survey.source}: the reconciliation reaches no physical solution from {tried} starts "
+                          f"({failures[0]}" + (f"; weighted SSR {least.chi_square['ssr']:.4g} on "
+                                               f"{least.chi_square['dof']} degrees of freedom" if least else "")
+                          + "); check the flows and % solids of that stream and the units of the measured flows")
+    best.meta["starts_tried"] = tried
+    best.runtime_s = time.perf_counter() - t0
+    measured_flows = [n for n in st.streams if best.solids(n)[2]]
+    if not measured_flows:
+        raise InputError(f"{survey.source}: unobservable system: no stream's solids flow is determined by the "
+                         "survey (give at least one solids_tph, e.g. the fresh feed's weightometer)")
+    chi = best.chi_square
+    if _absurd(best):
+        top = ", ".join(f"{c['measurement']} ({c['normalised_adjustment']:+.3g})" for c in best.ranked(3))
+        raise InputError(f"{survey.source}: the measurements contradict each other far beyond their SDs (weighted "
+                         f"SSR {chi['ssr']:.4g} on {chi['dof']} degrees of freedom, more than "
+                         f"{ABSURD_SSR_PER_DOF:g} per degree of freedom, from {tried} starts); largest normalised "
+                         f"adjustments: {top}: check these values and their units, or give them larger SDs")
+    return best
+
+
+#: A weighted SSR above this many times its degrees of freedom is refused: a single gross
+#: error of k SD adds about k^2 r to the SSR, so reaching 100 per degree of freedom takes
+#: errors of hundreds of SDs (a wrong unit, a typo) or SDs understated tenfold throughout.
+ABSURD_SSR_PER_DOF = 100.0
+
+
+def _absurd(bal) -> bool:
+    chi = bal.chi_square
+    return chi["dof"] > 0 and chi["ssr"] > ABSURD_SSR_PER_DOF * chi["dof"]
+
+
+def unphysical(bal) -> list[str]:
+    """What makes a reconciled solution impossible: a stream whose solids flow is not positive,
+    a water flow or water addition negative by more than 3 of its SDs (or negative and
+    unobservable). Small negatives within the errors are not refused; :func:`negatives`
+    reports them."""
+    st = bal.structure
+    out = []
+    scale = float(np.max(np.abs(bal.z[: st.S * st.K]).reshape(st.S, st.K).sum(axis=1), initial=0.0)) or 1.0
+    for s, n in enumerate(st.streams):
+        M = float(bal.z[st.m_index(s)].sum())
+        if not M > 1e-9 * scale:
+            out.append(f"stream {n} has solids {M * 3.6:.4g} t/h")
+    if st.wet:
+        for s, n in enumerate(st.streams):
+            W = float(bal.z[st.w_index(s)])
+            if W < -1e-9 * scale:
+                _, sd, ok = bal.water(n)
+                if not ok or W < -3.0 * sd:
+                    out.append(f"stream {n} has water {W * 3.6:.4g} t/h")
+        for k, u in enumerate(st.additions):
+            a = float(bal.z[st.a_index(k)])
+            if a < -1e-9 * scale:
+                _, sd, ok = bal.addition(u)
+                if not ok or a < -3.0 * sd:
+                    out.append(f"water added at {u} is {a * 3.6:.4g} t/h")
+    return out
+
+
+def negatives(bal) -> list[dict]:
+    """Reconciled values outside their physical range but within their errors, reported rather
+    than clipped: a size class's solids flow below 0 (its adjusted fraction negative, the
+    passing above it over 100 %), a stream's water or a water addition below 0."""
+    st = bal.structure
+    out = []
+    for s, n in enumerate(st.streams):
+        m = bal.z[st.m_index(s)]
+        M = m.sum()
+        for k in np.flatnonzero(m < 0):
+            c = int(st.live[k])
+            lo = st.sieves[c] * 1e6 if c < st.sieves.size else 0.0
+            hi = st.sieves[c - 1] * 1e6 if c > 0 else None
+            label = (f"+{lo:.6g} um" if hi is None else f"-{hi:.6g} +{lo:.6g} um" if lo > 0 else f"-{hi:.6g} um")
+            out.append({"stream": n, "quantity": f"class {label}", "value_pct": float(100 * m[k] / M),
+                        "unit": "% of the stream's solids"})
+        if st.wet and bal.z[st.w_index(s)] < 0:
+            out.append({"stream": n, "quantity": "water", "value_tph": float(bal.z[st.w_index(s)] * 3.6)})
+    for k, u in enumerate(st.additions if st.wet else []):
+        if bal.z[st.a_index(k)] < 0:
+            out.append({"unit": u, "quantity": "water addition", "value_tph": float(bal.z[st.a_index(k)] * 3.6)})
+    return out
+
+
+def _solve_from(st: Structure, survey, z_p, N, z0, max_iter: int, reweight: int, sd_measured) -> Balance:
+    """Solve from the start ``z0`` (projected onto the balances) and collect the statistics."""
+    t0 = time.perf_counter()
+    t = N.T @ (z0 - z_p)
+    nfev = 0
     for k in range(1 + reweight):  # the passes before the last only set the weights: 1e-3 is enough
         t, n = _solve(st, z_p, N, t, max_iter, survey.source, 1e-6 if k == reweight else 1e-3)
         nfev += n
@@ -397,11 +526,11 @@ def reconcile(survey, *, max_iter: int = 100, reweight: int = 2) -> Balance:
     threshold = float(stats.norm.ppf(1 - GROSS_ERROR_ALPHA / (2 * max(n_red, 1))))
     resid_bal = st.A @ z - st.b if st.A.size else np.zeros(0)
     flows = np.abs(z[: st.S * st.K]).sum() or 1.0
-    bal = Balance(survey, st, z, N, z_p, cov_t, null_t, h, adjusted_sd, leverage, rank, chi, threshold, nfev,
-                  time.perf_counter() - t0, float(np.max(np.abs(resid_bal), initial=0.0) / flows),
-                  {"sd_at_measured": sd_measured, "reweight_passes": reweight, "J": J})
-    measured_flows = [n for n in st.streams if bal.solids(n)[2]]
-    if not measured_flows:
-        raise InputError(f"{survey.source}: unobservable system: no stream's solids flow is determined by the "
-                         "survey (give at least one solids_tph, e.g. the fresh feed's weightometer)")
-    return bal
+    # the structure is shared by the starts; the balance keeps its own SDs
+    import copy
+
+    own = copy.copy(st)
+    own.sd = st.sd.copy()
+    return Balance(survey, own, z, N, z_p, cov_t, null_t, h, adjusted_sd, leverage, rank, chi, threshold, nfev,
+                   time.perf_counter() - t0, float(np.max(np.abs(resid_bal), initial=0.0) / flows),
+                   {"sd_at_measured": sd_measured, "reweight_passes": reweight, "J": J})

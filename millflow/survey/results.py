@@ -194,7 +194,9 @@ def summary(bal) -> dict:
                                   "larger than the stated errors allow at 5 % (gross errors, or SDs too small)")),
         "gross_error_threshold": bal.threshold,
         "gross_error_rule": ("|normalised adjustment| > z(1 - 0.05 / (2 n_redundant)): a two-sided test at 5 % "
-                             "family-wise (Bonferroni) over the redundant measurements"),
+                             "family-wise (Bonferroni) over the redundant measurements; not_separable_from lists "
+                             "the measurements whose normalised adjustments correlate with a candidate's by "
+                             "|rho| >= 0.9: an error in any of them looks alike to the test"),
         "gross_error_candidates": bal.gross_errors,
         "largest_normalised_adjustments": bal.ranked(5),
         "gross_error_detectability": detectability(bal),
@@ -206,6 +208,9 @@ def summary(bal) -> dict:
         "exact": [k for k, _ in bal.structure.exact],
         "balance_error": bal.balance_error,
         "iterations": bal.nfev, "runtime_s": bal.runtime_s,
+        "starts_tried": bal.meta.get("starts_tried", 1), "start": bal.meta.get("start"),
+        "outside_physical_range": _outside(bal),
+        "physical_range_violations": list(bal.meta.get("unphysical", [])),
     }
     extra = _report_fields(bal)
     for n, v in extra.pop("stream_topology").items():
@@ -214,16 +219,26 @@ def summary(bal) -> dict:
     return _clean(d)
 
 
+def _outside(bal) -> list:
+    """Reconciled values below 0 within their errors (a size class, a water flow), as they are:
+    the reconciliation does not impose positivity and nothing is clipped."""
+    from millflow.survey.reconcile import negatives
+
+    return negatives(bal)
+
+
 def _p80_p50(sieves, passing) -> tuple[float, float]:
     """P80 and P50 [m] read from cumulative passing at the sieves (coarse -> fine), linear
-    in log size between the two sieves that bracket it; NaN where the percentile lies above
-    the top sieve or below the finest, or the analysis is unobservable."""
+    in log size between the two observable sieves that bracket it; NaN where the percentile
+    lies above the top sieve or below the finest, or the analysis is unobservable."""
     x = np.asarray(sieves, float)
     P = np.asarray(passing, float)
+    keep = np.isfinite(P)  # sieves the survey does not determine for this stream are left out
+    x, P = x[keep], P[keep]
     out = []
     for q in (0.8, 0.5):
         val = math.nan
-        if np.isfinite(P).all():
+        if P.size:
             for k in range(P.size - 1):
                 if P[k] >= q > P[k + 1]:
                     f = (P[k] - q) / (P[k] - P[k + 1])

@@ -12,7 +12,8 @@ variables every node balance is linear:
 
 The measurements are functions of the variables: solids flow M_s = sum_k m_sk and water
 W_s are linear; a class fraction f_sj = sum_{k in j} m_sk / M_s (j a class of the
-stream's own sieves, which must be a subset of the common series: sieves that nest)
+stream's own sieves; the common series is the union of every analysis's sieves, so
+each analysis's class is a range of common classes)
 and the solids content M_s / (M_s + W_s) are not. The pan of each analysis is one
 minus the others, so it is not an independent measurement and is not counted.
 Flows given with SD 0 are exact: they join the balances as A z = b.
@@ -128,24 +129,42 @@ class Structure:
         return h, (J if sparse else J.toarray())
 
 
+#: Two sieves closer than this ratio are not two sieves of one series but one sieve written two
+#: ways (4100 and 4000 um, 74 and 75 um): the finest series in use, ISO 565's R40/3 and the
+#: fourth root of 2, step by 1.19, and R40 itself by 1.06.
+NEAR_DUPLICATE_RATIO = 1.05
+
+
 def _common_sieves(survey) -> tuple[np.ndarray, dict]:
-    """The common sieve series (the finest stream's) and each stream's sieve indices in it."""
+    """The common sieve series (the union of every analysis's sieves, descending) and each
+    stream's sieve indices in it.
+
+    Analyses may use different ranges of one series (a stream without the top sieve, another
+    with one more fine sieve): each analysis's classes are ranges of the common classes. Two
+    sieves within :data:`NEAR_DUPLICATE_RATIO` of each other but not equal (to 1e-6) are
+    refused: they do not nest. The error names the stream(s) that bring the sieve fewer
+    analyses use.
+    """
     psds = {n: m.psd for n, m in survey.streams.items() if m.psd is not None}
     if not psds:
         return np.zeros(0), {}
-    finest = max(psds, key=lambda n: psds[n].sizes.size)
-    common = psds[finest].sizes
-    where = {}
-    for n, p in psds.items():
-        idx = []
+    union = []
+    for p in psds.values():
         for x in p.sizes:
-            k = np.flatnonzero(np.abs(common - x) <= 1e-6 * x)
-            if k.size == 0:
-                raise InputError(f"streams.{n}.psd: sieves do not nest: {x * 1e6:.6g} um is not in the series of "
-                                 f"streams.{finest}.psd ({', '.join(f'{v * 1e6:.6g}' for v in common)} um); "
-                                 "every analysis must use sieves of one series")
-            idx.append(int(k[0]))
-        where[n] = np.array(idx)
+            if not any(abs(x - u) <= 1e-6 * x for u in union):
+                union.append(float(x))
+    common = np.array(sorted(union, reverse=True))
+    users = {k: [n for n, p in psds.items() if np.any(np.abs(p.sizes - x) <= 1e-6 * x)] for k, x in enumerate(common)}
+    for k in range(common.size - 1):
+        if common[k] / common[k + 1] < NEAR_DUPLICATE_RATIO:
+            a, b = (k, k + 1) if len(users[k]) <= len(users[k + 1]) else (k + 1, k)
+            odd, usual = common[a], common[b]
+            who = ", ".join(f"streams.{n}.psd" for n in users[a])
+            raise InputError(f"{survey.source}: {who}: sieves do not nest: {odd * 1e6:.6g} um is within "
+                             f"{100 * (NEAR_DUPLICATE_RATIO - 1):.0f} % of the {usual * 1e6:.6g} um sieve of "
+                             f"{', '.join(f'streams.{n}.psd' for n in users[b])}; one sieve written two ways, or "
+                             "two series: give every analysis sieves of one series")
+    where = {n: np.array([int(np.argmin(np.abs(common - x))) for x in p.sizes]) for n, p in psds.items()}
     return common, where
 
 

@@ -55,7 +55,8 @@ def synthetic_survey(sol, sieves, rng, *, errors: ErrorModel | None = None, soli
     psd : "all" or a list of streams with a sieve analysis.
     additions : units whose water addition is measured.
     gross : {"stream": name, "class": j, "sd": 10} adds a gross error of that many SDs
-        to class j of that stream's analysis (or ``"solids": True`` to its solids flow).
+        to class j of that stream's analysis (or, with ``"solids": True`` or
+        ``"solids_content": True`` in place of ``"class"``, to its solids flow or its % solids).
     """
     fs = sol.flowsheet
     errors = errors or ErrorModel()
@@ -71,12 +72,13 @@ def synthetic_survey(sol, sieves, rng, *, errors: ErrorModel | None = None, soli
         kw = {}
         if n in solids:
             M = truth["solids"][n]
-            k = 10.0 if gross.get("stream") == n and gross.get("solids") else 0.0
+            k = gross.get("sd", 10.0) if gross.get("stream") == n and gross.get("solids") else 0.0
             sd = errors.solids_rel * M
             kw.update(solids=M + sd * (rng.standard_normal() + k), solids_sd=sd, solids_rel=errors.solids_rel)
         if n in water:
             c = truth["solids_content"][n]
-            kw.update(solids_content=c + errors.solids_content_sd * rng.standard_normal(),
+            k = gross.get("sd", 10.0) if gross.get("stream") == n and gross.get("solids_content") else 0.0
+            kw.update(solids_content=c + errors.solids_content_sd * (rng.standard_normal() + k),
                       solids_content_sd=errors.solids_content_sd)
         if n in psd:
             f = class_fractions(truth["passing"][n])

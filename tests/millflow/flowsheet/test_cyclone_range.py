@@ -111,3 +111,26 @@ def test_cli_warns_once_per_quantity(tmp_path, capsys):
     assert len(err) == 1 and "ModelRangeWarning: units.cyclones: pressure" in err[0]
     units = (tmp_path / "o" / "units.csv").read_text().splitlines()[0].split(",")
     assert {"d50c_um", "pressure_kPa", "flow_per_cyclone_m3_h", "underflow_solids_pct_v", "cyclones"} <= set(units)
+
+
+def test_each_model_has_its_own_range_with_its_basis_and_the_diameter_is_checked():
+    """Nageswararao's model was fitted to 102-381 mm cyclones, Plitt's revised model spans
+    laboratory to industrial sizes: the 660 mm cyclone of the wet example is in Plitt's range and
+    outside Nageswararao's, and the warning names the unit, the diameter and the basis."""
+    assert cy.VALIDITY["plitt"] != cy.VALIDITY["nageswararao"]
+    assert cy.VALIDITY["nageswararao"].diameter_mm == (100.0, 400.0)
+    assert "data base" in cy.VALIDITY["nageswararao"].source("diameter_mm")
+    assert cy.VALIDITY["plitt"].source("diameter_mm").startswith("judgment")
+    for model in cy.VALIDITY:  # every bound states where it comes from
+        rng = cy.VALIDITY[model]
+        assert {q for q, _ in rng.basis} == set(cy._RANGE_NAMES), model
+    g = cy.CycloneGeometry(0.66, 0.19, 0.25, 0.15, 2.0)
+    kw = {"pressure_Pa": 80e3, "feed_solids_volume_fraction": 0.2}
+    assert cy.out_of_range("plitt", g, **kw) == []
+    assert cy.out_of_range("nageswararao", g, **kw) == [("diameter_mm", pytest.approx(660.0), (100.0, 400.0))]
+    small = cy.CycloneGeometry(0.025, 0.006, 0.008, 0.004, 0.08)
+    assert [q for q, _, _ in cy.out_of_range("plitt", small, **kw)] == ["diameter_mm"]
+    nage = ('model = "plitt"', 'model = "nageswararao"')
+    with pytest.warns(ModelRangeWarning, match=r"units\.cyclones: cyclone diameter 660 mm outside 100-400 mm "
+                                               r"\(range of use of nageswararao's model, the model's data base"):
+        solve(loads(text(nage, ("cyclones = 2 ", "cyclones = 2\nK_D0 = 140\n"))))

@@ -100,12 +100,12 @@ PSD = "size_um = [2000, 1000, 500, 250, 125]\npassing_pct = [100, 80, 55, 30, 15
     ("[streams.fresh]\nsolids_tph = 250\nsolids_sd_tph = -2\n[streams.fresh.psd]\n" + PSD,
      "streams.fresh.solids_sd_tph = -2: expected a value >= 0"),
     ("[streams.fresh]\nsolids_tph = 250\n[streams.fresh.psd]\n" + PSD
-     + "[streams.overflow.psd]\nsize_um = [2000, 710, 500]\npassing_pct = [100, 90, 80]\n",
-     "sieves do not nest"),
+     + "[streams.overflow.psd]\nsize_um = [2000, 1020, 500]\npassing_pct = [100, 90, 80]\n",
+     "survey.toml: streams.overflow.psd: sieves do not nest: 1020 um is within 5 % of the 1000 um sieve"),
     ("[streams.fresh.psd]\n" + PSD + "[streams.overflow.psd]\n" + PSD, "unobservable system"),
     ("[streams.fresh]\nsolids_tph = 250\nsolids_sd_tph = 0\n[streams.fresh.psd]\n" + PSD
      + "[streams.overflow]\nsolids_tph = 240\nsolids_sd_tph = 0\n[streams.overflow.psd]\n" + PSD,
-     "contradict the balances"),
+     "survey.toml: the exact values (SD 0)"),
     ("[streams.fresh]\nsolids = 250\n", "streams.fresh: unknown key solids"),
     ("[streams.fresh.psd]\nsize_um = [2000, 1000]\npassing_pct = [50, 80]\n", "passing rises"),
 ])
@@ -239,3 +239,167 @@ def test_balance_reports_detectability(tmp_path, capsys):
     assert {"redundancy", "power_10sd", "detectable_sd_90"} <= set(m.columns)
     assert d["n_detected_at_power"] == int((m["power_10sd"] >= 0.9).sum())
     assert m["power_10sd"].min() == pytest.approx(powers[0], rel=1e-6)
+
+
+# ------------------------------------------------------------------ starts and physical solutions
+def _without_solids(survey):
+    """The survey with no solids flow measured (the weightometer missing): the flow scale must come
+    from the water meter and the % solids either side of the sump."""
+    import dataclasses
+
+    streams = {n: dataclasses.replace(m, solids=None, solids_sd=None, solids_rel=None)
+               for n, m in survey.streams.items()}
+    return dataclasses.replace(survey, streams=streams)
+
+
+def test_no_solids_meter_the_flows_follow_from_the_water_meter_and_the_pct_solids():
+    """Fresh-feed solids flow removed, the sump's water meter kept: solvable (the meter and the
+    % solids of the mill discharge and the cyclone feed fix the flow through the sump). The start
+    derived from them reaches the physical minimum; over 20 replicates the fresh feed's 95 %
+    interval covers the truth in >= 17 (binomial: P(< 17 | p = 0.95) = 1.6 %), every solution is
+    physical and the chi-square test passes as often as it should (<= 4 of 20 rejected)."""
+    from millflow.survey.reconcile import unphysical
+
+    sol = solved("examples/survey/circuit.toml")
+    sieves = grid_sieves(sol.flowsheet.grid, 2, bottom=40e-6)[1:]
+    errors = ErrorModel(solids_rel=0.02, water_rel=0.05, solids_content_sd=0.01, psd_sd=0.01, psd_floor=0.001)
+    rng = np.random.default_rng(27)
+    covered, rejected = 0, 0
+    for _ in range(20):
+        survey, truth = synthetic_survey(sol, sieves, rng, errors=errors, additions=["sump"])
+        bal = reconcile(_without_solids(survey))
+        assert unphysical(bal) == []
+        M, sd, ok = bal.solids("fresh")
+        assert ok and sd > 0
+        covered += abs(M - truth["solids"]["fresh"]) <= 1.959964 * sd
+        rejected += not bal.chi_square["passed"]
+        content = bal.adjusted[[i for i, r in enumerate(bal.structure.rows) if r["kind"] == "solids_content"]]
+        assert np.all((content > 0.3) & (content < 1.0))  # no % solids "adjusted" to 0
+    assert covered >= 17, covered
+    assert rejected <= 4, rejected
+
+
+def test_a_poor_start_is_refused_not_reported(monkeypatch, tmp_path, capsys):
+    """From the measured-or-typical start (1 kg/s where nothing is measured), the survey without a
+    solids meter falls into a minimum with water flows of -1e8 t/h and every % solids adjusted to 0
+    (SSR ~ 2e4): unphysical() names it; reconcile() keeps only physical solutions, and when none
+    is reached says so in one line (exit 1 on the command line)."""
+    import millflow.survey.start as start_mod
+    from millflow.errors import SolverError
+    from millflow.survey.reconcile import _particular, _solve_from, unphysical
+    from millflow.survey.structure import build_structure
+
+    survey = _without_solids(read_survey(EXAMPLE / "survey.toml"))
+    st = build_structure(survey)
+    z_p, N = _particular(st)
+    bad = _solve_from(st, survey, z_p, N, start_mod.naive_start(st, survey), 100, 2,
+                      st.sd.copy())
+    problems = unphysical(bad)
+    assert problems and "water" in problems[0], problems
+    assert bad.chi_square["ssr"] > 1e3
+    good = reconcile(survey)
+    assert unphysical(good) == [] and good.chi_square["passed"]
+    assert good.meta["start"].startswith("derived")
+
+    monkeypatch.setattr(start_mod, "derived_start", lambda st, survey: None)
+    with pytest.raises(SolverError, match="no physical solution from 1 starts") as exc:
+        reconcile(survey)
+    assert "\n" not in str(exc.value) and "water" in str(exc.value)
+    text = (EXAMPLE / "survey.toml").read_text().replace("solids_tph = ", "# solids_tph = ")
+    p = _write(tmp_path, text.replace('flowsheet = "circuit.toml"', ""))
+    assert main(["balance", str(p), "--out", str(tmp_path / "out"), "--no-fit"]) == 1
+    err = capsys.readouterr().err.strip()
+    assert "\n" not in err and "no physical solution" in err, err
+    assert not (tmp_path / "out").exists()
+
+
+def test_values_below_zero_within_their_errors_are_reported_not_clipped(tmp_path):
+    """Adjusted class fractions a little below 0 (a nearly empty coarse class) are listed in
+    summary.json's outside_physical_range with their values, and the adjusted values keep them."""
+    out = tmp_path / "out"
+    assert main(["balance", str(EXAMPLE / "survey.toml"), "--out", str(out), "--no-fit", "--no-plots"]) == 0
+    s = json.loads((out / "summary.json").read_text())
+    neg = s["outside_physical_range"]
+    bal = reconcile(read_survey(EXAMPLE / "survey.toml"))
+    st = bal.structure
+    n_neg = int(np.sum(bal.z[: st.S * st.K] < 0))
+    assert len([v for v in neg if v["quantity"].startswith("class")]) == n_neg
+    assert all(v["value_pct"] < 0 for v in neg if "value_pct" in v)
+
+
+# ------------------------------------------------------------------ sieve series
+def _rebin(psd, sizes, truth_passing=None):
+    """The analysis on the sieves ``sizes`` (a subset of its own, or with sieves whose true passing
+    is given in ``truth_passing``), SDs from the error model."""
+    from millflow.survey.reader import PSDMeasurement
+
+    lookup = {round(x * 1e9): p for x, p in zip(psd.sizes, psd.passing)}
+    lookup.update(truth_passing or {})
+    passing = np.array([lookup[round(x * 1e9)] for x in sizes])
+    e = ErrorModel()
+    return PSDMeasurement(np.asarray(sizes), passing, e.fraction_sd(class_fractions(passing)), psd.sd_rule)
+
+
+def test_analyses_on_different_ranges_of_one_series():
+    """The underflow's analysis lacks the top sieve and adds a finer one (as c2c of the audit);
+    the common series is the union, each analysis's classes are ranges of it. Noise-free: every
+    flow is returned exactly (1e-9), SSR 0; the finer sieve is determined only for the underflow
+    (and the streams the class balances tie to it), and observability names the others at that
+    sieve instead of refusing the survey."""
+    import dataclasses
+
+    sol = solved("examples/survey/circuit.toml")
+    sieves = grid_sieves(sol.flowsheet.grid, 2, bottom=30e-6)[1:]  # 5657 ... 31 um
+    survey, truth = _noise_free(sol, sieves, additions=["sump"])
+    streams = dict(survey.streams)
+    for n, m in streams.items():
+        keep = sieves[:-1] if n != "underflow" else sieves[1:]  # the others stop at 44 um
+        streams[n] = dataclasses.replace(m, psd=_rebin(m.psd, keep))
+    survey = dataclasses.replace(survey, streams=streams)
+    bal = reconcile(survey)
+    np.testing.assert_allclose(bal.structure.sieves, sieves)
+    assert bal.chi_square["ssr"] < 1e-12
+    for n in sol.flowsheet.stream_names:
+        assert bal.solids(n)[0] == pytest.approx(truth["solids"][n], rel=1e-9)
+    p, _, ok = bal.passing("underflow")
+    assert ok.all()
+    np.testing.assert_allclose(p, truth["passing"]["underflow"], atol=1e-9)
+    bad = bal.observability()["unobservable"]
+    assert f"streams.overflow.psd at {sieves[-1] * 1e6:.6g} um" in bad
+    p, _, ok = bal.passing("overflow")
+    assert ok[:-1].all() and not ok[-1]
+    np.testing.assert_allclose(p[:-1], truth["passing"]["overflow"][:-1], atol=1e-9)
+
+
+def test_a_near_duplicate_sieve_names_the_stream_that_brings_it(tmp_path, capsys):
+    """4100 um in one analysis (which also has the most sieves) against 4000 um in five: the
+    error names the underflow, which brings the odd sieve, and the survey file."""
+    text = (EXAMPLE / "survey.toml").read_text()
+    head, rest = text.split("[streams.underflow.psd]", 1)
+    block, tail = rest.split("\n\n", 1)
+    block = block.replace("size_um = [5657, 4000,", "size_um = [5657, 4100,").replace("44]", "44, 31]")
+    block = block.replace("]\n", "]\n", 1)
+    lines = block.strip().splitlines()
+    lines[-1] = lines[-1].rstrip("]") + ", 4.0]"
+    p = _write(tmp_path, (head + "[streams.underflow.psd]\n" + "\n".join(lines) + "\n\n" + tail).replace(
+        'flowsheet = "circuit.toml"', ""))
+    assert main(["balance", str(p), "--out", str(tmp_path / "out"), "--no-fit"]) == 2
+    err = capsys.readouterr().err.strip()
+    assert "\n" not in err and "survey.toml: streams.underflow.psd: sieves do not nest: 4100 um" in err, err
+
+
+def test_an_absurd_ssr_is_refused_naming_the_largest_adjustments(tmp_path, capsys):
+    """SDs understated 20-fold (psd_sd 0.05 % instead of 1 %, floor 0.005 %): the weighted SSR
+    grows ~400-fold, beyond 100 per degree of freedom, which no single gross error explains; the
+    balance is refused in one line naming the largest normalised adjustments (exit 2), not
+    printed as a result."""
+    text = (EXAMPLE / "survey.toml").read_text()
+    text = text.replace("psd_sd_pct = 1 ", "psd_sd_pct = 0.05 ")
+    text = text.replace("psd_floor_pct = 0.1 ", "psd_floor_pct = 0.005 ")
+    assert "psd_sd_pct = 0.05" in text and "psd_floor_pct = 0.005" in text
+    p = _write(tmp_path, text.replace('flowsheet = "circuit.toml"', ""))
+    assert main(["balance", str(p), "--out", str(tmp_path / "out"), "--no-fit"]) == 2
+    err = capsys.readouterr().err.strip()
+    assert "\n" not in err and "survey.toml: the measurements contradict each other far beyond their SDs" in err, err
+    assert "largest normalised adjustments: streams." in err
+    assert not (tmp_path / "out").exists()

@@ -49,7 +49,7 @@ def _truth_rows(bal, truth):
 def test_reconciliation_statistics(name):
     sol, sieves = case(name)
     rng = np.random.default_rng(20261125)
-    rejected, covered, cl_covered, closer = 0, [], [], []
+    rejected, covered, cl_covered, closer, water, added = 0, [], [], [], [], []
     for _ in range(REPLICATES):
         survey, truth = synthetic_survey(sol, sieves, rng)
         bal = reconcile(survey)
@@ -59,14 +59,30 @@ def test_reconciliation_statistics(name):
                 v, sd, ok = bal.solids(n)
                 assert ok
                 covered.append(abs(v - truth["solids"][n]) <= 1.959964 * sd)
+            if bal.structure.wet:  # water is never metered here: every stream's water is derived
+                v, sd, ok = bal.water(n)
+                assert ok
+                water.append(abs(v - truth["water"][n]) <= 1.959964 * sd)
+        for u in bal.structure.additions:  # unmetered additions, derived
+            v, sd, ok = bal.addition(u)
+            assert ok
+            added.append(abs(v - truth["water_added"][u]) <= 1.959964 * sd)
         for n, (v, sd, _ok) in bal.circulating_loads().items():
             cl_covered.append(abs(v - truth["circulating_load"][n]) <= 1.959964 * sd)
         t = _truth_rows(bal, truth)
         closer.append((np.sum(((bal.adjusted - t) / bal.sd) ** 2), np.sum(((bal.measured - t) / bal.sd) ** 2)))
     rate = rejected / REPLICATES
+    print(f"{name}: chi-square rejects {rate:.4f}; derived solids flows covered {np.mean(covered):.4f} "
+          f"({len(covered)}), circulating load {np.mean(cl_covered):.4f} ({len(cl_covered)})"
+          + (f", water flows {np.mean(water):.4f} ({len(water)}), water additions {np.mean(added):.4f} "
+             f"({len(added)})" if water else ""))
     assert 0.03 <= rate <= 0.08, rate
     assert 0.90 <= np.mean(covered) <= 0.98, np.mean(covered)
     assert 0.90 <= np.mean(cl_covered) <= 0.98, np.mean(cl_covered)
+    if name == "wet_cyclones":
+        assert len(water) == REPLICATES * len(sol.flowsheet.stream_names) and len(added) >= REPLICATES
+        assert 0.90 <= np.mean(water) <= 0.98, np.mean(water)
+        assert 0.90 <= np.mean(added) <= 0.98, np.mean(added)
     adj, meas = np.mean(closer, axis=0)
     assert adj < meas  # adjusted values are closer to the truth than the measurements on average
 
@@ -141,3 +157,55 @@ def test_gross_error_detection_rate_matches_the_predicted_power(stream, cls):
     # terms and the SD moving with the reconciled value: the normalised adjustment's null SD is
     # ~1.1, not 1, and its shift under the error is off by up to ~0.3)
     assert abs(rate - p) <= 3 * max(se, 0.5 / R) + 0.15, (rate, p, se)
+
+
+def _plant(rows, i):
+    r = rows[i]
+    g = {"stream": r["stream"], "sd": 10.0}
+    if r["kind"] == "fraction":
+        g["class"] = r["class"]
+    else:
+        g[r["kind"]] = True
+    return g
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("name", list(CASES))
+def test_gross_errors_planted_at_random_measurements(name):
+    """A 10-SD error planted at a random measurement (size fraction, solids flow or % solids),
+    200 replicates. Among the plantings at measurements the balance reports as detectable with
+    power >= 0.9 (on the noise-free survey):
+
+    - the planted measurement is named first, or is among the first candidate's
+      not_separable_from (|rho| >= 0.9), in >= 90 %;
+    - where the planted measurement has no such partner (it is separable), it is named first
+      in >= 90 %.
+
+    Named first alone is not >= 90 %: in a node whose size class is measured in every stream,
+    an error in one stream's class moves the others' normalised adjustments as much (rho near
+    1), and which of them is first is decided by the noise. Measured (seed 31): closed circuit
+    first 56.8 % of 111 with power >= 0.9 (98.2 % with the group; separable 100 % of 34),
+    34.0 % overall; wet circuit first 91.4 % of 163 (94.5 % with the group; separable 92.7 %
+    of 109), 79.0 % overall. docs/survey.md records these."""
+    sol, sieves = case(name)
+    clean = reconcile(synthetic_survey(sol, sieves, _Zero())[0])
+    rows = clean.structure.rows
+    power = clean.detection_power(10.0)
+    separable = [not clean.inseparable(i) for i in range(len(rows))]
+    candidates = [i for i, r in enumerate(rows) if r["kind"] in ("fraction", "solids", "solids_content")]
+    rng = np.random.default_rng(31)
+    rec = []
+    for _ in range(200):
+        i = candidates[rng.integers(len(candidates))]
+        survey, _ = synthetic_survey(sol, sieves, rng, gross=_plant(rows, i))
+        bal = reconcile(survey)
+        top = bal.ranked(1)[0]["row"]
+        rec.append((power[i] >= 0.9, separable[i], top == i, top == i or i in bal.inseparable(top)))
+    a = np.array(rec, bool)
+    hi, sep, first, group = a.T
+    print(f"{name}: named first {first.mean():.3f} overall; power >= 0.9 ({hi.sum()}): first "
+          f"{first[hi].mean():.3f}, first or its group {group[hi].mean():.3f}; separable ({(hi & sep).sum()}): "
+          f"first {first[hi & sep].mean():.3f}")
+    assert hi.sum() >= 50 and (hi & sep).sum() >= 20  # enough plantings for the rates below
+    assert group[hi].mean() >= 0.90, group[hi].mean()
+    assert first[hi & sep].mean() >= 0.90, first[hi & sep].mean()
