@@ -39,36 +39,59 @@ def dataset(data_vars: dict, coords: dict | None = None, attrs: dict | None = No
     import xarray as xr
 
     coords = coords or {}
-    variables, indexes, plain = {}, {}, False
+    variables, plain = {}, False
     for name, (dims, values, var_attrs) in {**coords, **data_vars}.items():
         dims = (dims,) if isinstance(dims, str) else tuple(dims)
         values = np.asarray(values)
         if values.dtype.kind not in "biufcU" or values.ndim != len(dims):
             plain = True  # objects, dates, a shape xarray must explain: the general path
-        variables[name] = (dims, values, dict(var_attrs or {}))
-    if plain or not hasattr(xr.Dataset, "_construct_direct"):
+        variables[name] = (dims, values, var_attrs)
+    construct = _direct_constructor(xr)
+    if plain or construct is None:
         return _public(xr, variables, coords, attrs)
     sizes: dict = {}
-    for name, (dims, values, _) in variables.items():
+    built, indexes = {}, {}
+    for name, (dims, values, var_attrs) in variables.items():
         for dim, n in zip(dims, values.shape):
             if sizes.setdefault(dim, n) != n:
                 raise ValueError(f"{name}: dimension {dim!r} has length {n} here and {sizes[dim]} elsewhere")
-    built = {}
-    for name, (dims, values, var_attrs) in variables.items():
-        var = xr.Variable(dims, values, var_attrs, fastpath=True)
-        if name in coords and dims == (name,):
+        var = xr.Variable(dims, values, dict(var_attrs or {}), fastpath=True)
+        if dims == (name,) and name in coords:
             index = _pandas_index(name, values)
             var = index.create_variables({name: var})[name]
             indexes[name] = index
         built[name] = var
     try:
-        return xr.Dataset._construct_direct(built, set(coords), dims=sizes, attrs=dict(attrs or {}),
-                                            indexes=indexes)
+        return construct(built, set(coords), dims=sizes, attrs=dict(attrs or {}), indexes=indexes)
     except TypeError:  # another signature: the public constructor
         return _public(xr, variables, coords, attrs)
 
 
+def _direct_constructor(xr):
+    """xarray's internal ``Dataset._construct_direct``, or None where it is missing."""
+    return getattr(xr.Dataset, "_construct_direct", None)
+
+
+#: Pandas indexes of recent dimension coordinates, by (name, dtype, values): a mill solved
+#: again and again on one grid reuses its index (pandas indexes are immutable; xarray
+#: shares them between Datasets the same way on every shallow copy).
+_INDEXES: dict = {}
+_INDEXES_KEPT = 64
+
+
 def _pandas_index(name, values):
+    key = (name, values.dtype.str, values.shape, values.tobytes()) if values.size <= 4096 else None
+    index = _INDEXES.get(key) if key is not None else None
+    if index is None:
+        index = _new_pandas_index(name, values)
+        if key is not None:
+            if len(_INDEXES) >= _INDEXES_KEPT:
+                _INDEXES.pop(next(iter(_INDEXES)))
+            _INDEXES[key] = index
+    return index
+
+
+def _new_pandas_index(name, values):
     import pandas as pd
     from xarray.indexes import PandasIndex
 
