@@ -25,8 +25,8 @@ from millflow.errors import GridError
 from millflow.flowsheet.water import slurry_properties
 from millflow.psd import _fix_sum, _percentiles_of_cum, cum_passing, cum_passing_at
 
-__all__ = ["stream_properties", "circulating_loads", "mass_balance", "to_dataset", "summary", "error_report",
-           "stream_table", "unit_table", "psd_table", "save"]
+__all__ = ["stream_properties", "circulating_loads", "mass_balance", "to_dataset", "summary", "key_figures",
+           "error_report", "stream_table", "unit_table", "psd_table", "save"]
 
 TPH = 3.6  # kg/s -> t/h
 
@@ -89,7 +89,26 @@ def recycle_streams(fs) -> list[str]:
     """The streams that close recycle loops: back edges of a depth-first walk of each loop
     from where its new feed enters, following streams in file order (for a ball mill with
     cyclones, the underflow; a splitter's returning branch is another)."""
-    lab = dict(zip(fs.units, fs.components()))
+    return list(_loops(fs)[1])
+
+
+def _loops(fs) -> tuple:
+    """(loop label per unit, recycle streams) of the flowsheet's connections, computed once
+    per connection pattern: a sweep's cases share their base flowsheet's streams."""
+    got = _LOOPS.get(id(fs.streams))
+    if got is None or got[0] is not fs.streams or got[1] != tuple(fs.units):
+        lab = dict(zip(fs.units, fs.components()))
+        got = (fs.streams, tuple(fs.units), lab, tuple(_recycle_streams(fs, lab)))
+        if len(_LOOPS) >= 64:
+            _LOOPS.pop(next(iter(_LOOPS)))
+        _LOOPS[id(fs.streams)] = got  # holds the streams: their id is not reused while kept
+    return got[2], got[3]
+
+
+_LOOPS: dict = {}
+
+
+def _recycle_streams(fs, lab) -> list[str]:
     out, seen = [], set()
     entries = [st.target for st in fs.streams.values() if lab[st.source] != lab[st.target]]
     for start in entries:
@@ -123,14 +142,17 @@ def circulating_loads(sol) -> dict:
     is U/F_new (= U/O at steady state).
     """
     fs = sol.flowsheet
-    lab = dict(zip(fs.units, fs.components()))
-    tot = {n: math.fsum(sol.flows[k]) for k, n in enumerate(fs.stream_names)}
+    return _circulating(fs, {n: math.fsum(sol.flows[k]) for k, n in enumerate(fs.stream_names)})
+
+
+def _circulating(fs, tot) -> dict:
+    lab, recycles = _loops(fs)
     new_feed = {}
     for n, st in fs.streams.items():
         if lab[st.source] != lab[st.target]:
             new_feed[lab[st.target]] = new_feed.get(lab[st.target], 0.0) + tot[n]
     out = {}
-    for n in recycle_streams(fs):
+    for n in recycles:
         fresh = new_feed.get(lab[fs.streams[n].source], 0.0)
         out[n] = tot[n] / fresh if fresh > 0 else float("nan")
     return out
@@ -370,6 +392,32 @@ def summary(sol, props=None, grid_check=None) -> dict:
         "error_estimate": error_report(sol, grid_check),
         "runtime_s": sol.runtime_s,
     })
+
+
+def key_figures(sol, streams=None) -> dict:
+    """The numbers a sweep keeps of a solved case, as :func:`summary` gives them (the same
+    arithmetic), without the rest of the summary: ``p80_um`` and ``p50_um`` of ``streams``
+    (default: every stream), ``circulating_load``, ``specific_energy_kWh_per_t`` and
+    ``mass_balance_error``."""
+    fs = sol.flowsheet
+    names = fs.stream_names
+    x = fs.grid.x
+    tot = {n: math.fsum(sol.flows[k]) for k, n in enumerate(names)}
+    p80, p50 = {}, {}
+    for n in (names if streams is None else streams):
+        if tot[n] > 0:  # as stream_properties: rounding-level negatives cut, the sum's residual placed
+            g = np.maximum(sol.flows[names.index(n)], 0.0)
+            a, b = _p80_p50(x, cum_passing(_fix_sum(g / math.fsum(g))))
+        else:
+            a = b = float("nan")
+        p80[n], p50[n] = a * 1e6, b * 1e6
+    feed = math.fsum(u.solids for u in fs.units.values() if u.type == "feed")
+    prod = math.fsum(tot[st.name] for st in fs.streams.values() if fs.units[st.target].type == "product")
+    power = [u.power for u in fs.units.values() if u.type == "mill" and u.power is not None]
+    energy = None if not power else ((math.fsum(power) / 1e3) / (prod * TPH) if prod > 0 else float("nan"))
+    return _clean({"p80_um": p80, "p50_um": p50, "circulating_load": _circulating(fs, tot),
+                   "specific_energy_kWh_per_t": energy,  # as _specific_energy
+                   "mass_balance_error": abs(prod - feed) / feed if feed > 0 else 0.0})  # as mass_balance
 
 
 def _cyclone_columns(r) -> dict:
