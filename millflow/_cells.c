@@ -571,10 +571,10 @@ HOT_LOOP static void chain_block(Py_ssize_t N, Py_ssize_t n, const double *RESTR
 }
 
 PyDoc_STRVAR(population_chains_doc,
-"population_chains(s, b, f, out, P, N, n, f_rows) -> None\n\n"
+"population_chains(s, scale, b, f, out, P, N, n, f_rows) -> None\n\n"
 "Products of P chains of n equal well-mixed cells (perfect mixing: n = 1; tanks in\n"
-"series: n cells of tau/n) that share the breakage b (N, N): s (P, N) the cell's rates\n"
-"tau S / (n d*) of each member, f (f_rows, N) the feed (f_rows 1: shared, or P), out (P, N)\n"
+"series: n cells of tau/n) that share the breakage b (N, N): scale * s (P, N) the cell's\n"
+"rates tau S / (n d*) of each member, f (f_rows, N) the feed (f_rows 1: shared, or P), out (P, N)\n"
 "written. Eq. 3 by forward substitution in every cell, class after class, all cells of a\n"
 "class in one pass; members in blocks of 8 whose sums over the coarser classes share\n"
 "one read of b's row. Non-finite rates give non-finite products (nothing is raised).");
@@ -583,7 +583,8 @@ static PyObject *population_chains(PyObject *self, PyObject *args)
 {
     PyObject *os, *ob, *of, *oout;
     Py_ssize_t P, N, n, f_rows;
-    if (!PyArg_ParseTuple(args, "OOOOnnnn", &os, &ob, &of, &oout, &P, &N, &n, &f_rows))
+    double scale;
+    if (!PyArg_ParseTuple(args, "OdOOOnnnn", &os, &scale, &ob, &of, &oout, &P, &N, &n, &f_rows))
         return NULL;
     if (P < 0 || N < 1 || n < 1 || (f_rows != 1 && f_rows != P)) {
         PyErr_SetString(PyExc_ValueError, "expected P >= 0 members, N >= 1 classes, n >= 1 cells, f_rows 1 or P");
@@ -625,7 +626,7 @@ static PyObject *population_chains(PyObject *self, PyObject *args)
             const Py_ssize_t src = m < nb ? p0 + m : p0;
             const double *sm = s + src * N, *fm = f + (f_rows == 1 ? 0 : src) * N;
             for (Py_ssize_t i = 0; i < N; i++) {
-                sT[i * MEMBERS + m] = sm[i];
+                sT[i * MEMBERS + m] = scale * sm[i];
                 fT[i * MEMBERS + m] = fm[i];
             }
         }

@@ -52,12 +52,12 @@ def tanks_in_series_population(S, b, feed, tau: float, n: int, *, kernel: str | 
     (P, N): each tank's product the next one's feed (``kernel`` as
     :func:`millflow.compiled.kernel`)."""
     S = np.atleast_2d(np.asarray(S, dtype=float))
-    return _chains(S * (float(tau) / int(n)), np.asarray(b, dtype=float), np.asarray(feed, dtype=float), int(n),
+    return _chains(S, float(tau) / int(n), np.asarray(b, dtype=float), np.asarray(feed, dtype=float), int(n),
                    kernel)
 
 
-def _chains(s, b, f, n: int, kernel=None) -> np.ndarray:
-    """n cells of eq. 3 in turn with rates s (P, N) (tau/n S/d* already in them)."""
+def _chains(s, scale: float, b, f, n: int, kernel=None) -> np.ndarray:
+    """n cells of eq. 3 in turn with rates scale * s (P, N) (tau/n S/d*)."""
     from millflow import compiled
 
     P, N = s.shape
@@ -65,11 +65,12 @@ def _chains(s, b, f, n: int, kernel=None) -> np.ndarray:
     if module is not None and b.ndim == 2:
         f2 = np.ascontiguousarray(f if f.ndim == 2 else f[np.newaxis])
         out = np.empty((P, N))
-        module.population_chains(np.ascontiguousarray(s), np.ascontiguousarray(b), f2, out, P, N, n, f2.shape[0])
+        module.population_chains(np.ascontiguousarray(s), float(scale), np.ascontiguousarray(b), f2, out, P, N, n,
+                                 f2.shape[0])
         return out
     p = f
     for _ in range(n):
-        p = well_mixed_population(s, b, p, 1.0)
+        p = well_mixed_population(s, b, p, scale)
     return np.broadcast_to(p, (P, N)).copy()
 
 
@@ -107,7 +108,7 @@ def steady_population(S, b, feed, transport, d=None, *, where=None, kernel: str 
     S = np.asarray(S, dtype=float)
     if S.ndim != 2 or S.shape[1] < 1:
         raise InputError(f"S has shape {S.shape}; expected (members, classes)")
-    if not np.all(np.isfinite(S)) or np.any(S < 0):
+    if S.size and not (S.min() >= 0 and S.max() < np.inf):  # two passes without temporaries; NaN fails
         raise InputError("S: expected finite rates >= 0 [1/s] for every member")
     n_members, n = S.shape
     b = np.asarray(b, dtype=float)
@@ -122,8 +123,7 @@ def steady_population(S, b, feed, transport, d=None, *, where=None, kernel: str 
             raise InputError(f"d has shape {d.shape}; expected ({n},) or ({n_members}, {n})")
     kind = _kind(transport)
     if kind == "perfect_mixing" and where in (None, "discharge", "cells"):
-        s = S * float(transport.tau) if d is None else S * float(transport.tau) / d
-        return _chains(s, b, f, 1, kernel)
+        return _chains(S if d is None else S / d, float(transport.tau), b, f, 1, kernel)
     tis_n = getattr(transport, "n", None)
     if (isinstance(transport, rtd.TanksInSeries) and d is None and where is None
             and float(tis_n).is_integer()):

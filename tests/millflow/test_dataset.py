@@ -5,13 +5,23 @@ import xarray as xr
 
 import rtd
 from millflow import _dataset
-from millflow.bench.percase import _scene
+from millflow.breakage import b_from_B, normalized_B, power_law_rates
+from millflow.grid import SizeGrid
 from millflow.mill import steady_mill
 
 try:  # xarray's own consistency check of a Dataset's variables, dims and indexes
     from xarray.testing import _assert_internal_invariants
 except ImportError:  # pragma: no cover - another xarray
     _assert_internal_invariants = None
+
+
+def _scene(n):
+    g = SizeGrid.geometric(1e-2, 2 ** 0.25, n)
+    S = power_law_rates(g.x, 0.05, 1.0, g.x[0])
+    S[-1] = 0.0
+    feed = np.zeros(n)
+    feed[:3] = [0.2, 0.5, 0.3]
+    return g, S, b_from_B(normalized_B(g.x, 0.4, 0.8, 3.0)), feed
 
 
 def _check(ds, ref):

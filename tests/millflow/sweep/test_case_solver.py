@@ -27,12 +27,13 @@ def _plain(data, case, source):
     {"grid.n": 40.0},
 ])
 def test_cases_equal_the_whole_build(case):
-    from millflow.bench.flowsheet import CLOSED_CIRCUIT_TOML
     import tomllib
 
-    data = tomllib.loads(CLOSED_CIRCUIT_TOML)
-    data["grid"]["n"] = 50
-    data["units"]["ball_mill"]["transport"]["n"] = 3
+    from tests.closed_circuit import per_time_text
+
+    data = tomllib.loads(per_time_text())  # the shipped circuit with tau_min and rates per time
+    data["grid"] = {"top_um": 8000, "bottom_um": 2, "n": 50}
+    data["units"]["ball_mill"]["transport"] = {"model": "tanks_in_series", "n": 3}
     before = copy.deepcopy(data)
     solver = CaseSolver(data, "<test>")
     for _ in range(2):  # a kept unit variant gives the same numbers
