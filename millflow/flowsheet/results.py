@@ -402,22 +402,30 @@ def key_figures(sol, streams=None) -> dict:
     fs = sol.flowsheet
     names = fs.stream_names
     x = fs.grid.x
-    tot = {n: math.fsum(sol.flows[k]) for k, n in enumerate(names)}
+    rows = sol.flows.tolist()  # fsum over Python floats: the same exact sums, without numpy's per-item boxing
+    tot = {n: math.fsum(row) for n, row in zip(names, rows)}
     p80, p50 = {}, {}
     for n in (names if streams is None else streams):
         if tot[n] > 0:  # as stream_properties: rounding-level negatives cut, the sum's residual placed
             g = np.maximum(sol.flows[names.index(n)], 0.0)
-            a, b = _p80_p50(x, cum_passing(_fix_sum(g / math.fsum(g))))
+            a, b = _p80_p50(x, cum_passing(_fix_sum(g / math.fsum(g.tolist()))))
         else:
             a = b = float("nan")
-        p80[n], p50[n] = a * 1e6, b * 1e6
+        p80[n], p50[n] = _finite(a * 1e6), _finite(b * 1e6)
     feed = math.fsum(u.solids for u in fs.units.values() if u.type == "feed")
     prod = math.fsum(tot[st.name] for st in fs.streams.values() if fs.units[st.target].type == "product")
     power = [u.power for u in fs.units.values() if u.type == "mill" and u.power is not None]
     energy = None if not power else ((math.fsum(power) / 1e3) / (prod * TPH) if prod > 0 else float("nan"))
-    return _clean({"p80_um": p80, "p50_um": p50, "circulating_load": _circulating(fs, tot),
-                   "specific_energy_kWh_per_t": energy,  # as _specific_energy
-                   "mass_balance_error": abs(prod - feed) / feed if feed > 0 else 0.0})  # as mass_balance
+    return {"p80_um": p80, "p50_um": p50,
+            "circulating_load": {k: _finite(v) for k, v in _circulating(fs, tot).items()},
+            "specific_energy_kWh_per_t": None if energy is None else _finite(energy),  # as _specific_energy
+            "mass_balance_error": _finite(abs(prod - feed) / feed if feed > 0 else 0.0)}  # as mass_balance
+
+
+def _finite(v) -> float | None:
+    """A float as JSON reads it (as :func:`_clean`): None when not finite."""
+    v = float(v)
+    return v if math.isfinite(v) else None
 
 
 def _cyclone_columns(r) -> dict:
