@@ -22,7 +22,7 @@ __getattr__, __dir__ = attach(__name__, {
                         "OutputError", "SolverError"),
     "millflow.grid": ("SizeGrid",),
     "millflow.linalg": ("SpectralBlocks", "breakage_matrix"),
-    "millflow.mill": ("Mill", "steady_mill", "transfer_matrix"),
+    "millflow.mill": ("Mill", "steady_mill", "steady_population", "transfer_matrix"),
     "millflow.mill.well_mixed": ("solve_well_mixed",),
     "millflow.flowsheet": ("Flowsheet",),
 })
@@ -56,5 +56,6 @@ __all__ = [
     "power_law_rates",
     "solve_well_mixed",
     "steady_mill",
+    "steady_population",
     "transfer_matrix",
 ]

@@ -34,7 +34,6 @@ from __future__ import annotations
 import math
 
 import numpy as np
-from scipy.optimize import brentq
 
 from millflow.errors import InputError
 from millflow.grid import as_sizes
@@ -82,6 +81,8 @@ def _whiten_beta_star(alpha: float, beta: float) -> float:
         hi *= 2.0
         if hi > 1e6:
             raise InputError(f"whiten: no beta* found for alpha = {alpha!r}, beta = {beta!r}")
+    from scipy.optimize import brentq  # imported here: scipy.optimize loads scipy.sparse (start-up)
+
     return brentq(f, 1e-9, hi, xtol=1e-15, rtol=1e-15)
 
 

@@ -2,8 +2,11 @@
 
 Each sub-command lives in its own module of :mod:`millflow.commands` and exposes
 ``add_parser(subparsers)``, which registers the sub-command and sets ``func`` (a
-callable taking the parsed arguments and returning an exit code). Sub-commands are
-found by listing that package, so adding a command is adding a module.
+callable taking the parsed arguments and returning an exit code).
+:data:`millflow.commands.COMMANDS` maps the names to the modules: a command line
+imports the module of the command it runs and no other (the rest are listed by name
+and help line only), so that ``millflow run`` does not pay for what ``fit-rtd`` or
+``scaleup`` import.
 """
 from __future__ import annotations
 
@@ -11,7 +14,6 @@ import argparse
 import contextlib
 import importlib
 import os
-import pkgutil
 import re
 import signal
 import sys
@@ -21,9 +23,12 @@ import warnings
 from millflow.errors import MillflowError, OutputError, SolverError
 
 
-def build_parser() -> argparse.ArgumentParser:
-    import millflow.commands as commands
+def build_parser(argv: list[str] | None = None) -> argparse.ArgumentParser:
+    """The command-line parser. With ``argv``, only the sub-command it names is built in
+    full (its module imported); the others are listed with their help line. Without
+    ``argv`` (documentation, tests), every sub-command is built."""
     from millflow import __version__
+    from millflow.commands import COMMANDS
 
     parser = argparse.ArgumentParser(
         prog="millflow",
@@ -33,15 +38,23 @@ def build_parser() -> argparse.ArgumentParser:
     parser.add_argument("--version", action="version", version=f"millflow {__version__}")
     sub = parser.add_subparsers(dest="command", metavar="COMMAND")
     sub.required = True
-    for info in sorted(pkgutil.iter_modules(commands.__path__), key=lambda m: m.name):
-        module = importlib.import_module(f"millflow.commands.{info.name}")
-        if hasattr(module, "add_parser"):
-            module.add_parser(sub)
+    wanted = set(COMMANDS) if argv is None else {_command_of(argv)}
+    for name, (module, help_line) in sorted(COMMANDS.items()):
+        if name in wanted:
+            importlib.import_module(f"millflow.commands.{module}").add_parser(sub)
+        else:  # listed under --help and in "invalid choice" messages; never parsed
+            sub.add_parser(name, help=help_line, add_help=False)
     for name, p in sub.choices.items():  # help text is plain text: no reStructuredText roles
         p.description = _plain(p.description)
         p.epilog = p.epilog or f"example: {EXAMPLES.get(name, f'millflow {name} --help')}"
         p.formatter_class = argparse.RawDescriptionHelpFormatter
     return parser
+
+
+def _command_of(argv: list[str]) -> str | None:
+    """The sub-command an argument list names: its first word that is not an option
+    (the top level takes no option with a value)."""
+    return next((a for a in argv if not a.startswith("-")), None)
 
 
 #: One example line per command (shown under --help).
@@ -85,15 +98,18 @@ def main(argv: list[str] | None = None) -> int:
     and argparse's usage errors); 130 SIGINT. Every failure is one line on stderr;
     MILLFLOW_DEBUG=1 adds the traceback of an internal error.
     """
+    whole_process = argv is None  # the command line itself: the process exits after the command
     argv = sys.argv[1:] if argv is None else list(argv)
     if argv == ["--version"]:  # answered before the sub-commands (and numpy) are imported
         from millflow import __version__
 
         print(f"millflow {__version__}")
         raise SystemExit(0)  # as argparse's version action does
-    parser = build_parser()
+    parser = build_parser(argv)
     args = parser.parse_args(argv)
     name = f"millflow {args.command}"
+    if whole_process:
+        _hide_dask(args.command)
     previous = signal.getsignal(signal.SIGTERM) if _main_thread() else None
     previous_int = signal.getsignal(signal.SIGINT) if _main_thread() else None
     if previous is not None:
@@ -131,6 +147,18 @@ def main(argv: list[str] | None = None) -> int:
             signal.signal(signal.SIGTERM, previous)
         if previous_int is not None:
             signal.signal(signal.SIGINT, previous_int)
+
+
+def _hide_dask(command: str) -> None:
+    """In a whole ``millflow`` process (the command line, not a call of :func:`main` from
+    Python) of a command that holds no dask array, make ``import dask`` fail, so that
+    xarray's duck-array checks find dask absent instead of importing dask.array (0.5-1 s
+    of a small run's start-up). ``sys.modules[name] = None`` is Python's documented way
+    to block an import; it lasts until the process exits, right after the command."""
+    from millflow.commands import USES_DASK
+
+    if command not in USES_DASK and "dask" not in sys.modules:
+        sys.modules["dask"] = None
 
 
 def one_line(err) -> str:

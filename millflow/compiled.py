@@ -16,7 +16,7 @@ __all__ = ["KERNELS", "CHOICES", "kernel", "load", "status"]
 CHOICES = (None, "compiled", "numpy")
 
 #: The compiled pieces: name -> (module, the KERNEL_VERSION its callers are written for).
-KERNELS = {"eigenbasis": ("_eigenbasis", 1), "cells": ("_cells", 1)}
+KERNELS = {"eigenbasis": ("_eigenbasis", 1), "cells": ("_cells", 2)}
 
 
 def load(name: str, version: int):

@@ -285,12 +285,11 @@ class SizeGrid:
         """The sizes as an xarray coordinate ``size`` [m] with units and long_name."""
         import xarray as xr
 
-        return xr.DataArray(
-            self.upper_m.copy(),
-            dims="size",
-            name="size",
-            attrs={"units": "m", "long_name": "upper size of class (Austin convention)"},
-        )
+        # a Variable on its fastpath: a DataArray of a bare ndarray would have xarray's
+        # duck-array probe import dask.array (about a second) when dask is installed
+        return xr.DataArray(xr.Variable("size", self.upper_m.copy(),
+                                        {"units": "m", "long_name": "upper size of class (Austin convention)"},
+                                        fastpath=True), name="size")
 
     def __len__(self) -> int:
         return self.n

@@ -26,7 +26,6 @@ from dataclasses import dataclass
 from typing import ClassVar
 
 import numpy as np
-from scipy import special
 
 from rtd.base import ParameterError, RTDModel, as_s, as_time, check_positive
 
@@ -236,6 +235,8 @@ def open_density(theta, pe: float) -> np.ndarray:
 
 def open_cdf(theta, pe: float) -> np.ndarray:
     """F = Phi(z (theta - 1)) - exp(Pe) Phi(-z (theta + 1)), z = sqrt(Pe/(2 theta))."""
+    from scipy import special  # here: scipy.special is a large share of start-up
+
     th = np.maximum(np.asarray(theta, dtype=float), 0)
     with np.errstate(divide="ignore", invalid="ignore"):
         z = np.sqrt(pe / (2 * th))

@@ -22,7 +22,6 @@ from dataclasses import dataclass
 from typing import ClassVar
 
 import numpy as np
-from scipy import special
 
 
 from rtd.base import (  # noqa: F401  (re-exported: rtd.models is where users found them)
@@ -163,6 +162,8 @@ class TanksInSeries(RTDModel):
 
     def pdf(self, t):
         """E(t), the exit-age density [1/time], at times ``t`` (0 before t = 0)."""
+        from scipy import special  # here: scipy.special is a large share of start-up
+
         t = as_time(t)
         x = self.n * np.maximum(t, 0) / self.tau
         # log form: (n/tau) x^(n-1) e^-x / Gamma(n) overflows piecewise for large n
@@ -174,6 +175,8 @@ class TanksInSeries(RTDModel):
 
     def cdf(self, t):
         """F(t), the fraction [-] of the tracer that has left by times ``t``."""
+        from scipy import special
+
         t = as_time(t)
         return special.gammainc(self.n, self.n * np.maximum(t, 0) / self.tau)
 

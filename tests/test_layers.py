@@ -17,7 +17,7 @@ PACKAGES = ("millflow", "rtd")
 LAYERS = [
     ("base", ("millflow.errors", "millflow._interrupt", "millflow.grid", "millflow.compiled", "millflow.plotting",
               "millflow.inputs", "millflow._lazy", "millflow.threads", "millflow.balances",
-              "millflow.progress", "millflow.report")),  # report: pages from summaries, no physics
+              "millflow.progress", "millflow.report", "millflow._dataset")),  # report: pages from summaries, no physics
     ("kinetics", ("millflow.psd", "millflow.checks", "millflow.classifiers", "millflow.cyclones", "millflow.breakage",
                   "millflow.linalg",
                   "millflow.batch", "millflow.nonlinear")),  # nonlinear: where issue 12's kinetics land

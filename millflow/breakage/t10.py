@@ -24,7 +24,6 @@ from __future__ import annotations
 from dataclasses import dataclass, field
 
 import numpy as np
-from scipy.interpolate import PchipInterpolator
 
 from millflow.breakage.distributions import b_from_B, validate_B
 from millflow.errors import BreakageError, InputError
@@ -106,6 +105,8 @@ def _phi(r_known: np.ndarray, phi_known: np.ndarray):
     """Phi(r) for r in (0, 1]: PCHIP in ln r through the points, power law below."""
     lr = np.log(r_known[::-1])  # increasing
     lp = phi_known[::-1]
+    from scipy.interpolate import PchipInterpolator  # imported here: loading a flowsheet need not pay for it
+
     spline = PchipInterpolator(lr, lp)
     slope = (np.log(phi_known[-2]) - np.log(phi_known[-1])) / (np.log(r_known[-2]) - np.log(r_known[-1])) \
         if phi_known[-1] > 0 else 0.0

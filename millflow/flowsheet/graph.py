@@ -12,8 +12,6 @@ from __future__ import annotations
 from dataclasses import dataclass, field
 
 import numpy as np
-from scipy.sparse import csr_matrix
-from scipy.sparse.csgraph import connected_components
 
 from millflow.errors import InputError
 from millflow.grid import SizeGrid
@@ -113,13 +111,46 @@ class Flowsheet:
         raise KeyError(f"{unit}.{port}")
 
     def components(self) -> np.ndarray:
-        """Strongly connected component label of each unit (order of ``units``)."""
+        """Strongly connected component label of each unit (order of ``units``): Tarjan's
+        algorithm on the unit graph (a few units: plain Python, no sparse matrix), labels
+        numbered in the order the components are completed."""
         names = list(self.units)
-        idx = {u: k for k, u in enumerate(names)}
-        rows = [idx[s.source] for s in self.streams.values()]
-        cols = [idx[s.target] for s in self.streams.values()]
-        g = csr_matrix((np.ones(len(rows)), (rows, cols)), shape=(len(names), len(names)))
-        return connected_components(g, directed=True, connection="strong")[1]
+        succ = {u: [] for u in names}
+        for s in self.streams.values():
+            succ[s.source].append(s.target)
+        index, low, label, stack, on_stack = {}, {}, {}, [], set()
+        count = 0
+        for root in names:
+            if root in index:
+                continue
+            work = [(root, iter(succ[root]))]
+            index[root] = low[root] = len(index)
+            stack.append(root)
+            on_stack.add(root)
+            while work:
+                unit, it = work[-1]
+                nxt = next(it, None)
+                if nxt is not None:
+                    if nxt not in index:
+                        index[nxt] = low[nxt] = len(index)
+                        stack.append(nxt)
+                        on_stack.add(nxt)
+                        work.append((nxt, iter(succ[nxt])))
+                    elif nxt in on_stack:
+                        low[unit] = min(low[unit], index[nxt])
+                    continue
+                work.pop()
+                if work:
+                    low[work[-1][0]] = min(low[work[-1][0]], low[unit])
+                if low[unit] == index[unit]:
+                    while True:
+                        member = stack.pop()
+                        on_stack.discard(member)
+                        label[member] = count
+                        if member == unit:
+                            break
+                    count += 1
+        return np.array([label[u] for u in names])
 
     def recycle_streams(self) -> list[str]:
         """Streams whose source and target lie in the same recycle loop."""

@@ -30,7 +30,7 @@ from rtd import names as rtd_names
 from millflow.inputs import UNITS, quantity, read_json, read_text, suffixes
 from millflow.psd import from_distribution, from_sieves, gates_gaudin_schuhmann, rosin_rammler
 
-__all__ = ["Flowsheet", "load", "loads", "from_dict", "DIMENSIONS"]
+__all__ = ["Flowsheet", "load", "loads", "from_dict", "with_units", "unit_from_table", "DIMENSIONS"]
 
 
 class Flowsheet(graph.Flowsheet):
@@ -875,7 +875,50 @@ def from_dict(data: dict, *, source: str = "<dict>", base_dir=None) -> Flowsheet
     top.finish("title, grid, report, slurry, materials, units, streams")
     return Flowsheet(grid=grid, units=units, streams=streams, title=title, passing_sizes=passing,
                      source_file=source, slurry=slurry, water_added=water_added,
-                     meta={"document": data, "base_dir": None if base is None else str(base)})
+                     meta={"document": data, "base_dir": None if base is None else str(base), "materials": materials})
+
+
+def unit_from_table(fs: Flowsheet, name: str, table: dict):
+    """(unit, water added to its feed [kg/s] or None) built from its ``table`` (as in the
+    document) on the grid, materials and slurry of ``fs``. A mill whose rate and breakage
+    come out the very objects of the mill of that name in ``fs`` keeps its class-averaged
+    forms on the grid: they depend on neither tau, power nor transport."""
+    materials = fs.meta.get("materials")
+    if materials is None:
+        raise InputError("unit_from_table: the flowsheet was not built from a document (from_dict, load)")
+    if name not in fs.units:
+        raise InputError(f"units.{name}: no such unit in the flowsheet; units: {', '.join(fs.units)}")
+    base = Path(fs.meta["base_dir"]) if fs.meta.get("base_dir") else None
+    u = _Table(table, f"units.{name}")
+    added = u.quantity("add_water", "mass_flow", None, allow_zero=True)
+    new = _unit(name, u, fs.grid, materials, fs.slurry, base)
+    if added is not None and new.type in ("feed", "product"):
+        raise InputError(f"units.{name}.add_water: a {new.type} takes no water addition (give a feed its water_tph)")
+    old = fs.units[name]
+    kept = old.__dict__.get("_grid_forms") if new.type == "mill" == old.type else None
+    if kept is not None and new.rate is old.rate and new.breakage is old.breakage:
+        object.__setattr__(new, "_grid_forms", kept)  # the cache of MillUnit._on_grid: the same forms
+    return new, added
+
+
+def with_units(fs: Flowsheet, tables: dict, built: dict | None = None) -> Flowsheet:
+    """``fs`` with the units named in ``tables`` (unit name -> its table, as in the document)
+    built again from those tables (:func:`unit_from_table`); grid, materials, streams and
+    the other units are the very objects of ``fs`` (a sweep's case that changes keys of
+    some units). ``built`` (name -> (unit, water added)) gives units built already."""
+    units, water_added = dict(fs.units), dict(fs.water_added)
+    for uname, table in tables.items():
+        new, added = (built or {}).get(uname) or unit_from_table(fs, uname, table)
+        if added is not None:
+            water_added[uname] = added
+        else:
+            water_added.pop(uname, None)
+        units[uname] = new
+    document = dict(fs.meta.get("document") or {})
+    document["units"] = {**document.get("units", {}), **tables}
+    return Flowsheet(grid=fs.grid, units=units, streams=fs.streams, title=fs.title, passing_sizes=fs.passing_sizes,
+                     source_file=fs.source_file, slurry=fs.slurry, water_added=water_added,
+                     meta={**fs.meta, "document": document})
 
 
 def loads(text: str, *, source: str = "<string>") -> Flowsheet:

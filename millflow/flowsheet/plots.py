@@ -1,4 +1,4 @@
-"""PNG plots of a solved flowsheet (matplotlib through millflow.plotting).
+"""PNG plots of a solved flowsheet.
 
 - ``psd.png``: cumulative passing of every stream on a log size axis [um].
 - ``classifiers.png``: partition curves of every classifier and mill discharge screen
@@ -6,6 +6,11 @@
 - ``flowsheet.png``: the drawing of report.html (:mod:`millflow.report.layout`): units
   placed by distance from the feeds, streams labelled with solids and water t/h, % solids
   and P80, recycles routed below their row.
+
+:func:`save_plots` writes them as report.html draws them (its SVG line plots and
+flowsheet drawing, rasterised by :mod:`millflow.report.raster`: Pillow, a few
+hundredths of a second), or with matplotlib where Pillow has no FreeType. The
+``plot_*`` functions draw the same plots on a matplotlib axis, for a user's own figure.
 """
 from __future__ import annotations
 
@@ -167,12 +172,61 @@ _DRAWING_MARGINS = {"left": 0.01, "right": 0.99, "bottom": 0.01, "top": 0.93}
 def save_plots(sol, ds, out_dir) -> dict:
     """Write psd.png, classifiers.png (only when the circuit classifies) and flowsheet.png to
     ``out_dir``; returns name -> path."""
-    out = Path(out_dir)
+    from millflow.report import raster
+
+    if raster.available():
+        return _save_raster(sol, ds, Path(out_dir))
+    return _save_matplotlib(sol, ds, Path(out_dir))
+
+
+def _classifies(sol) -> bool:
+    return any(u.type == "classifier" or (u.type == "mill" and u.classification is not None)
+               for u in sol.flowsheet.units.values())
+
+
+def _save_raster(sol, ds, out: Path) -> dict:
+    """The plots as report.html's SVG drawings, rasterised."""
+    import html
+
+    from millflow.report.html import esc, flowsheet_svg, line_plot
+    from millflow.report.raster import svg_to_png
+
     files = {}
-    classifies = any(u.type == "classifier" or (u.type == "mill" and u.classification is not None)
-                     for u in sol.flowsheet.units.values())
+    x = ds["size"].values * 1e6
+    series = []
+    for k, s in enumerate(ds["stream"].values):
+        y = ds["cum_passing"].values[k] * 100
+        if not np.all(np.isnan(y)):
+            series.append((f"{s} ({float(ds['solids'].values[k]) * 3.6:.4g} t/h)", x.tolist(), y.tolist()))
+    svg = line_plot(series, xlabel="size [um] (upper class edge)", ylabel="cumulative passing [%]", ylim=(0, 100))
+    files["psd_png"] = out / "psd.png"
+    svg_to_png(svg, files["psd_png"])
+    if _classifies(sol):
+        from millflow.report.flowsheet import partition_curves
+
+        curves = [(label, xs, ys) for label, (xs, ys) in partition_curves(sol).items()]  # report.html's
+        svg = line_plot(curves, xlabel="size [um]", ylabel="fraction to coarse stream [-]", ylim=(0, 1))
+        files["classifiers_png"] = out / "classifiers.png"
+        svg_to_png(svg, files["classifiers_png"])
+    lay, labels = flowsheet_drawing(sol, ds)
+    units = {u: [esc(u), esc(getattr(unit, "kind", unit.type))] for u, unit in sol.flowsheet.units.items()}
+    svg = flowsheet_svg(lay, units, {n: [html.escape(html.unescape(t)) for t in lines] for n, lines in labels.items()})
+    # a title band above the drawing, as flowsheet.png always had
+    band = 26
+    svg = svg.replace(f'viewBox="0 0 {lay.width:.0f} {lay.height:.0f}"',
+                      f'viewBox="0 {-band} {lay.width:.0f} {lay.height + band:.0f}"', 1)
+    svg = svg.replace("</defs>", f'</defs><text x="{lay.width / 2:.1f}" y="{-band / 2 + 4:.1f}" text-anchor="middle" '
+                      f'class="ttl">{esc(sol.flowsheet.title or "flowsheet")}</text>', 1)
+    files["flowsheet_png"] = out / "flowsheet.png"
+    svg_to_png(svg, files["flowsheet_png"], scale=PX_PER_IN / 100.0 * 1.1)
+    return files
+
+
+def _save_matplotlib(sol, ds, out: Path) -> dict:
+    """The plots with matplotlib (where Pillow has no FreeType)."""
+    files = {}
     plots = [("psd_png", "psd.png", plot_psd, ds, (8, 5))]
-    if classifies:
+    if _classifies(sol):
         plots.append(("classifiers_png", "classifiers.png", plot_classifiers, sol, (8, 5)))
     plots.append(("flowsheet_png", "flowsheet.png", lambda s, ax: plot_flowsheet(s, ax, ds), sol,
                   flowsheet_figsize(sol, ds)))

@@ -25,8 +25,8 @@ from millflow.errors import GridError
 from millflow.flowsheet.water import slurry_properties
 from millflow.psd import _fix_sum, _percentiles_of_cum, cum_passing, cum_passing_at
 
-__all__ = ["stream_properties", "circulating_loads", "mass_balance", "to_dataset", "summary", "error_report",
-           "stream_table", "unit_table", "psd_table", "save"]
+__all__ = ["stream_properties", "circulating_loads", "mass_balance", "to_dataset", "summary", "key_figures",
+           "error_report", "stream_table", "unit_table", "psd_table", "save"]
 
 TPH = 3.6  # kg/s -> t/h
 
@@ -89,7 +89,26 @@ def recycle_streams(fs) -> list[str]:
     """The streams that close recycle loops: back edges of a depth-first walk of each loop
     from where its new feed enters, following streams in file order (for a ball mill with
     cyclones, the underflow; a splitter's returning branch is another)."""
-    lab = dict(zip(fs.units, fs.components()))
+    return list(_loops(fs)[1])
+
+
+def _loops(fs) -> tuple:
+    """(loop label per unit, recycle streams) of the flowsheet's connections, computed once
+    per connection pattern: a sweep's cases share their base flowsheet's streams."""
+    got = _LOOPS.get(id(fs.streams))
+    if got is None or got[0] is not fs.streams or got[1] != tuple(fs.units):
+        lab = dict(zip(fs.units, fs.components()))
+        got = (fs.streams, tuple(fs.units), lab, tuple(_recycle_streams(fs, lab)))
+        if len(_LOOPS) >= 64:
+            _LOOPS.pop(next(iter(_LOOPS)))
+        _LOOPS[id(fs.streams)] = got  # holds the streams: their id is not reused while kept
+    return got[2], got[3]
+
+
+_LOOPS: dict = {}
+
+
+def _recycle_streams(fs, lab) -> list[str]:
     out, seen = [], set()
     entries = [st.target for st in fs.streams.values() if lab[st.source] != lab[st.target]]
     for start in entries:
@@ -123,14 +142,17 @@ def circulating_loads(sol) -> dict:
     is U/F_new (= U/O at steady state).
     """
     fs = sol.flowsheet
-    lab = dict(zip(fs.units, fs.components()))
-    tot = {n: math.fsum(sol.flows[k]) for k, n in enumerate(fs.stream_names)}
+    return _circulating(fs, {n: math.fsum(sol.flows[k]) for k, n in enumerate(fs.stream_names)})
+
+
+def _circulating(fs, tot) -> dict:
+    lab, recycles = _loops(fs)
     new_feed = {}
     for n, st in fs.streams.items():
         if lab[st.source] != lab[st.target]:
             new_feed[lab[st.target]] = new_feed.get(lab[st.target], 0.0) + tot[n]
     out = {}
-    for n in recycle_streams(fs):
+    for n in recycles:
         fresh = new_feed.get(lab[fs.streams[n].source], 0.0)
         out[n] = tot[n] / fresh if fresh > 0 else float("nan")
     return out
@@ -162,57 +184,62 @@ def _specific_energy(sol) -> float | None:
 
 
 def to_dataset(sol, props=None, grid_check=None):
-    """The solution as an xarray Dataset with dimensions ``stream``, ``size`` (and ``unit``, ``classifier``)."""
-    import xarray as xr
+    """The solution as an xarray Dataset with dimensions ``stream``, ``size`` (and ``unit``, ``classifier``).
+
+    Built from numpy arrays by :func:`millflow._dataset.dataset` (no merge or alignment,
+    no dask import: the same Dataset ``xr.Dataset`` would make)."""
+    from millflow._dataset import dataset
 
     fs = sol.flowsheet
     props = props or stream_properties(sol)
     names = fs.stream_names
     size = fs.grid.size_coord()
-    ds = xr.Dataset(coords={"stream": ("stream", names, {"long_name": "stream name"}), "size": size})
+    coords = {"stream": ("stream", np.array(names), {"long_name": "stream name"}),
+              "size": ("size", size.values, dict(size.attrs))}
+    data = {}
 
-    def var(dims, data, units, long_name):
-        return (dims, np.asarray(data), {"units": units, "long_name": long_name})
+    def var(dims, values, units, long_name):
+        return (dims, np.asarray(values), {"units": units, "long_name": long_name})
 
-    ds["mass_flow"] = var(("stream", "size"), sol.flows, "kg/s", "solids mass flow per size class")
-    ds["mass_fraction"] = var(("stream", "size"), [props[n]["fraction"] for n in names], "1",
-                              "mass fraction per size class")
-    ds["cum_passing"] = var(("stream", "size"), [props[n]["cum_passing"] for n in names], "1",
-                            "cumulative mass fraction passing the upper class size")
-    ds["solids"] = var("stream", [props[n]["solids_kg_s"] for n in names], "kg/s", "solids mass flow")
-    ds["p80"] = var("stream", [props[n]["p80_m"] for n in names], "m", "80 % passing size")
-    ds["p50"] = var("stream", [props[n]["p50_m"] for n in names], "m", "50 % passing size")
+    data["mass_flow"] = var(("stream", "size"), sol.flows, "kg/s", "solids mass flow per size class")
+    data["mass_fraction"] = var(("stream", "size"), [props[n]["fraction"] for n in names], "1",
+                                "mass fraction per size class")
+    data["cum_passing"] = var(("stream", "size"), [props[n]["cum_passing"] for n in names], "1",
+                              "cumulative mass fraction passing the upper class size")
+    data["solids"] = var("stream", [props[n]["solids_kg_s"] for n in names], "kg/s", "solids mass flow")
+    data["p80"] = var("stream", [props[n]["p80_m"] for n in names], "m", "80 % passing size")
+    data["p50"] = var("stream", [props[n]["p50_m"] for n in names], "m", "50 % passing size")
     gs = (grid_check or {}).get("streams")
     if gs:
         for key in ("p80", "p50"):
-            ds[f"{key}_grid_error"] = var("stream", [gs[n][f"{key}_grid_error"] for n in names], "1",
-                                          f"relative grid error of {key.upper()} (Richardson, two-grid GCI)")
-    ds["source"] = var("stream", [f"{fs.streams[n].source}.{fs.streams[n].port}" for n in names], "",
-                       "unit and outlet the stream leaves")
-    ds["target"] = var("stream", [fs.streams[n].target for n in names], "", "unit the stream enters")
+            data[f"{key}_grid_error"] = var("stream", [gs[n][f"{key}_grid_error"] for n in names], "1",
+                                            f"relative grid error of {key.upper()} (Richardson, two-grid GCI)")
+    data["source"] = var("stream", [f"{fs.streams[n].source}.{fs.streams[n].port}" for n in names], "",
+                         "unit and outlet the stream leaves")
+    data["target"] = var("stream", [fs.streams[n].target for n in names], "", "unit the stream enters")
     if is_wet(sol):
-        ds["water"] = var("stream", [props[n]["water_kg_s"] for n in names], "kg/s", "water mass flow")
-        ds["solids_content"] = var("stream", [props[n]["solids_content"] for n in names], "1",
-                                   "solids mass fraction of the slurry")
+        data["water"] = var("stream", [props[n]["water_kg_s"] for n in names], "kg/s", "water mass flow")
+        data["solids_content"] = var("stream", [props[n]["solids_content"] for n in names], "1",
+                                     "solids mass fraction of the slurry")
         if fs.slurry is not None:
-            ds["volume_flow"] = var("stream", [props[n]["volume_flow_m3_s"] for n in names], "m3/s",
-                                    "volumetric slurry flow")
-            ds["pulp_density"] = var("stream", [props[n]["pulp_density_kg_m3"] for n in names], "kg/m3",
-                                     "slurry (pulp) density")
+            data["volume_flow"] = var("stream", [props[n]["volume_flow_m3_s"] for n in names], "m3/s",
+                                      "volumetric slurry flow")
+            data["pulp_density"] = var("stream", [props[n]["pulp_density_kg_m3"] for n in names], "kg/m3",
+                                       "slurry (pulp) density")
     if fs.passing_sizes:
-        ds = ds.assign_coords(named_size=("named_size", np.array(fs.passing_sizes),
-                                          {"units": "m", "long_name": "size for % passing"}))
-        ds["passing_named"] = var(("stream", "named_size"), [props[n]["passing"] for n in names], "1",
-                                  "cumulative mass fraction passing the named size")
+        coords["named_size"] = ("named_size", np.array(fs.passing_sizes, dtype=float),
+                                {"units": "m", "long_name": "size for % passing"})
+        data["passing_named"] = var(("stream", "named_size"), [props[n]["passing"] for n in names], "1",
+                                    "cumulative mass fraction passing the named size")
     units = list(fs.units)
-    ds = ds.assign_coords(unit=("unit", units, {"long_name": "unit name"}))
-    ds["unit_type"] = var("unit", [sol.units[u]["type"] for u in units], "", "unit type")
-    ds["unit_method"] = var("unit", [sol.units[u]["method"] for u in units], "", "method of the unit model")
-    ds["unit_mass_balance_error"] = var("unit", [sol.units[u]["mass_balance_error"] for u in units], "1",
-                                        "relative mass balance error |out - in| / in")
-    ds["unit_error_estimate"] = var("unit", [sol.units[u]["error_estimate"] for u in units], "1",
-                                    "error estimate of the unit model")
-    ds["unit_runtime"] = var("unit", [sol.units[u]["runtime_s"] for u in units], "s", "run time of the unit model")
+    coords["unit"] = ("unit", np.array(units), {"long_name": "unit name"})
+    data["unit_type"] = var("unit", [sol.units[u]["type"] for u in units], "", "unit type")
+    data["unit_method"] = var("unit", [sol.units[u]["method"] for u in units], "", "method of the unit model")
+    data["unit_mass_balance_error"] = var("unit", [sol.units[u]["mass_balance_error"] for u in units], "1",
+                                          "relative mass balance error |out - in| / in")
+    data["unit_error_estimate"] = var("unit", [sol.units[u]["error_estimate"] for u in units], "1",
+                                      "error estimate of the unit model")
+    data["unit_runtime"] = var("unit", [sol.units[u]["runtime_s"] for u in units], "s", "run time of the unit model")
     for key, name, unit_of, long_name in (("tau_s", "unit_tau", "s", "mean residence time of the mill"),
                                           ("holdup_kg", "unit_holdup", "kg", "solids hold-up of the mill"),
                                           ("power_kW", "unit_power", "kW", "mill power draw"),
@@ -230,23 +257,25 @@ def to_dataset(sol, props=None, grid_check=None):
                                                 "above about 0.50-0.55)")):
         vals = [sol.units[u].get(key) for u in units]
         if any(v is not None for v in vals):
-            ds[name] = var("unit", [np.nan if v is None else v for v in vals], unit_of, long_name)
+            data[name] = var("unit", np.array([np.nan if v is None else v for v in vals], dtype=float), unit_of,
+                             long_name)
     for key, name, long_name in (("breakage_basis", "unit_breakage_basis", "mill breakage per time or per energy"),
                                  ("tau_from", "unit_tau_from", "how the mill's residence time is set"),
                                  ("power_role", "unit_power_role", "whether the mill power enters its kinetics")):
         vals = [sol.units[u].get(key) for u in units]
         if any(v is not None for v in vals):
-            ds[name] = var("unit", ["" if v is None else v for v in vals], "", long_name)
+            data[name] = var("unit", ["" if v is None else v for v in vals], "", long_name)
     if sol.water is not None and is_wet(sol):
-        ds["unit_water_in"] = var("unit", [sol.water.units[u]["water_in_kg_s"] for u in units], "kg/s",
-                                  "water entering the unit (with its addition)")
-        ds["unit_water_balance_error"] = var("unit", [sol.water.units[u]["water_balance_error"] for u in units],
-                                             "1", "relative water balance error |out - in| / in")
+        data["unit_water_in"] = var("unit", [sol.water.units[u]["water_in_kg_s"] for u in units], "kg/s",
+                                    "water entering the unit (with its addition)")
+        data["unit_water_balance_error"] = var("unit", [sol.water.units[u]["water_balance_error"] for u in units],
+                                               "1", "relative water balance error |out - in| / in")
     cls = [u for u, unit in fs.units.items() if unit.type == "classifier"]
     if cls:
-        ds = ds.assign_coords(classifier=("classifier", cls))
-        ds["efficiency"] = var(("classifier", "size"), [sol.unit_blocks[u][fs.units[u].ports[0]] for u in cls], "1",
-                               "fraction of each size to the coarse stream (partition curve)")
+        coords["classifier"] = ("classifier", np.array(cls), {})
+        data["efficiency"] = var(("classifier", "size"), [sol.unit_blocks[u][fs.units[u].ports[0]] for u in cls], "1",
+                                 "fraction of each size to the coarse stream (partition curve)")
+    ds = dataset(data, coords)
     mb = mass_balance(sol)
     ds.attrs.update({
         "title": fs.title, "source_file": fs.source_file,
@@ -363,6 +392,40 @@ def summary(sol, props=None, grid_check=None) -> dict:
         "error_estimate": error_report(sol, grid_check),
         "runtime_s": sol.runtime_s,
     })
+
+
+def key_figures(sol, streams=None) -> dict:
+    """The numbers a sweep keeps of a solved case, as :func:`summary` gives them (the same
+    arithmetic), without the rest of the summary: ``p80_um`` and ``p50_um`` of ``streams``
+    (default: every stream), ``circulating_load``, ``specific_energy_kWh_per_t`` and
+    ``mass_balance_error``."""
+    fs = sol.flowsheet
+    names = fs.stream_names
+    x = fs.grid.x
+    rows = sol.flows.tolist()  # fsum over Python floats: the same exact sums, without numpy's per-item boxing
+    tot = {n: math.fsum(row) for n, row in zip(names, rows)}
+    p80, p50 = {}, {}
+    for n in (names if streams is None else streams):
+        if tot[n] > 0:  # as stream_properties: rounding-level negatives cut, the sum's residual placed
+            g = np.maximum(sol.flows[names.index(n)], 0.0)
+            a, b = _p80_p50(x, cum_passing(_fix_sum(g / math.fsum(g.tolist()))))
+        else:
+            a = b = float("nan")
+        p80[n], p50[n] = _finite(a * 1e6), _finite(b * 1e6)
+    feed = math.fsum(u.solids for u in fs.units.values() if u.type == "feed")
+    prod = math.fsum(tot[st.name] for st in fs.streams.values() if fs.units[st.target].type == "product")
+    power = [u.power for u in fs.units.values() if u.type == "mill" and u.power is not None]
+    energy = None if not power else ((math.fsum(power) / 1e3) / (prod * TPH) if prod > 0 else float("nan"))
+    return {"p80_um": p80, "p50_um": p50,
+            "circulating_load": {k: _finite(v) for k, v in _circulating(fs, tot).items()},
+            "specific_energy_kWh_per_t": None if energy is None else _finite(energy),  # as _specific_energy
+            "mass_balance_error": _finite(abs(prod - feed) / feed if feed > 0 else 0.0)}  # as mass_balance
+
+
+def _finite(v) -> float | None:
+    """A float as JSON reads it (as :func:`_clean`): None when not finite."""
+    v = float(v)
+    return v if math.isfinite(v) else None
 
 
 def _cyclone_columns(r) -> dict:

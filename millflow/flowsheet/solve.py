@@ -41,8 +41,6 @@ import time
 from dataclasses import dataclass, field
 
 import numpy as np
-import scipy.sparse as sp
-import scipy.sparse.linalg as spla
 
 from millflow.errors import InputError, SolverError
 from millflow.flowsheet.water import solve_water
@@ -99,6 +97,8 @@ def _unit_blocks(fs, state):
 def assemble(fs, blocks, extra_sources=None):
     """Sparse matrix A = I - T and source vector s (size-major ordering) of the flowsheet;
     ``extra_sources`` (stream -> flows) adds constant sources (torn non-linear mills)."""
+    import scipy.sparse as sp  # imported here: a flowsheet of cell-chain mills never needs it (start-up)
+
     names = fs.stream_names
     S, N = len(names), fs.grid.n
     sidx = {n: k for k, n in enumerate(names)}
@@ -181,6 +181,8 @@ def check_exits(fs, blocks) -> None:
 
 
 def _linear_solve(fs, blocks, extra_sources=None):
+    import scipy.sparse.linalg as spla
+
     t0 = time.perf_counter()
     A, rhs = assemble(fs, blocks, extra_sources)
     S, N = len(fs.streams), fs.grid.n

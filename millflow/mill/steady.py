@@ -44,6 +44,7 @@ import time
 import numpy as np
 import xarray as xr
 
+from millflow._dataset import dataset
 from millflow.errors import InputError, SolverError
 from millflow.mill.accuracy import check_accuracy
 from millflow.mill.scene import (AXIAL_KINDS, METHODS, WHERE, _check_feed, _part_scene, _Scene, _scene,
@@ -263,6 +264,9 @@ def _size_coords(n: int, x) -> dict:
 
 
 def _fractions(a: np.ndarray, axis: int = -1) -> np.ndarray:
+    if a.ndim == 1:  # the common case, without the broadcasting machinery (a Dataset per call)
+        total = a.sum()
+        return a / total if total > 0 else np.zeros(a.shape)
     total = a.sum(axis=axis, keepdims=True)
     with np.errstate(invalid="ignore", divide="ignore"):
         return np.where(total > 0, a / np.where(total > 0, total, 1.0), 0.0)
@@ -422,8 +426,7 @@ def steady_mill(S, b, feed, transport, d=None, *, where=None, dispersion=None, d
                            {"units": "s", "long_name": "hold-up density per unit feed rate and fractional length"})
         data["profile_fraction"] = (("position", "size"), _fractions(prof[1]),
                                     {"units": "1", "long_name": "local hold-up mass fraction"})
-    ds = xr.Dataset(data, coords=coords)
-    ds.attrs.update(
+    attrs = dict(
         method=solved["method"],
         error_estimate=float(solved["error"]) * scale,
         solver_error_estimate=float(solved["error"]) * scale,
@@ -435,6 +438,7 @@ def steady_mill(S, b, feed, transport, d=None, *, where=None, dispersion=None, d
         classification="none" if sc.d is None else f"d* at {sc.where}",
         tau_s=_tau(transport),
     )
+    ds = dataset(data, coords, attrs)  # the Dataset xr.Dataset would build, without its merge and alignment
     for key, value in solved["extras"].items():
         ds.attrs[key] = value if not isinstance(value, list) else str(value)
     if locations is not None:

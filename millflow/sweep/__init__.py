@@ -17,6 +17,6 @@ Cases are solved in chunks (one task per chunk keeps the per-case overhead small
 progress. ``scheduler="serial"`` solves in this process (no Dask needed).
 """
 from millflow.sweep.cases import Axis, grid_cases, latin_hypercube_cases, parse_vary
-from millflow.sweep.run import run_sweep, solve_case
+from millflow.sweep.run import CaseSolver, run_sweep, solve_case
 
-__all__ = ["Axis", "parse_vary", "grid_cases", "latin_hypercube_cases", "run_sweep", "solve_case"]
+__all__ = ["Axis", "parse_vary", "grid_cases", "latin_hypercube_cases", "run_sweep", "solve_case", "CaseSolver"]

@@ -13,7 +13,7 @@ import xarray as xr
 from millflow.errors import InputError, MillflowError
 from millflow.sweep.cases import Axis, grid_cases, latin_hypercube_cases, set_key
 
-__all__ = ["solve_case", "run_sweep", "SCHEDULERS"]
+__all__ = ["CaseSolver", "solve_case", "run_sweep", "SCHEDULERS"]
 
 #: "local": a dask.distributed LocalCluster on this machine; "serial": this process; any
 #: other value is the address of a running Dask scheduler (e.g. tcp://10.0.0.5:8786).
@@ -27,30 +27,119 @@ def _products(data: dict) -> list[str]:
             if isinstance(s, dict) and units.get(s.get("to"), {}).get("type") == "product"]
 
 
+class CaseSolver:
+    """Solves cases of one flowsheet document: the base flowsheet is built once; a case
+    that changes keys of units (``units.<unit>.<key>``) rebuilds those units only
+    (:func:`millflow.flowsheet.io.with_units`: a mill keeps its class-averaged breakage),
+    each unit variant once (units are stateless: the cases of a grid that share a unit's
+    values share the unit); any other key (grid, materials, streams) builds the case's
+    whole flowsheet again.
+    Each case is summarised by :func:`millflow.flowsheet.results.key_figures` (the product
+    streams' P80 and P50, circulating loads, kWh/t, mass balance)."""
+
+    def __init__(self, data: dict, source: str = "<sweep>"):
+        from millflow.flowsheet import from_dict, solve
+
+        self.data, self.source = data, source
+        self.products = _products(data)  # the streams whose P80 and P50 a sweep keeps
+        self._units = {}  # (unit, its varied values) -> (unit, water added): units are stateless
+        try:
+            self.base = from_dict(copy.deepcopy(data), source=source)
+        except MillflowError:
+            self.base = None  # every case is built whole (and says why it fails)
+        else:
+            try:
+                solve(self.base)  # its mills' class averages, kept by the cases' rebuilt mills
+            except MillflowError:
+                pass
+
+    def flowsheet(self, case: dict):
+        """The case's flowsheet (raises MillflowError naming what is wrong)."""
+        from millflow.flowsheet import from_dict
+        from millflow.flowsheet.io import unit_from_table, with_units
+
+        units = {}
+        for key, value in case.items():
+            parts = key.split(".")
+            if parts[0] != "units" or len(parts) < 3 or self.base is None:
+                units = None
+                break
+            units.setdefault(parts[1], []).append((key, value))
+        if units is None:
+            d = copy.deepcopy(self.data)
+            for key, value in case.items():
+                set_key(d, key, value)
+            return from_dict(d, source=self.source)
+        source = self.data.get("units", {})
+        wrap = {"units": {u: source[u] for u in units if u in source}}
+        for key, value in case.items():
+            _set_copied(wrap, key, value)  # copies along the key's path: the document is shared
+        tables, built = wrap["units"], {}
+        for uname, values in units.items():
+            memo = (uname, tuple(sorted(values)))
+            unit = self._units.get(memo)
+            if unit is None:  # a grid repeats each unit's values in many cases: built once each
+                unit = unit_from_table(self.base, uname, tables[uname])
+                if len(self._units) >= _UNITS_KEPT:
+                    self._units.pop(next(iter(self._units)))
+                self._units[memo] = unit
+            built[uname] = unit
+        return with_units(self.base, tables, built)
+
+    def solve(self, case: dict) -> dict:
+        """One case solved: ``{"p80_um": {stream: v}, "p50_um": {...}, "circulating_load":
+        {recycle stream: v}, "specific_energy_kWh_per_t", "mass_balance_error", "runtime_s",
+        "reason"}``; a case that cannot be built or solved returns NaNs and its one-line reason."""
+        from millflow.flowsheet import solve
+        from millflow.flowsheet.results import key_figures
+
+        t0 = time.perf_counter()
+        try:
+            out = key_figures(solve(self.flowsheet(case)), self.products)
+        except MillflowError as exc:
+            return {"reason": " ".join(str(exc).split()), "runtime_s": time.perf_counter() - t0}
+        out.update(runtime_s=time.perf_counter() - t0, reason="")
+        return out
+
+
+#: Unit variants a CaseSolver keeps (a grid of 100 x 100 cases has 200 of them).
+_UNITS_KEPT = 4096
+
+
+def _set_copied(tables: dict, key: str, value: float) -> None:
+    """:func:`set_key` on copies of the tables along the key's path (the document the
+    sweep shares between its cases is never written)."""
+    node = tables
+    for part in key.split(".")[:-1]:
+        if not isinstance(node, dict) or not isinstance(node.get(part), dict):
+            break  # set_key names the missing table
+        node[part] = dict(node[part])
+        node = node[part]
+    set_key(tables, key, value)
+
+
 def solve_case(data: dict, case: dict, source: str = "<sweep>") -> dict:
-    """One case: the flowsheet dict with the case's values set, solved. Returns
-    ``{"p80_um": {stream: v}, "p50_um": {...}, "circulating_load": {recycle stream: v},
-    "specific_energy_kWh_per_t", "mass_balance_error", "runtime_s", "reason"}``; a case
-    that cannot be built or solved returns NaNs and its one-line reason."""
-    from millflow.flowsheet import from_dict, solve, summary
+    """One case on its own: the flowsheet dict with the case's values set, built whole,
+    solved and reduced to the figures :meth:`CaseSolver.solve` returns (a sweep keeps one
+    CaseSolver for all its cases instead)."""
+    from millflow.flowsheet import from_dict, solve
+    from millflow.flowsheet.results import key_figures
 
     t0 = time.perf_counter()
-    d = copy.deepcopy(data)
     try:
+        d = copy.deepcopy(data)
         for key, value in case.items():
             set_key(d, key, value)
-        s = summary(solve(from_dict(d, source=source)))
+        out = key_figures(solve(from_dict(d, source=source)), _products(data))
     except MillflowError as exc:
         return {"reason": " ".join(str(exc).split()), "runtime_s": time.perf_counter() - t0}
-    return {"p80_um": {n: s["streams"][n]["p80_um"] for n in s["streams"]},
-            "p50_um": {n: s["streams"][n]["p50_um"] for n in s["streams"]},
-            "circulating_load": dict(s["circulating_load"]),
-            "specific_energy_kWh_per_t": s["specific_energy_kWh_per_t"],
-            "mass_balance_error": s["mass_balance_error"], "runtime_s": time.perf_counter() - t0, "reason": ""}
+    out.update(runtime_s=time.perf_counter() - t0, reason="")
+    return out
 
 
 def _solve_chunk(data: dict, cases: list[dict], source: str) -> list[dict]:
-    return [solve_case(data, c, source) for c in cases]
+    solver = CaseSolver(data, source)
+    return [solver.solve(c) for c in cases]
 
 
 def _num(v) -> float:

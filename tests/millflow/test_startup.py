@@ -5,6 +5,7 @@ import json
 import subprocess
 import sys
 
+import numpy as np
 import pytest
 
 from millflow._lazy import HEAVY, heavy_modules_loaded
@@ -54,3 +55,74 @@ def test_lazy_names_are_the_modules_objects():
     from millflow.flowsheet import Flowsheet as F2
 
     assert Flowsheet is F2
+
+
+def test_command_table_matches_the_modules():
+    # millflow.commands.COMMANDS lists every command module (name and help line as its
+    # add_parser registers them): the command line imports only the module it runs
+    import argparse
+    import pkgutil
+
+    import millflow.commands as commands
+
+    found = {}
+    for info in pkgutil.iter_modules(commands.__path__):
+        module = importlib.import_module(f"millflow.commands.{info.name}")
+        if hasattr(module, "add_parser"):
+            sub = argparse.ArgumentParser().add_subparsers()
+            module.add_parser(sub)
+            for action in sub._choices_actions:
+                found[action.dest] = (info.name, action.help)
+    assert found == commands.COMMANDS
+    assert commands.USES_DASK <= set(commands.COMMANDS)
+
+
+def test_a_command_line_imports_only_its_command():
+    code = ("import sys, json\nfrom millflow.cli import build_parser\nbuild_parser(['run', 'x.toml'])\n"
+            "print(json.dumps(sorted(m for m in sys.modules if m.startswith('millflow.commands.'))))")
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True)
+    assert set(json.loads(out.stdout.strip().splitlines()[-1])) <= {"millflow.commands.run",
+                                                                     "millflow.commands.output"}
+    # the full parser (documentation, tests) still has every command with its options
+    from millflow.cli import build_parser
+
+    sub = next(a for a in build_parser()._actions if a.dest == "command")
+    assert "--tear-method" in {o for a in sub.choices["run"]._actions for o in a.option_strings}
+    assert "--vary" in {o for a in sub.choices["sweep"]._actions for o in a.option_strings}
+
+
+def test_run_without_plots_loads_neither_dask_nor_matplotlib(tmp_path):
+    # the whole `millflow run --no-plots` process: results.nc is written by xarray, which
+    # would import dask.array to tell a numpy array from a dask one; the command line tells
+    # it dask is absent (the run holds no dask array) and the file is the same
+    from millflow._lazy import import_path_env
+    from tests import paths
+
+    sheet = paths.FLOWSHEETS / "open_circuit_ball_mill.toml"  # a small open circuit
+    code = ("import sys, json, runpy\nsys.argv = ['millflow', 'run', sys.argv[1], '--no-plots', '--quiet', "
+            "'--out', sys.argv[2]]\ntry:\n    runpy.run_module('millflow', run_name='__main__')\nexcept SystemExit:\n"
+            "    pass\nprint(json.dumps([m for m in ('dask', 'dask.array', 'matplotlib', 'distributed') "
+            "if sys.modules.get(m) is not None]))")
+    out = subprocess.run([sys.executable, "-c", code, str(sheet), str(tmp_path / "out")], env=import_path_env(),
+                         capture_output=True, text=True, check=True)
+    assert json.loads(out.stdout.strip().splitlines()[-1]) == []
+    import xarray as xr
+
+    from millflow.flowsheet import load, solve
+    from millflow.flowsheet.results import to_dataset
+
+    with xr.open_dataset(tmp_path / "out" / "results.nc") as ds:
+        ref = to_dataset(solve(load(sheet)))  # the file holds the Dataset (run times aside)
+        assert ds["mass_flow"].attrs["units"] == "kg/s"
+        np.testing.assert_allclose(ds["mass_flow"].values, ref["mass_flow"].values, rtol=1e-12, atol=0)
+        assert list(ds["source"].values) == list(ref["source"].values)
+        assert list(ds["stream"].values) == list(ref["stream"].values)
+
+
+def test_dataset_in_process_keeps_dask_usable():
+    # millflow.cli.main called from Python (not the command line) leaves dask importable
+    from millflow.cli import main
+
+    with pytest.raises(SystemExit):
+        main(["--version"])
+    assert sys.modules.get("dask", True) is not None

@@ -40,6 +40,6 @@ def test_growth_rows_cover_both_forms_and_fit_exponents():
     lin = [r["runtime_s"] for r in sized if r["method"].startswith("per-time")]
     assert g["growth_linear"] == bench.growth_exponent([100, 200, 400], lin)
     assert g["ratio_N100"] == next(r["ratio_vs_baseline"] for r in sized if r["n"] == 100
-                                   and r["method"].startswith("per-time"))
+                                   and r["method"].startswith("prebuilt class-by-class"))
     assert any(r["method"].startswith("energy + hold-up: tear") for r in sized)
     assert "fitted exponents" in g["method"] and "N^" in bench.format_table(rows)
