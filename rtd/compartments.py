@@ -22,7 +22,8 @@ from typing import ClassVar
 
 import numpy as np
 
-from rtd.base import ParameterError, RTDModel, as_s, as_time, check_fraction, check_memory, check_positive
+from rtd.base import (ParameterError, RTDModel, _as_float, as_s, as_time, check_fraction, check_memory,
+                      check_positive)
 
 
 def _frozen(a) -> np.ndarray:
@@ -381,10 +382,11 @@ class RecirculatingCells(RTDModel):
     def __post_init__(self):
         name = "RecirculatingCells"
         object.__setattr__(self, "tau", check_positive(name, "tau", self.tau))
-        if float(self.n) != int(round(float(self.n))) or self.n < 1:
+        n = _as_float(name, "n", self.n, "an integer >= 1")
+        if not math.isfinite(n) or n != round(n) or n < 1:
             raise ParameterError(f"{name}: n = {self.n!r}; expected an integer >= 1")
-        object.__setattr__(self, "n", int(round(float(self.n))))
-        r = float(self.r)
+        object.__setattr__(self, "n", int(round(n)))
+        r = _as_float(name, "r", self.r, "a number >= 0")
         if not (math.isfinite(r) and r >= 0):
             raise ParameterError(f"{name}: r = {r!r}; expected a number >= 0")
         object.__setattr__(self, "r", r)
