@@ -230,7 +230,7 @@ LARGE_N = 1e4
 
 
 def _log1pmx(d):
-    """d - log(1 + d) >= 0 for d > -1, without the cancellation of the plain difference.
+    """The difference d - log(1 + d) >= 0 for d > -1, without the cancellation of the plain difference.
 
     Series sum_(k>=2) (-1)^k d^k / k for |d| < 0.25 (30 terms: 0.25^30 / 30 < 1e-19),
     the plain expression elsewhere (no cancellation there).
@@ -247,13 +247,16 @@ def _log1pmx(d):
 
 
 def _stirling_tail(n: float) -> float:
-    """ln Gamma(n) - [(n - 1/2) ln n - n + ln(2 pi)/2], n >= 100: 1/(12 n) - 1/(360 n^3) + 1/(1260 n^5)."""
+    """Stirling's remainder ln Gamma(n) - [(n - 1/2) ln n - n + ln(2 pi)/2] for n >= 100.
+
+    1/(12 n) - 1/(360 n^3) + 1/(1260 n^5), error < 1/(1680 n^7).
+    """
     inv = 1.0 / n
     return inv / 12.0 - inv**3 / 360.0 + inv**5 / 1260.0
 
 
 def _gamma_pdf_large(n: float, d) -> np.ndarray:
-    """tau E(t) of tanks in series at d = t/tau - 1 for large n, in log form without cancellation.
+    """The density tau E(t) of tanks in series at d = t/tau - 1 for large n, in log form without cancellation.
 
     ln(tau E) = ln(n) + (n - 1) ln(n u) - n u - ln Gamma(n)
               = ln(n)/2 - ln(2 pi)/2 - n (d - ln(1 + d)) - ln(u) - stirling(n),  d = u - 1:
