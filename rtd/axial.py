@@ -358,6 +358,35 @@ class AxialDispersion(RTDModel):
             out = closed_transform(p, self.pe)
         return (out.real if real else out)[()]  # 0-d array -> numpy scalar
 
+    exact_survival: ClassVar[bool] = True
+
+    def survival_laplace(self, s):
+        """G(s) = (1 - E_hat(s))/s [time], the transform of 1 - F(t), without cancellation.
+
+        With p = s tau, a = sqrt(1 + 4p/Pe), a - 1 = (4p/Pe)/(1 + a), y = 2p/(1 + a):
+        open, 1 - E_hat = [(a - 1) - expm1(-y)]/a; closed, E_hat = 4 e^-y / D with
+        D = 4 - ((a - 1)^2/a) expm1(-Pe a), so 1 - E_hat = [-4 expm1(-y) - ((a - 1)^2/a)
+        expm1(-Pe a)]/D. Every term is >= 0 for real p >= 0 (the plain 1 - E_hat loses
+        eps/(s tau)); where 4p/Pe overflows, the perfect mixer tau/(1 + p).
+        """
+        s, real = as_s(s)
+        p = np.asarray(s * self.tau, dtype=complex)
+        zero = p == 0
+        ps = np.where(zero, 1.0, p)
+        with np.errstate(over="ignore", invalid="ignore", divide="ignore"):
+            a = np.sqrt(1 + 4 * ps / self.pe)
+            am1 = (4 * ps / self.pe) / (1 + a)
+            y = 2 * ps / (1 + a)
+            if self.bc == "open":
+                out = self.tau * (am1 - np.expm1(-y)) / (a * ps)
+            else:
+                r = am1 * am1 / a
+                e = np.expm1(-self.pe * a)
+                out = self.tau * (-4 * np.expm1(-y) - r * e) / (ps * (4 - r * e))
+            out = np.where(np.isfinite(a), out, self.tau / (1 + ps))
+        out = np.where(zero, self.mean, out)
+        return (out.real if real else out)[()]
+
     @property
     def mean(self) -> float:
         """Mean residence time [time]."""

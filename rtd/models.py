@@ -28,12 +28,13 @@ from scipy import special
 from rtd.base import (  # noqa: F401  (re-exported: rtd.models is where users found them)
     ParameterError,
     RTDError,
-    _as_float,
     RTDModel,
+    _as_float,
     as_s,
     as_time,
     check_fraction,
     check_positive,
+    clog1p,
 )
 from rtd.compartments import CompartmentNetwork
 
@@ -66,6 +67,14 @@ class PerfectMixing(RTDModel):
         """E_hat(s), the Laplace transform of E, at real or complex ``s`` [1/time]."""
         s, _ = as_s(s)
         return 1.0 / (1.0 + s * self.tau)
+
+    exact_survival: ClassVar[bool] = True
+
+    def survival_laplace(self, s):
+        """G(s) = (1 - E_hat(s))/s = tau/(1 + s tau) [time], the transform of 1 - F(t)."""
+        s, real = as_s(s)
+        out = self.tau / (1.0 + s * self.tau)
+        return (out.real if real else out)[()]
 
     @property
     def mean(self) -> float:
@@ -118,6 +127,16 @@ class PlugFlow(RTDModel):
         """E_hat(s), the Laplace transform of E, at real or complex ``s`` [1/time]."""
         s, _ = as_s(s)
         return np.exp(-s * self.tau)
+
+    exact_survival: ClassVar[bool] = True
+
+    def survival_laplace(self, s):
+        """G(s) = (1 - exp(-s tau))/s = -tau expm1(-x)/x, x = s tau [time]; tau at s = 0."""
+        s, real = as_s(s)
+        x = s * self.tau
+        safe = np.where(x == 0, 1.0, x)
+        out = np.where(x == 0, self.tau, -self.tau * np.expm1(-safe) / safe)
+        return (out.real if real else out)[()]
 
     @property
     def mean(self) -> float:
@@ -194,6 +213,26 @@ class TanksInSeries(RTDModel):
                 return np.where(x > -1, np.exp(-self.n * np.log1p(np.maximum(x, -1.0))),
                                 np.power(1 + x, -self.n))
         return np.exp(-self.n * np.log1p(x))
+
+    exact_survival: ClassVar[bool] = True
+
+    def survival_laplace(self, s):
+        """G(s) = (1 - E_hat(s))/s = -tau expm1(-n log1p(x))/(n x), x = s tau/n [time].
+
+        No cancellation for small |s| tau (expm1 and log1p); tau at s = 0.
+        """
+        s, real = as_s(s)
+        x = s * self.tau / self.n
+        safe = np.where(x == 0, 1.0, x)
+        with np.errstate(invalid="ignore", divide="ignore", over="ignore"):
+            if real:  # left of the branch point as laplace: integer n only
+                lg = np.where(safe > -1, np.log1p(np.maximum(safe, -1.0)), np.log(np.abs(1 + safe)))
+                out = -np.expm1(-self.n * lg) / (self.n * safe) * self.tau
+                out = np.where(safe > -1, out, (1 - np.power(1 + safe, -self.n)) / (self.n * safe) * self.tau)
+            else:
+                out = -np.expm1(-self.n * clog1p(safe)) / (self.n * safe) * self.tau
+        out = np.where(x == 0, self.tau, out)
+        return (out.real if real else out)[()]
 
     @property
     def mean(self) -> float:
