@@ -550,4 +550,9 @@ def _unit_reports(fs, flows, infos, mass_tol: float = MASS_TOL, water=None) -> d
             rep["power_kW"] = unit.power / 1e3
             rep["specific_energy_kWh_per_t"] = (unit.power / 1e3) / (fin * 3.6)
         out[uname] = rep
+    if water is not None and not water.overall_error <= mass_tol:
+        # every unit may close while the flowsheet does not (water in a loop the tear left
+        # unconverged): the overall balance is checked like the solids'
+        raise SolverError(f"water balance of the flowsheet: error {water.overall_error:.2g} (water fed and added vs "
+                          f"water in the products) above mass_tol {mass_tol:.2g}")
     return out
