@@ -121,3 +121,13 @@ def test_process_value_the_fit_does_not_have_is_named(files):
     (files / "circuit.toml").write_text(text)
     with pytest.raises(InputError, match="process.speed: not a process variable"):
         load(files / "circuit.toml")
+
+
+@pytest.mark.parametrize("unit", [["min"], {"unit": "min"}, 60, None, "fortnight"])
+def test_rtd_fit_time_unit_of_the_wrong_type_is_named(files, unit):
+    # a list (or any non-string) time_unit was an unhandled TypeError once; now one line
+    d = json.loads((files / "tracer-fit.json").read_text())
+    d["time_unit"] = unit
+    (files / "tracer-fit.json").write_text(json.dumps(d))
+    with pytest.raises(InputError, match=r"time_unit = .*expected one of s, min, h"):
+        load(files / "circuit.toml")
