@@ -238,13 +238,21 @@ def solve_axial(S, b, feed, tau: float, pe: float, d=None, w=None, *, tol: float
         z, c, p = solve_axial_grid(S, b, feed, tau, pe, M, d, w)
         return z, c, np.concatenate([p, _holdup(z, c)])
 
+    cols = int(np.prod(np.shape(feed)[1:], dtype=int))
     both, estimate, order, history, finest, _, _ = refine_grids(
-        grid, float(ratio.max()) * pe, tol=tol, m_start=m_start, m_max=m_max)
+        grid, float(ratio.max()) * pe, tol=tol, m_start=m_start, m_max=m_max,
+        bytes_per_cell=8.0 * 6 * n_cls * cols)  # c, w c, tau c and three kept grids
     z, c, _ = finest
     return AxialSolution(both[:n_cls], z, tau * c, tau * both[n_cls:], estimate, order, history)
 
 
-def refine_grids(solve_grid, cell_pe: float, *, tol: float, m_start: int, m_max: int):
+#: Share of the memory budget (MILLFLOW_MEMORY_BUDGET_GB) the finite-volume grids may hold:
+#: a transfer matrix solves N columns at once, (M + 1) N^2 numbers per grid.
+FV_MEMORY_SHARE = 0.25
+
+
+def refine_grids(solve_grid, cell_pe: float, *, tol: float, m_start: int, m_max: int,
+                 bytes_per_cell: float = 0.0):
     """Grids of M, 2M, 4M, ... volumes until the error estimate of the product is below ``tol``.
 
     ``solve_grid(M)`` returns a tuple whose third item is the product on that grid;
@@ -253,9 +261,15 @@ def refine_grids(solve_grid, cell_pe: float, *, tol: float, m_start: int, m_max:
     when it is 2 and stable and the cell Peclet number <= 1 the product is
     Richardson-extrapolated (estimate: the change of the extrapolation since the previous
     grid), otherwise the finest product is taken with the estimate |p_4M - p_2M| / (2^q - 1).
+    ``bytes_per_cell``: what one volume of a grid costs in memory (every array the solve and
+    the kept grids hold); refinement stops before a grid would exceed
+    :data:`FV_MEMORY_SHARE` of the memory budget (the history says so, the estimate stays).
     Returns (product >= 0, estimate, order, history, finest grid's tuple, the one before,
     extrapolated: True when the product is the Richardson extrapolation).
     """
+    from millflow.grid import memory_budget_bytes
+
+    limit = FV_MEMORY_SHARE * memory_budget_bytes()
     M = int(m_start)
     grids = [solve_grid(M * k) for k in (1, 2)]
     history = [(M, float("nan")), (2 * M, float(np.abs(grids[1][2] - grids[0][2]).max()))]
@@ -289,6 +303,9 @@ def refine_grids(solve_grid, cell_pe: float, *, tol: float, m_start: int, m_max:
             r_prev = None
         converged = estimate <= tol
         if converged or 2 * M > m_max:
+            break
+        if bytes_per_cell * (2 * M + 1) > limit:
+            history.append(("memory budget", 2 * M))
             break
     product = np.maximum(product, 0.0)  # extrapolation may dip below 0 by < estimate
     history.append(("converged", bool(converged)))

@@ -325,7 +325,9 @@ def solve_axial_open(S, b, feed, tau: float, pe: float, d=None, w=None, *, disch
     if m_cells is not None:
         z, c, p, hold = solve_axial_open_grid(S, b, feed, tau, pe, m_cells, v, w_arr, discharge, tail=L_t)
         return AxialSolution(np.maximum(p, 0.0), z, tau * c, hold, float("nan"), float("nan"), [])
+    cols = int(np.prod(np.shape(feed)[1:], dtype=int))
     both, estimate, order, history, finest, coarser, extrapolated = refine_grids(
-        grid, float((v / w_arr).max()) * pe, tol=tol, m_start=m_start, m_max=m_max)
+        grid, float((v / w_arr).max()) * pe, tol=tol, m_start=m_start, m_max=m_max,
+        bytes_per_cell=8.0 * 3 * 8 * n_cls * cols)  # the mill and two tails; c, back layer, kept grids
     z, c, _, _ = finest
     return AxialSolution(both[:n_cls], z, tau * c, mean * both[n_cls:], estimate, order, history)

@@ -180,7 +180,10 @@ def _axial_fv(sc, feed, out, *, tol, holdup, cache):
         out["extras"]["limit"] = "; ".join(f"{what} (estimate {est:.2g})" for what, est in sol.history)
         out["extras"].pop("control_volumes")
     elif sol.error_estimate > tol:
-        out["extras"]["advice"] = _axial_advice(sc)
+        stopped = [m for what, m in sol.history if what == "memory budget"]
+        out["extras"]["advice"] = (
+            f"grid refinement stopped before {stopped[0]} volumes: that grid would hold more than a quarter of the "
+            "memory budget (MILLFLOW_MEMORY_BUDGET_GB) for these columns" if stopped else _axial_advice(sc))
     return sc
 
 
