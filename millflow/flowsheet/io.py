@@ -593,11 +593,12 @@ def _transport_part(data, where: str) -> tuple:
     return model, params, frac
 
 
-def _rtd_fit(tr: _Table, base: Path | None, classified: bool):
+def _rtd_fit(tr: _Table, base: Path | None, classified: bool, kinetic: bool = False):
     """Transport from a ``millflow fit-rtd --json`` result (or its --out folder's fit.json):
     the model and its shape parameters, and tau converted from the fit's time unit to s.
     A tanks-in-series fit with real n and discharge classification (which needs whole
-    cells) uses the nearest whole n, said in the mill's method."""
+    cells) or non-linear kinetics (solved tank by tank) uses the nearest whole n, said in
+    the mill's method."""
 
     name = tr.plain("rtd_fit", kind=str)
     tr.finish("rtd_fit (a 'millflow fit-rtd --json' result; nothing else with it)")
@@ -630,10 +631,11 @@ def _rtd_fit(tr: _Table, base: Path | None, classified: bool):
     if missing:
         raise InputError(f"{p}: params {missing} missing for model {model!r}")
     note = f"transport from {p.name} ({model}, fitted in {unit})"
-    if model == "tanks_in_series" and classified and params["n"] != round(params["n"]):
+    if model == "tanks_in_series" and (classified or kinetic) and params["n"] != round(params["n"]):
         whole = max(1, round(params["n"]))
-        note += (f"; fitted n = {params['n']:.4g} -> {whole} tanks (nearest whole n: discharge classification "
-                 "needs whole cells)")
+        why = ("discharge classification needs whole cells" if classified
+               else "non-linear kinetics are solved tank by tank")
+        note += f"; fitted n = {params['n']:.4g} in {p.name} -> {whole} tanks (nearest whole n: {why})"
         params["n"] = float(whole)
     return model, params, values["tau"] * UNITS["time"][unit], note
 
@@ -657,7 +659,7 @@ def _mill(name: str, t: _Table, materials: dict, slurry=None, base: Path | None 
     model, tparams = "perfect_mixing", {}
     fitted_tau, rtd_note = None, None
     if tr is not None and "rtd_fit" in tr.data:
-        model, tparams, fitted_tau, rtd_note = _rtd_fit(tr, base, "classification" in t.data)
+        model, tparams, fitted_tau, rtd_note = _rtd_fit(tr, base, "classification" in t.data, "kinetics" in t.data)
     elif tr is not None and tr.data.get("model") == "series":
         tr.plain("model")
         parts = tr.plain("parts")
