@@ -191,7 +191,7 @@ def prediction_noise(model) -> float | None:
     """
     noise = getattr(model, "fd_noise", None)
     spec = getattr(model, "spec", None)
-    if spec is not None and spec.mode == "mill" and spec.transport in _AXIAL_TRANSPORTS:
+    if getattr(spec, "mode", None) == "mill" and getattr(spec, "transport", None) in _AXIAL_TRANSPORTS:
         return max(float(noise or 0.0), AXIAL_PREDICTION_NOISE)
     return noise
 
