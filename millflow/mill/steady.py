@@ -181,9 +181,11 @@ def _axial_fv(sc, feed, out, *, tol, holdup, cache):
         out["extras"].pop("control_volumes")
     elif sol.error_estimate > tol:
         stopped = [m for what, m in sol.history if what == "memory budget"]
-        out["extras"]["advice"] = (
-            f"grid refinement stopped before {stopped[0]} volumes: that grid would hold more than a quarter of the "
-            "memory budget (MILLFLOW_MEMORY_BUDGET_GB) for these columns" if stopped else _axial_advice(sc))
+        memory = (f"grid refinement stopped before {stopped[0]} volumes: that grid would hold more than a quarter "
+                  "of the memory budget (MILLFLOW_MEMORY_BUDGET_GB) for these columns" if stopped else None)
+        advice = "; ".join(a for a in (_axial_advice(sc), memory) if a)
+        if advice:
+            out["extras"]["advice"] = advice
     return sc
 
 
