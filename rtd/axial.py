@@ -13,6 +13,10 @@ and each regime gets the method that is accurate there (theta = t/tau, q = Pe/2)
   exp(-sqrt(Pe w / 2)) (like a Gaussian for large Pe), so a few hundred nodes give
   ~1e-13 absolute accuracy; the period is chosen so that E(theta + T) < 1e-28.
 
+For Pe < 1 the poles and residues are computed in the angle eps_k = q beta_k/2 - (k-1) pi/2
+(:func:`_eigen_small`), which keeps full accuracy down to Pe = 1e-250; below that the
+vessel is one perfect mixer to relative O(Pe) and E, F are exp(-theta), 1 - exp(-theta).
+
 Where E is below ~e^-700 (very early times; late times for Pe > 1000) it is returned
 as 0, which also keeps the number of series terms to a few hundred. For Pe -> 0 E
 approaches exp(-theta)/tau (one perfect mixer), for
@@ -29,6 +33,9 @@ import numpy as np
 
 from rtd.base import ParameterError, RTDModel, as_s, as_time, check_positive
 
+#: Below this Peclet number the closed vessel is one perfect mixer to relative O(Pe), far
+#: below rounding: its poles beyond the first are at p < -1e250.
+PE_MIXED = 1e-250
 SERIES_MAX_PE = 16.0   # below: series cancellation costs < exp(Pe/4) ~ 55 ulp
 SERIES_MIN_THETA = 2.0  # above: every series term is <= O(1), no cancellation
 _CHUNK = 1024
@@ -48,8 +55,12 @@ def closed_transform(p, pe: float):
     with q (1 - a) = -2p / (1 + a) (no cancellation when 4p/Pe is small at large Pe):
     Wehner-Wilhelm divided through by exp(a q); Re a >= 0 keeps every exponential <= e^q.
     """
+    with np.errstate(over="ignore", divide="ignore", invalid="ignore"):  # 4p/Pe -> inf: _mixed_limit
+        return _closed_transform(np.asarray(p), pe)
+
+
+def _closed_transform(p, pe: float):
     q = 0.5 * pe
-    p = np.asarray(p)
     if not np.iscomplexobj(p) and p.size and (1 + 4 * p.min() / pe) > 0:
         # real p > -Pe/4: a is real and positive, den > 0; the same formula in float64
         # (a third of the cost of the complex one, and what a segregated mill evaluates)
@@ -101,6 +112,8 @@ def _mixed_limit(out, p, a):
 @functools.lru_cache(maxsize=128)
 def _eigen(pe: float, k_max: int) -> tuple[np.ndarray, np.ndarray]:
     """Poles p_k (in p = s tau) and residue factors c_k, k = 1..k_max."""
+    if pe < 1.0:
+        return _eigen_small(pe, k_max)
     q = 0.5 * pe
     k = np.arange(1, k_max + 1, dtype=float)
     lo, hi = (k - 1) * np.pi / q, k * np.pi / q
@@ -123,11 +136,48 @@ def _eigen(pe: float, k_max: int) -> tuple[np.ndarray, np.ndarray]:
     return p, c
 
 
+def _eigen_small(pe: float, k_max: int) -> tuple[np.ndarray, np.ndarray]:
+    """Poles and residue factors for Pe < 1, written in eps_k = q beta_k / 2 - (k - 1) pi / 2.
+
+    With phi = q beta / 2 the root condition 2 arctan(beta) + q beta = k pi reads
+    eps = arctan(q / (2 phi)), phi = (k - 1) pi / 2 + eps, eps in (0, pi/2]; then
+    p_k = -q/2 - 2 phi^2 / q and, since e^(2 i phi) and 1 + i beta reduce to rotations,
+    D'(i beta_k) = -/+ (4 + 2 q / sin^2 eps) and c_k = (-1)^(k+1) Pe cos^2(eps) /
+    (2 sin^2(eps) + q): no cancellation as q -> 0, where the beta form subtracts
+    q beta^2 ~ 2 from 2 + q (its relative error grows like eps_mach / Pe: 3e-6 in F at
+    Pe = 1e-20).
+    """
+    q = 0.5 * pe
+    k = np.arange(1, k_max + 1, dtype=float)
+    sign = np.where(k % 2 == 1, 1.0, -1.0)
+    if pe < PE_MIXED:  # p_1 = -1 - Pe/6 + O(Pe^2), c_1 = 1 - Pe/6 ...; p_k -> -inf for k >= 2
+        return np.r_[-1.0, np.full(k_max - 1, -np.inf)], np.r_[1.0, 2.0 * sign[1:]]
+    lo = (k - 1) * (0.5 * np.pi)
+    with np.errstate(divide="ignore"):
+        eps = np.where(k == 1, min(math.sqrt(0.5 * q), 1.0), np.arctan(q / (2 * lo)))
+    # h(eps) = eps - arctan(q / (2 (lo + eps))) is increasing and concave: Newton from the
+    # left climbs monotonically to the root (after at most one step from the right)
+    for _ in range(100):
+        phi = lo + eps
+        h = eps - np.arctan(q / (2 * phi))
+        step = h / (1 + 2 * q / (4 * phi * phi + q * q))
+        new = np.clip(eps - step, 0.0, 0.5 * np.pi)
+        if np.all(np.abs(new - eps) <= 1e-15 * new):
+            eps = new
+            break
+        eps = new
+    phi = lo + eps
+    with np.errstate(over="ignore"):
+        p = -0.5 * q - 2 * phi * phi / q
+    c = sign * pe * np.cos(eps) ** 2 / (2 * np.sin(eps) ** 2 + q)
+    return p, c
+
+
 def _n_terms(pe: float, theta_min: float) -> int:
     """Terms so that |c_k| exp(q + p_k theta_min) < e^-42 for the last one."""
     q = 0.5 * pe
-    beta = math.sqrt(2 * (q + 42) / (q * theta_min))
-    k = int(beta * q / math.pi) + 3
+    # beta q / pi with beta = sqrt(2 (q + 42) / (q theta_min)), written without dividing by q
+    k = int(math.sqrt(2 * (q + 42) * q / theta_min) / math.pi) + 3
     return 1 << max(4, (k - 1).bit_length())  # power of 2: few distinct cache entries
 
 
@@ -308,6 +358,35 @@ class AxialDispersion(RTDModel):
         else:
             out = closed_transform(p, self.pe)
         return (out.real if real else out)[()]  # 0-d array -> numpy scalar
+
+    exact_survival: ClassVar[bool] = True
+
+    def survival_laplace(self, s):
+        """G(s) = (1 - E_hat(s))/s [time], the transform of 1 - F(t), without cancellation.
+
+        With p = s tau, a = sqrt(1 + 4p/Pe), a - 1 = (4p/Pe)/(1 + a), y = 2p/(1 + a):
+        open, 1 - E_hat = [(a - 1) - expm1(-y)]/a; closed, E_hat = 4 e^-y / D with
+        D = 4 - ((a - 1)^2/a) expm1(-Pe a), so 1 - E_hat = [-4 expm1(-y) - ((a - 1)^2/a)
+        expm1(-Pe a)]/D. Every term is >= 0 for real p >= 0 (the plain 1 - E_hat loses
+        eps/(s tau)); where 4p/Pe overflows, the perfect mixer tau/(1 + p).
+        """
+        s, real = as_s(s)
+        p = np.asarray(s * self.tau, dtype=complex)
+        zero = p == 0
+        ps = np.where(zero, 1.0, p)
+        with np.errstate(over="ignore", invalid="ignore", divide="ignore"):
+            a = np.sqrt(1 + 4 * ps / self.pe)
+            am1 = (4 * ps / self.pe) / (1 + a)
+            y = 2 * ps / (1 + a)
+            if self.bc == "open":
+                out = self.tau * (am1 - np.expm1(-y)) / (a * ps)
+            else:
+                r = am1 * am1 / a
+                e = np.expm1(-self.pe * a)
+                out = self.tau * (-4 * np.expm1(-y) - r * e) / (ps * (4 - r * e))
+            out = np.where(np.isfinite(a), out, self.tau / (1 + ps))
+        out = np.where(zero, self.mean, out)
+        return (out.real if real else out)[()]
 
     @property
     def mean(self) -> float:

@@ -22,7 +22,8 @@ from typing import ClassVar
 
 import numpy as np
 
-from rtd.base import ParameterError, RTDModel, as_s, as_time, check_fraction, check_memory, check_positive
+from rtd.base import (ParameterError, RTDModel, _as_float, as_s, as_time, check_fraction, check_memory,
+                      check_positive)
 
 
 def _frozen(a) -> np.ndarray:
@@ -182,15 +183,17 @@ class CompartmentNetwork:
             return None
         return np.diag(a, -1).copy(), np.diag(a).copy(), np.diag(a, 1).copy()
 
-    def _resolvent(self, s: np.ndarray) -> np.ndarray:
+    def _resolvent(self, s: np.ndarray, left: np.ndarray | None = None) -> np.ndarray:
         """Transfer function w^T (s I - A)^-1 u of a tridiagonal A at complex s.
 
         w^T (s I - A)^-1 u for a tridiagonal A at complex s (1-D): the Thomas algorithm,
         vectorised over s, O(n) per s. s I - A is diagonally dominant for Re s >= 0 (each
-        cell's outflow covers its inflow), so no pivoting is needed there.
+        cell's outflow covers its inflow), so no pivoting is needed there. ``left``
+        replaces w (ones: the transform of the tracer still inside).
         """
         lo, di, up = self._bands
-        n, u, w = self.n, self.inlet, self._w()
+        n, u = self.n, self.inlet
+        w = self._w() if left is None else np.asarray(left, dtype=float)
         if not np.any(w[:-1]):  # exit from the last cell only: x_n from the forward sweep alone
             cp = -up[0] / (s - di[0])
             dp = u[0] / (s - di[0])
@@ -265,6 +268,28 @@ class CompartmentNetwork:
         x = np.linalg.solve(m, np.broadcast_to(self.inlet, (flat.size, self.n))[..., None])[..., 0]
         out = (self.bypass + (1 - self.bypass) * (x @ self._w())).reshape(s.shape)
         return (out.real if real else out)[()]  # 0-d array -> numpy scalar
+
+    #: ``survival_laplace`` is a closed form (no cancellation), see :class:`rtd.RTDModel`.
+    exact_survival = True
+
+    def survival_laplace(self, s):
+        """G(s) = (1 - E_hat(s))/s = (1 - b) 1^T (s I - A)^-1 u [time], the transform of 1 - F.
+
+        The tracer still inside (1 - F(t) = 1^T m(t), the bypass having left at t = 0): since
+        1^T A = -w^T, s 1^T (s I - A)^-1 u = 1 - w^T (s I - A)^-1 u. One solve, no
+        cancellation (the plain (1 - E_hat)/s loses eps/(|s| mean)).
+        """
+        s, real = as_s(s)
+        flat = s.ravel().astype(complex)
+        ones = np.ones(self.n)
+        if self._bands is not None and self.n >= self.CHAIN_MIN_CELLS:
+            out = ((1 - self.bypass) * self._resolvent(flat, ones)).reshape(s.shape)
+            return (out.real if real else out)[()]
+        a = self.system_matrix()
+        m = flat[:, None, None] * np.eye(self.n)[None] - a[None]
+        x = np.linalg.solve(m, np.broadcast_to(self.inlet, (flat.size, self.n))[..., None])[..., 0]
+        out = ((1 - self.bypass) * x.sum(axis=1)).reshape(s.shape)
+        return (out.real if real else out)[()]
 
     def _moment(self, k: int) -> float:
         """k-th raw moment k! w^T (-A)^-(k+1) u times (1 - b)."""
@@ -381,10 +406,11 @@ class RecirculatingCells(RTDModel):
     def __post_init__(self):
         name = "RecirculatingCells"
         object.__setattr__(self, "tau", check_positive(name, "tau", self.tau))
-        if float(self.n) != int(round(float(self.n))) or self.n < 1:
+        n = _as_float(name, "n", self.n, "an integer >= 1")
+        if not math.isfinite(n) or n != round(n) or n < 1:
             raise ParameterError(f"{name}: n = {self.n!r}; expected an integer >= 1")
-        object.__setattr__(self, "n", int(round(float(self.n))))
-        r = float(self.r)
+        object.__setattr__(self, "n", int(round(n)))
+        r = _as_float(name, "r", self.r, "a number >= 0")
         if not (math.isfinite(r) and r >= 0):
             raise ParameterError(f"{name}: r = {r!r}; expected a number >= 0")
         object.__setattr__(self, "r", r)
@@ -406,6 +432,12 @@ class RecirculatingCells(RTDModel):
     def laplace(self, s):
         """E_hat(s), the Laplace transform of E, at real or complex ``s`` [1/time]."""
         return self.network().laplace(s)
+
+    exact_survival: ClassVar[bool] = True
+
+    def survival_laplace(self, s):
+        """G(s) = (1 - E_hat(s))/s [time] from the network, without cancellation."""
+        return self.network().survival_laplace(s)
 
     @property
     def mean(self) -> float:

@@ -23,6 +23,7 @@ import numpy as np
 
 from rtd.compartments import CompartmentNetwork
 from rtd.inversion import fourier_inverse  # noqa: F401  (re-exported: rtd.compose is where it was)
+from rtd.base import survival_of
 from rtd.models import ParameterError, PlugFlow, RTDModel, as_s, as_time
 
 TALBOT_M = 24  # nodes; in double precision more nodes lose accuracy to round-off
@@ -167,6 +168,24 @@ class Series(RTDModel):
         return (out.real if real else out)[()]  # 0-d array -> numpy scalar
 
     @property
+    def exact_survival(self) -> bool:
+        """Every part's survival transform is a closed form."""
+        return all(getattr(p, "exact_survival", False) for p in self.parts)
+
+    def survival_laplace(self, s):
+        """G(s) = sum_i G_i(s) prod_(j<i) E_hat_j(s) [time] (telescoping 1 - prod E_hat_j).
+
+        Every term >= 0 for real s >= 0: no cancellation where the parts' G_i have none.
+        """
+        s, real = as_s(s)
+        out = np.zeros_like(s, dtype=complex)
+        before = np.ones_like(s, dtype=complex)
+        for p in self.parts:
+            out = out + survival_of(p, s) * before
+            before = before * p.laplace(s)
+        return (out.real if real else out)[()]
+
+    @property
     def mean(self) -> float:
         """Mean residence time [time]."""
         return float(sum(p.mean for p in self.parts))
@@ -224,6 +243,15 @@ class Parallel(RTDModel):
     def laplace(self, s):
         """E_hat(s), the Laplace transform of E, at real or complex ``s`` [1/time]."""
         return self._mix("laplace", s)
+
+    @property
+    def exact_survival(self) -> bool:
+        """Every part's survival transform is a closed form."""
+        return all(getattr(p, "exact_survival", False) for p in self.parts)
+
+    def survival_laplace(self, s):
+        """G(s) = sum_k w_k G_k(s) [time]."""
+        return sum(w * survival_of(p, s) for w, p in zip(self.weights, self.parts))
 
     @property
     def mean(self) -> float:

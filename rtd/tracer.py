@@ -181,10 +181,21 @@ def read_tracer_csv(path, kind: str | None = None) -> TracerCurve:
     if unit not in TIME_UNITS:
         raise TracerError(f"{path}: time unit {unit!r} in {tcol!r}; expected one of "
                           f"{sorted(TIME_UNITS)}", tcol)
+    known = {tcol, "concentration", "F", "inlet"}
+    unknown = [col for col in df.columns if col not in known]
+    hint = {u: k for u in unknown for k in ("concentration", "F", "inlet") if u.lower() == k.lower()}
+    said = "; ".join(f"{u!r} is not {k!r} (names are case-sensitive)" for u, k in hint.items())
     ccol = "F" if "F" in df.columns and kind in (None, "step") else "concentration"
     if ccol not in df.columns:
         raise TracerError(f"{path}: no column 'concentration' (or 'F' for a step response) in "
-                          f"{list(df.columns)}", "concentration")
+                          f"{list(df.columns)}{' (' + said + ')' if said else ''}", "concentration")
+    if unknown:
+        raise TracerError(f"{path}: unknown column{'s' if len(unknown) > 1 else ''} {unknown}"
+                          f"{' (' + said + ')' if said else ''}; expected {tcol}, concentration (a pulse) or F (a "
+                          "step response), and optionally inlet", unknown[0])
+    if "F" in df.columns and "concentration" in df.columns:
+        raise TracerError(f"{path}: both 'concentration' and 'F' columns; expected one: concentration for a pulse "
+                          "response, F for a step response (F(t), the fraction of the tracer that has left)", "F")
     kind = kind or ("step" if ccol == "F" else "pulse")
     if kind not in ("pulse", "step"):
         raise TracerError(f"kind = {kind!r}; expected 'pulse' or 'step'")

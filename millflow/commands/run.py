@@ -100,13 +100,31 @@ def format_summary(s: dict, out_dir: str | None, written: list[str] | None = Non
     return "\n".join(lines)
 
 
+#: N x N float64 matrices a linear flowsheet run holds at its peak, per grid, calibrated
+#: against the peak resident memory of `millflow run` (N = 200..5000 classes; docs/reliability.md):
+#: about 7 for the solve itself (b, B, the sparse system on the streams and its LU factors,
+#: the results) and 7-8 per mill (its transfer matrix, the cells' or the eigenbasis'
+#: workspace), 1 per other unit; measured 14.8 (one mill, five units), 21.9 (two mills, six
+#: units), and 12 per (N^2 + N'^2) with the grid check. Counted with margin: 8 + 8 per
+#: mill + 1 per other unit.
+RUN_MATRICES_BASE = 8
+RUN_MATRICES_PER_MILL = 8
+
+
+def run_matrices(fs) -> int:
+    """N x N matrices counted for a run of ``fs`` (see :data:`RUN_MATRICES_BASE`)."""
+    mills = sum(1 for u in fs.units.values() if u.type == "mill")
+    return RUN_MATRICES_BASE + RUN_MATRICES_PER_MILL * mills + (len(fs.units) - mills)
+
+
 def _check_memory(fs, grid_check: bool) -> None:
-    """The run's N x N matrices (a transfer matrix per unit, b, B and the solve's
-    workspace), and the grid check's as many on about 2N classes, within the budget."""
+    """What the run will allocate, before it does: its N x N matrices (:func:`run_matrices`)
+    and the grid check's as many on 2N - 1 classes (the refined solve runs while the first
+    solution is kept), within the budget (on top of what the process holds already)."""
     from millflow.grid import check_run_memory
 
     n = fs.grid.n
-    check_run_memory(n, len(fs.units) + 3, 2 * n - 1 if grid_check else None,
+    check_run_memory(n, run_matrices(fs), 2 * n - 1 if grid_check else None,
                      f"{getattr(fs, 'source_file', '') or 'the flowsheet'}")
 
 

@@ -32,7 +32,7 @@ from scipy.optimize import differential_evolution, least_squares
 from scipy.stats import qmc
 
 from millflow.errors import InputError, MillflowError
-from millflow.fitting.models import ForwardModel, Parameter, default_parameters
+from millflow.fitting.models import _AXIAL_TRANSPORTS, FORWARD_TOL, ForwardModel, Parameter, default_parameters
 from millflow.fitting.progress import reporter
 from millflow.fitting.statistics import information_criteria, jacobian, parameter_statistics
 
@@ -136,6 +136,10 @@ class FitResult:
         lines.append(f"SEP and intervals: {self.stats.get('covariance_kind', 'eq. 9')}"
                      + (f" ({self.stats['clusters']} samples)" if self.stats.get("clusters") else "")
                      + "; p omitted for ln_X parameters (X > 0 by construction: no meaningful null)")
+        vc = self.stats.get("variance_components")
+        if vc:
+            lines.append(f"weights: tracer rows x{vc['tracer_weight']:.3g} from the variance components (residual SD "
+                         f"tracer {vc['sd']['tracer']:.3g}, sieves {vc['sd']['psd']:.3g})")
         if self.stats.get("se_ratio_flag"):
             lines.append(f"flag: cluster-robust SEs up to {self.stats['se_ratio_max']:.2g}x eq. 9's, from "
                          f"{self.stats['clusters']} samples: residuals are correlated within samples; eq. 9 alone "
@@ -169,6 +173,29 @@ def _jsonable(v):
     return v
 
 
+#: Relative noise of a mill prediction that goes through the axial finite volumes: the
+#: refinement stops at the first grid whose estimate is below FORWARD_TOL, so where that
+#: grid changes with a parameter the product and hold-up jump by up to FORWARD_TOL and the
+#: axial profiles (finest-grid values) by ~10 FORWARD_TOL (measured 8.5e-5 at Pe 5.29).
+AXIAL_PREDICTION_NOISE = 10 * FORWARD_TOL
+
+
+def prediction_noise(model) -> float | None:
+    """The relative noise of ``model``'s predictions the finite-difference Jacobian must step over.
+
+    The model's own ``fd_noise`` (machine epsilon for exact solves, the ODE tolerance for
+    non-linear kinetics), raised to :data:`AXIAL_PREDICTION_NOISE` for a mill on a
+    plug-flow or axial-dispersion transport: with the step for exact solves (1e-5 of the
+    range) one such jump made a derivative 60 x too large and SE(ln Pe) 20 x too small
+    (z = +31 in a coverage study).
+    """
+    noise = getattr(model, "fd_noise", None)
+    spec = getattr(model, "spec", None)
+    if getattr(spec, "mode", None) == "mill" and getattr(spec, "transport", None) in _AXIAL_TRANSPORTS:
+        return max(float(noise or 0.0), AXIAL_PREDICTION_NOISE)
+    return noise
+
+
 class _Problem:
     """The varying parameters of a model as one vector, with vectorised residuals."""
 
@@ -183,7 +210,10 @@ class _Problem:
         self.names = [names[k] for k in self.idx]
         self.lower = np.array([params[n].min for n in self.names], float)
         self.upper = np.array([params[n].max for n in self.names], float)
-        self.sw = np.sqrt(model.weights)
+        self.fd_noise = prediction_noise(model)
+        self.base_sw = np.sqrt(model.weights)
+        self.row_factor = 1.0  # variance components re-weight rows (see _variance_components)
+        self.sw = self.base_sw
         self.nfev = 0
 
     def expand(self, z):
@@ -205,7 +235,7 @@ class _Problem:
         return np.where(np.isfinite(out), out, 1e300)
 
     def jac(self, z):
-        return jacobian(self.resid_pop, z, self.lower, self.upper, getattr(self.model, "fd_noise", None))
+        return jacobian(self.resid_pop, z, self.lower, self.upper, self.fd_noise)
 
 
 def check_problem(model: ForwardModel, params: dict) -> _Problem:
@@ -246,7 +276,7 @@ def check_problem(model: ForwardModel, params: dict) -> _Problem:
 def _local(prob: _Problem, z0, tight: bool = False):
     # the tight pass asks no more than the predictions resolve: 1e-12 for the exact
     # solves, the loose 1e-8 where an ODE tolerance (fd_noise) limits them
-    noise = float(getattr(prob.model, "fd_noise", 0.0) or 0.0)
+    noise = float(getattr(prob, "fd_noise", 0.0) or 0.0)
     tol = (1e-12 if noise < 1e-12 else 1e-8) if tight else 1e-8
     z0 = np.clip(z0, prob.lower, prob.upper)
     r = least_squares(prob.resid, z0, jac=prob.jac, bounds=(prob.lower, prob.upper), method="trf",
@@ -309,14 +339,23 @@ def fit(model: ForwardModel, params: dict | None = None, *, global_search: bool 
     zb, sb = _local(prob, sols[0][1], tight=True)
     if sb > sols[0][0]:
         zb, sb = sols[0][1], sols[0][0]
+    components = _variance_components(prob, zb)
+    if components is not None:  # the tracer rows re-weighted by their own noise: re-fit from here
+        zb, sb = components.pop("z"), components.pop("ssr")
+        sols = [(float(prob.resid(z) @ prob.resid(z)), z) for _, z in sols]
+        sols.sort(key=lambda t: t[0])
+        say(f"  variance components: tracer rows weighted x{components['tracer_weight']:.3g} (SD tracer "
+            f"{components['sd']['tracer']:.3g}, sieves {components['sd']['psd']:.3g})")
     spread = _spread(sols, zb, sb, lo, hi)
     theta = prob.expand(zb)[0]
     J = prob.jac(zb)
     st = parameter_statistics(prob.names, zb, J, sb, model.n_data, lo, hi, residuals=prob.resid(zb),
                               clusters=model.sample_ids())
+    if components is not None:
+        st["variance_components"] = components
     fitted = {n: Parameter(n, float(v), params[n].min, params[n].max, params[n].vary)
               for n, v in zip(model.param_names, theta)}
-    gc = _grid_check(model, params, theta, zb, sb, st) if grid_check else {}
+    gc = _grid_check(model, params, theta, zb, sb, st, prob.row_factor) if grid_check else {}
     _flag_parameters(st, gc, sols, prob.names, model.n_data)
     if profile:
         _profile_intervals(prob, zb, sb, st, model.n_data)
@@ -327,7 +366,59 @@ def fit(model: ForwardModel, params: dict | None = None, *, global_search: bool 
                      time.perf_counter() - t0, gc)
 
 
-def _grid_check(model, params, theta, zb, sb, st) -> dict:
+#: Variance components: at most this many re-weighted fits, stopped when the tracer weight
+#: changes by less than VC_RTOL.
+VC_ITERATIONS = 4
+VC_RTOL = 0.02
+
+
+def _variance_components(prob: _Problem, z) -> dict | None:
+    """Tracer rows and sieve rows weighted by their own noise (iteratively re-weighted LS).
+
+    Tracer F(t) and cumulative passing come from different instruments with different
+    noise. One pooled SER in eq. 9 gives the tracer-determined parameters (tau, Pe) the
+    sieves' smaller noise: in a joint fit with tracer SD 0.01 and sieve SD 0.005 their
+    95 % intervals covered 80 %, the SD of their z-scores 1.5. Each group's variance is
+    estimated from its residuals with its share of the fitted degrees of freedom,
+    sigma_g^2 = SSR_g / (n_g - sum_(i in g) h_ii) (h the hat matrix of the weighted
+    Jacobian: REML-like), the tracer rows are re-weighted by sigma_psd^2 / sigma_tracer^2
+    and the fit polished again, until the weight changes by less than 2 %. Only when the
+    model has both tracer and sieve rows and the user gave no ``kind_weights`` for the
+    tracer. Returns None, or the components with the re-fitted ``z`` and ``ssr``.
+    """
+    model = prob.model
+    kinds = np.asarray(getattr(model, "data_kind", []), dtype=object)
+    tracer = kinds == "tracer"
+    if kinds.size != model.n_data or not tracer.any() or tracer.all() or "tracer" in model.kind_weights:
+        return None
+    weight, history = 1.0, []
+    for _ in range(VC_ITERATIONS):
+        r = prob.resid(z)
+        J = prob.jac(z)
+        h = np.einsum("ij,ji->i", J, np.linalg.pinv(J.T @ J) @ J.T)  # leverages
+        sd = {}
+        for name, rows in (("tracer", tracer), ("psd", ~tracer)):
+            dof = rows.sum() - h[rows].sum()
+            sd[name] = math.sqrt(float(r[rows] @ r[rows]) / dof) / math.sqrt(weight if name == "tracer" else 1.0) \
+                if dof > 0 else math.nan
+        if not (np.isfinite(sd["tracer"]) and np.isfinite(sd["psd"]) and sd["tracer"] > 0 and sd["psd"] > 0):
+            return None
+        new = (sd["psd"] / sd["tracer"]) ** 2
+        history.append(new)
+        change = abs(new / weight - 1.0)
+        prob.row_factor = np.where(tracer, math.sqrt(new), 1.0)
+        prob.sw = prob.base_sw * prob.row_factor
+        weight = new
+        z, ssr = _local(prob, z, tight=True)
+        if change < VC_RTOL:
+            break
+    r = prob.resid(z)
+    return {"z": z, "ssr": float(r @ r), "tracer_weight": weight, "sd": sd, "weights_history": history,
+            "method": "tracer and sieve rows weighted by their own residual variance (REML-like dof), "
+                      "re-fitted until the weight changes < 2 %"}
+
+
+def _grid_check(model, params, theta, zb, sb, st, row_factor=1.0) -> dict:
     """Principle IV: SSR on ``grid.refine(2)`` at the estimate, and after a local re-fit
     there, with the largest parameter change in units of its SEP."""
     try:
@@ -335,6 +426,8 @@ def _grid_check(model, params, theta, zb, sb, st) -> dict:
     except InputError as exc:
         return {"skipped": str(exc)}
     prob = _Problem(fine, params)
+    prob.row_factor = row_factor  # the same weights as the fit (variance components)
+    prob.sw = prob.base_sw * row_factor
     r = prob.resid(zb)
     s_same = float(r @ r)
     z2, s2 = _local(prob, zb)

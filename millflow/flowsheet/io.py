@@ -124,6 +124,52 @@ def _wrap(where: str, fun, *args, **kw):
         raise InputError(f"{where}: {exc}") from exc
 
 
+#: Plausible ranges of a unit's extensive keys, in SI: outside them a value is a unit slip or
+#: a typo, and the numbers downstream overflow (rates S = S^E P / H at H = 1e-306 t are
+#: infinite) or lose their meaning (a hold-up of 1e306 t). (base, dimension) -> (low, high, SI unit).
+PLAUSIBLE = {
+    ("holdup", "mass"): (1e-6, 1e10, "kg"),          # 1 mg .. 10 Mt
+    ("tau", "time"): (1e-6, 1e9, "s"),                # 1 us .. 30 years
+    ("power", "power"): (0.0, 1e10, "W"),             # .. 10 GW
+    ("solids", "mass_flow"): (1e-9, 1e9, "kg/s"),     # 3.6e-6 kg/h .. 3.6e6 t/h
+    ("slurry_volume", "volume"): (1e-9, 1e6, "m3"),   # 1 mm3 .. 1e6 m3
+}
+
+
+def _user_key(t: _Table, base: str, dim: str) -> str | None:
+    """The key the file wrote for ``base`` (e.g. holdup_t), or None."""
+    found = [k for k in t.data if k.startswith(base + "_") and k[len(base) + 1:] in UNITS[dim]]
+    return found[0] if found else None
+
+
+def _plausible(t: _Table, base: str, dim: str, value):
+    """``value`` (SI) if inside :data:`PLAUSIBLE`, else an InputError naming the key and the
+    range in the unit the file used."""
+    if value is None:
+        return value
+    lo, hi, si = PLAUSIBLE[(base, dim)]
+    if lo <= value <= hi:
+        return value
+    key = _user_key(t, base, dim)
+    unit = key[len(base) + 1:]
+    factor = UNITS[dim][unit]
+    raise InputError(f"{t._at(key)} = {t.data[key]!r}: outside the plausible range {lo / factor:.3g}.."
+                     f"{hi / factor:.3g} {unit.replace('_', '/')} ({lo:.3g}..{hi:.3g} {si}); a unit slip?")
+
+
+#: Warnings already given for this file: the grid check parses the document again and would
+#: repeat each one (cleared by :func:`load` and :func:`loads`).
+_WARNED: set = set()
+
+
+def _warn_once(message: str) -> None:
+    import warnings
+
+    if message not in _WARNED:
+        _WARNED.add(message)
+        warnings.warn(message, UserWarning, stacklevel=3)
+
+
 # ------------------------------------------------------------------------ grid
 def _grid(t: _Table) -> SizeGrid:
     scheme = t.plain("scheme", "class_average", kind=str)
@@ -260,6 +306,7 @@ def _feed_psd(t: _Table, grid: SizeGrid, base: Path | None = None) -> np.ndarray
             t.finish("form, x63_um, n")
             if n <= 0:
                 raise InputError(f"{t.where}.n = {n!r}: expected > 0")
+            _inside_grid(t, "x63", x63, grid, "63 %")
 
             def cdf(x):
                 return rosin_rammler(x, x63, n)
@@ -269,6 +316,7 @@ def _feed_psd(t: _Table, grid: SizeGrid, base: Path | None = None) -> np.ndarray
             t.finish("form, xmax_um, m")
             if m <= 0:
                 raise InputError(f"{t.where}.m = {m!r}: expected > 0")
+            _inside_grid(t, "xmax", xmax, grid, "all")
 
             def cdf(x):
                 return gates_gaudin_schuhmann(x, xmax, m)
@@ -277,6 +325,17 @@ def _feed_psd(t: _Table, grid: SizeGrid, base: Path | None = None) -> np.ndarray
         except GridError as exc:
             raise GridError(str(exc).replace("does not cover the PSD", "does not cover the feed")) from exc
     raise InputError(f"{t.where}.form = {form!r}: unknown feed PSD form; valid: ggs, rosin_rammler, sieves")
+
+
+def _inside_grid(t: _Table, base: str, size: float, grid: SizeGrid, share: str) -> None:
+    """Refuse a feed PSD size below the grid's finest size: ``share`` of the feed would sit in
+    the sink class and pass through every unit unground, silently (x63_um = 0.8 meant mm?)."""
+    bottom = float(grid.x[-1])
+    if size < bottom:
+        key = _user_key(t, base, "length")
+        raise InputError(f"{t._at(key)} = {t.data[key]!r}: below the size grid's finest size ({bottom * 1e6:.4g} um), "
+                         f"so at least {share} of the feed would be in the sink class; expected a size inside the grid "
+                         f"({bottom * 1e6:.4g}..{grid.x[0] * 1e6:.4g} um); a unit slip?")
 
 
 # ------------------------------------------------------------------ breakage
@@ -534,11 +593,12 @@ def _transport_part(data, where: str) -> tuple:
     return model, params, frac
 
 
-def _rtd_fit(tr: _Table, base: Path | None, classified: bool):
+def _rtd_fit(tr: _Table, base: Path | None, classified: bool, kinetic: bool = False):
     """Transport from a ``millflow fit-rtd --json`` result (or its --out folder's fit.json):
     the model and its shape parameters, and tau converted from the fit's time unit to s.
     A tanks-in-series fit with real n and discharge classification (which needs whole
-    cells) uses the nearest whole n, said in the mill's method."""
+    cells) or non-linear kinetics (solved tank by tank) uses the nearest whole n, said in
+    the mill's method."""
 
     name = tr.plain("rtd_fit", kind=str)
     tr.finish("rtd_fit (a 'millflow fit-rtd --json' result; nothing else with it)")
@@ -571,10 +631,11 @@ def _rtd_fit(tr: _Table, base: Path | None, classified: bool):
     if missing:
         raise InputError(f"{p}: params {missing} missing for model {model!r}")
     note = f"transport from {p.name} ({model}, fitted in {unit})"
-    if model == "tanks_in_series" and classified and params["n"] != round(params["n"]):
+    if model == "tanks_in_series" and (classified or kinetic) and params["n"] != round(params["n"]):
         whole = max(1, round(params["n"]))
-        note += (f"; fitted n = {params['n']:.4g} -> {whole} tanks (nearest whole n: discharge classification "
-                 "needs whole cells)")
+        why = ("discharge classification needs whole cells" if classified
+               else "non-linear kinetics are solved tank by tank")
+        note += f"; fitted n = {params['n']:.4g} in {p.name} -> {whole} tanks (nearest whole n: {why})"
         params["n"] = float(whole)
     return model, params, values["tau"] * UNITS["time"][unit], note
 
@@ -598,7 +659,7 @@ def _mill(name: str, t: _Table, materials: dict, slurry=None, base: Path | None 
     model, tparams = "perfect_mixing", {}
     fitted_tau, rtd_note = None, None
     if tr is not None and "rtd_fit" in tr.data:
-        model, tparams, fitted_tau, rtd_note = _rtd_fit(tr, base, "classification" in t.data)
+        model, tparams, fitted_tau, rtd_note = _rtd_fit(tr, base, "classification" in t.data, "kinetics" in t.data)
     elif tr is not None and tr.data.get("model") == "series":
         tr.plain("model")
         parts = tr.plain("parts")
@@ -623,9 +684,9 @@ def _mill(name: str, t: _Table, materials: dict, slurry=None, base: Path | None 
                 raise InputError(f"units.{name}.lab: the rate is per energy (S = S^E P/H in every mill); "
                                  "a lab table scales rates per time only: remove one")
             rate = ScaledRate(rate, design["rate_factor"])
-    tau = t.quantity("tau", "time", None)
-    holdup = t.quantity("holdup", "mass", None)
-    slurry_volume = t.quantity("slurry_volume", "volume", None)
+    tau = _plausible(t, "tau", "time", t.quantity("tau", "time", None))
+    holdup = _plausible(t, "holdup", "mass", t.quantity("holdup", "mass", None))
+    slurry_volume = _plausible(t, "slurry_volume", "volume", t.quantity("slurry_volume", "volume", None))
     if fitted_tau is not None and tau is None and holdup is None and slurry_volume is None and design is None:
         tau = fitted_tau  # the tracer fit's tau, converted from its time unit
         rtd_note += f"; tau = {tau / 60:.6g} min from the fit"
@@ -653,7 +714,7 @@ def _mill(name: str, t: _Table, materials: dict, slurry=None, base: Path | None 
                          f"(volume: {_suffixes('volume')})")
     # (power_model of a mill by dimensions is not a power with an unknown unit)
     given = design is None or any(k.startswith("power_") and k != "power_model" for k in t.data)
-    power = t.quantity("power", "power", None, allow_zero=True) if given else None
+    power = _plausible(t, "power", "power", t.quantity("power", "power", None, allow_zero=True)) if given else None
     if design is not None and power is None:
         power = design["power_W"]
     cls = None
@@ -681,6 +742,8 @@ def _mill(name: str, t: _Table, materials: dict, slurry=None, base: Path | None 
 
 _CYCLONE_SIZES = (("diameter", True), ("inlet_diameter", True), ("vortex_finder", True), ("apex", True),
                   ("free_vortex_height", True), ("cylinder_length", False))
+#: No hydrocyclone dimension is below 1 mm (the smallest cyclones are ~10 mm across).
+CYCLONE_MIN_SIZE_M = 1e-3
 _CALIBRATION = {"plitt": ("F1", "F2", "F3", "F4", "density_exponent"),
                 "nageswararao": ("K_D0", "K_Q0", "K_V1", "K_W1", "alpha")}
 
@@ -695,6 +758,11 @@ def _predicted_cyclone(name: str, t: _Table, slurry):
         raise InputError(f"units.{name}.model = {model!r}: unknown hydrocyclone model; valid: "
                          f"{', '.join(CYCLONE_MODELS)} (or a fixed curve: curve = \"plitt\" with d50c_um, m, bypass)")
     sizes = {f"{k}_m": t.quantity(k, "length", ... if required else None) for k, required in _CYCLONE_SIZES}
+    for k, _ in _CYCLONE_SIZES:
+        if sizes[f"{k}_m"] is not None and sizes[f"{k}_m"] < CYCLONE_MIN_SIZE_M:
+            key = _user_key(t, k, "length")
+            raise InputError(f"{t._at(key)} = {t.data[key]!r}: a hydrocyclone dimension below 1 mm is implausible "
+                             "(industrial cyclones are 10..2500 mm across); a unit slip (m for mm)?")
     angle = t.plain("cone_angle_deg", None, kind=float)
     count = t.plain("cyclones", 1, kind=float)
     if count != int(count) or count < 1:
@@ -721,12 +789,10 @@ PLAUSIBLE_MIN_PCT_SOLIDS = 2.0
 
 def _warn_pct_slip(t: _Table, base: str) -> None:
     """One-line warning at a % solids key whose value looks like a fraction (unit slip)."""
-    import warnings
-
     v = t.data.get(f"{base}_pct")
     if isinstance(v, (int, float)) and not isinstance(v, bool) and 0 < v < PLAUSIBLE_MIN_PCT_SOLIDS:
-        warnings.warn(f"{t.where}.{base}_pct = {v!r}: {v:g} % solids by mass is implausibly dilute; if a fraction "
-                      f"was meant write {base}_pct = {v * 100:g} (or {base}_frac = {v!r})", UserWarning, stacklevel=2)
+        _warn_once(f"{t.where}.{base}_pct = {v!r}: {v:g} % solids by mass is implausibly dilute; if a fraction "
+                   f"was meant write {base}_pct = {v * 100:g} (or {base}_frac = {v!r})")
 
 
 def _feed_water(t: _Table, solids: float) -> float:
@@ -767,7 +833,7 @@ def _unit(name: str, t: _Table, grid: SizeGrid, materials: dict, slurry=None, ba
     if utype not in UNIT_TYPES:
         raise InputError(f"units.{name}.type = {utype!r}: unknown unit type; valid: {', '.join(sorted(UNIT_TYPES))}")
     if utype == "feed":
-        solids = t.quantity("solids", "mass_flow")
+        solids = _plausible(t, "solids", "mass_flow", t.quantity("solids", "mass_flow"))
         psd = _feed_psd(t.sub("psd"), grid, base)
         t.plain("material", None)
         water = _feed_water(t, solids)
@@ -789,7 +855,7 @@ def _unit(name: str, t: _Table, grid: SizeGrid, materials: dict, slurry=None, ba
                                                                              "coarse_solids_content_pct",
                                                                              "add_water_tph")), water)
     if utype in ("mixer", "tank"):
-        holdup = t.quantity("holdup", "mass", None)
+        holdup = _plausible(t, "holdup", "mass", t.quantity("holdup", "mass", None))
         t.finish("type, holdup_t, add_water_tph")
         return Mixer(name, holdup)
     if utype == "splitter":
@@ -923,6 +989,7 @@ def with_units(fs: Flowsheet, tables: dict, built: dict | None = None) -> Flowsh
 
 def loads(text: str, *, source: str = "<string>") -> Flowsheet:
     """Flowsheet from TOML text."""
+    _WARNED.clear()  # a new document: its warnings are new (the grid check's re-parse is not)
     try:
         data = tomllib.loads(text)
     except tomllib.TOMLDecodeError as exc:

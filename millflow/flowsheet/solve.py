@@ -239,9 +239,12 @@ def _substitution(g, x0, tol, maxiter, err=_relative_change):
     return x, maxiter, hist, False
 
 
-def _wegstein(g, x0, tol, maxiter, qmin=-5.0, qmax=0.0, err=_relative_change, bound=_substitute_negative):
+def _wegstein(g, x0, tol, maxiter, qmin=-5.0, qmax=0.0, err=_relative_change, bound=_substitute_negative,
+              stall: int | None = None):
     """Wegstein's accelerated substitution, componentwise, q bounded to [qmin, qmax]; ``err``
-    measures the change, ``bound(x, g(x))`` keeps the extrapolated iterate physical."""
+    measures the change, ``bound(x, g(x))`` keeps the extrapolated iterate physical. With
+    ``stall`` it gives up (not converged) when the smallest change of the last ``stall``
+    iterations is not 10 x below the smallest before them (a caller then switches method)."""
     x_prev, g_prev = x0, g(x0)
     hist = [err(g_prev, x_prev)]
     if hist[-1] < tol:
@@ -252,6 +255,8 @@ def _wegstein(g, x0, tol, maxiter, qmin=-5.0, qmax=0.0, err=_relative_change, bo
         hist.append(err(gx, x))
         if hist[-1] < tol or _at_rounding_floor(hist):
             return gx, it, hist, True
+        if stall and len(hist) > 2 * stall and min(hist[-stall:]) > 0.1 * min(hist[:-stall]):
+            return gx, it, hist, False
         dx = x - x_prev
         with np.errstate(divide="ignore", invalid="ignore"):
             s = np.where(dx != 0, (gx - g_prev) / dx, 0.0)
@@ -338,27 +343,12 @@ def solve(fs, *, method="wegstein", tol: float = 1e-13, maxiter: int = 200,
     torn = [n for n, u in fs.units.items() if getattr(u, "nonlinear", False)]
     wet = [n for n in torn if getattr(fs.units[n], "needs_water", False)]
     recov = [n for n in torn if getattr(fs.units[n], "needs_recovery", False)]
-    names = fs.stream_names
 
     def state_of(flows, infos):
-        """Torn variables: each torn unit's solids throughput, the water of those that need it,
-        and the corrected recovery C of the predicted cyclones that need it."""
-        F = [math.fsum(math.fsum(flows[names.index(s)]) for s in fs.inlets(u)) for u in torn]
-        if wet:
-            w = solve_water(fs, flows, infos)
-            F += [w.units[u]["water_in_kg_s"] for u in wet]
-        for u in recov:
-            inflow = sum(flows[names.index(s)] for s in fs.inlets(u))
-            F.append(fs.units[u].corrected_recovery(fs.grid, inflow, infos[u]))
-        return np.array(F)
+        return np.array(_torn_state(fs, torn, wet, recov, flows, infos))
 
     def unit_state(X):
-        state = {u: {"throughput": X[k]} for k, u in enumerate(torn)}
-        for k, u in enumerate(wet):
-            state[u]["water"] = X[len(torn) + k]
-        for k, u in enumerate(recov):
-            state[u]["recovery"] = X[len(torn) + len(wet) + k]
-        return state
+        return _torn_unit_state(torn, wet, recov, X)
 
     tear_report = None
     if torn:
@@ -434,15 +424,21 @@ _vector_substitution = functools.partial(_substitution, err=_vector_err)
 _vector_wegstein = functools.partial(_wegstein, err=_vector_err, bound=lambda x, gx: np.maximum(x, 0.0))
 
 
-def _vector_newton(g, x0, tol, maxiter):
+def _vector_newton(g, x0, tol, maxiter, err=_vector_err, scale=None, project=None):
+    """scipy's hybrid Powell on (g(x) - x) / scale for a torn vector (flows >= 0); the answer is
+    g at the evaluated point with the smallest change ``err``, accepted when that change is
+    below ``tol`` (or at the rounding floor of the unit solves), the same test as Wegstein's."""
     from scipy.optimize import root
 
     hist = []
-    scale = max(float(np.sum(x0)), 1e-300)
+    if scale is None:
+        scale = max(float(np.sum(x0)), 1e-300)
+    if project is None:
+        project = functools.partial(np.maximum, 0.0)  # flows >= 0
 
     def f(x):
-        gx = g(np.maximum(x, 0.0))
-        hist.append(_vector_err(gx, x))
+        gx = g(project(x))
+        hist.append(err(gx, x))
         return (gx - x) / scale
 
     best = [np.inf, x0]
@@ -450,63 +446,164 @@ def _vector_newton(g, x0, tol, maxiter):
     def f_best(x):
         out = f(x)
         if hist[-1] < best[0]:
-            best[:] = [hist[-1], x + out * scale]  # g(max(x, 0)) at the best point
+            best[:] = [hist[-1], x + out * scale]  # g(project(x)) at the best point
         return out
 
     root(f_best, x0, method="hybr", options={"xtol": tol, "maxfev": maxiter * (x0.size + 1)})
-    ok = bool(hist) and (best[0] < max(tol, 1e-12) * 100 or _at_rounding_floor(hist))
-    return np.maximum(best[1], 0.0), len(hist), hist, ok
+    ok = bool(hist) and (best[0] < tol or _at_rounding_floor(hist))
+    return project(best[1]), len(hist), hist, ok
 
 
 _VECTOR_TEARS = {"wegstein": _vector_wegstein, "substitution": _vector_substitution, "newton": _vector_newton}
 
 
+def _torn_state(fs, torn, wet, recov, flows, infos, water=None) -> list:
+    """Torn variables of the units torn on their throughput: each one's solids throughput,
+    the water of those that need it, the corrected recovery C of the predicted cyclones."""
+    names = fs.stream_names
+    out = [math.fsum(math.fsum(flows[names.index(s)]) for s in fs.inlets(u)) for u in torn]
+    if wet:
+        w = water if water is not None else solve_water(fs, flows, infos)
+        out += [w.units[u]["water_in_kg_s"] for u in wet]
+    for u in recov:
+        inflow = sum(flows[names.index(s)] for s in fs.inlets(u))
+        out.append(fs.units[u].corrected_recovery(fs.grid, inflow, infos[u]))
+    return out
+
+
+def _torn_unit_state(torn, wet, recov, X) -> dict:
+    """The keywords of each torn unit's ``blocks`` from its torn variables (:func:`_torn_state`'s order)."""
+    state = {u: {"throughput": X[k]} for k, u in enumerate(torn)}
+    for k, u in enumerate(wet):
+        state[u]["water"] = X[len(torn) + k]
+    for k, u in enumerate(recov):
+        state[u]["recovery"] = X[len(torn) + len(wet) + k]
+    return state
+
+
+#: Iterations without a tenfold gain after which the inlet-vector Wegstein tear counts as
+#: stalled and Newton takes over.
+TEAR_STALL = 25
+
+#: A tear cannot resolve changes below the error of the unit solves it iterates on: the
+#: tolerance in effect is at least this many times the largest error estimate of a
+#: non-linear mill's product (relative to its throughput), and the report says so.
+TEAR_NOISE_FACTOR = 4.0
+
+
+_NOTED: set = set()
+
+
+def _note_once(message: str) -> None:
+    """A UserWarning once per process (the grid check's second solve would repeat it)."""
+    import warnings
+
+    if message not in _NOTED:
+        _NOTED.add(message)
+        warnings.warn(message, UserWarning, stacklevel=3)
+
+
 def _solve_kinetic(fs, kin, method, tol, maxiter, t0, mass_tol=MASS_TOL):
-    """Tear the inlet flow vectors of the mills with non-linear kinetics (see the module)."""
-    others = [n for n, u in fs.units.items() if getattr(u, "nonlinear", False) and n not in kin]
-    if others:
-        raise InputError(f"units {', '.join(others)}: a unit torn on its throughput (a hold-up or slurry-volume mill, "
-                         f"a predicted hydrocyclone) in the same flowsheet as a mill with non-linear kinetics "
-                         f"({', '.join(kin)}) is not supported; give the mill tau_<unit> or the cyclone a fixed curve")
+    """Tear the inlet flow vectors of the mills with non-linear kinetics (see the module).
+
+    Units torn on their throughput (a hold-up, slurry-volume or per-energy linear mill, a
+    predicted hydrocyclone) join the same tear with their throughput, water and corrected
+    recovery, as in the linear path. The torn vector is [inlet flows of each non-linear
+    mill, water of those given by slurry volume, the other units' torn variables]; its change
+    is the largest of max |dx| / sum(x) over the flows and the relative change of each
+    scalar. Wegstein (default) falls back to Newton on the tear from where it stalled.
+    """
     if not isinstance(method, str) or method not in _VECTOR_TEARS:
         raise InputError(f"method = {method!r}: the inlet-vector tear of non-linear mills takes one of "
                          f"{', '.join(_VECTOR_TEARS)}")
     names = fs.stream_names
     N = fs.grid.n
-    blocks = {}
-    infos = {}
+    torn = [n for n, u in fs.units.items() if getattr(u, "nonlinear", False) and n not in kin]
+    wet_o = [n for n in torn if getattr(fs.units[n], "needs_water", False)]
+    recov = [n for n in torn if getattr(fs.units[n], "needs_recovery", False)]
+    blocks, infos = {}, {}
     for name, unit in fs.units.items():
         if name in kin:
             blocks[name], infos[name] = {}, {}
-        else:
+        elif name not in torn:
             blocks[name], infos[name] = unit.blocks(fs.grid, None)
     outlets = {u: fs.outlet(u, "out") for u in kin}
     # mills given by their slurry hold-up: tau = V / Q needs the water through them, torn too
     wet = [u for u in kin if getattr(fs.units[u], "needs_water", False)]
+    nv = len(kin) * N  # the flow vectors; the scalars (water, throughputs, recoveries) follow
     state = {}
 
     def g(X):
         extra = {}
+        ustate = _torn_unit_state(torn, wet_o, recov, X[nv + len(wet):])
+        for u in torn:
+            blocks[u], infos[u] = fs.units[u].blocks(fs.grid, **ustate[u])
         for k, u in enumerate(kin):
-            water = X[len(kin) * N + wet.index(u)] if u in wet else None
+            water = X[nv + wet.index(u)] if u in wet else None
             extra[outlets[u]], infos[u] = fs.units[u].product_flows(fs.grid, X[k * N:(k + 1) * N], water)
+            note = getattr(fs.units[u], "transport_note", None)
+            if note:
+                infos[u]["method"] += f" [{note}]"
         flows, info = _linear_solve(fs, blocks, extra)
         state.update(flows=flows, info=info)
         out = [sum(flows[names.index(s)] for s in fs.inlets(u)) for u in kin]
+        w = solve_water(fs, flows, infos) if (wet or wet_o) else None
         if wet:
-            w = solve_water(fs, flows, infos)
             out.append(np.array([w.units[u]["water_in_kg_s"] for u in wet]))
+        out.append(np.array(_torn_state(fs, torn, wet_o, recov, flows, infos, w), dtype=float))
         return np.concatenate(out)
+
+    def err(gx, x):
+        scalars = _relative_change(gx[nv:], x[nv:]) if gx.size > nv else 0.0
+        return max(_vector_err(gx[:nv], x[:nv]), scalars)
 
     fresh = sum(u.solids * np.asarray(u.psd, float) for u in fs.units.values() if u.type == "feed")
     water0 = sum(getattr(u, "water", 0.0) for u in fs.units.values() if u.type == "feed")
     water0 += sum((getattr(fs, "water_added", {}) or {}).values())
-    X0 = np.concatenate([fresh for _ in kin] + [np.full(len(wet), float(water0))])
-    X, its, hist, ok = _VECTOR_TEARS[method](g, X0, tol, maxiter)
+    X0 = np.concatenate([fresh for _ in kin] + [np.full(len(wet), float(water0))]
+                        + [np.array([float(np.sum(fresh))] * len(torn) + [float(water0)] * len(wet_o)
+                                    + [0.5] * len(recov))])
+    # the tolerance in effect: the tear cannot resolve what the mill solves do not
+    g(X0)
+    noise = max((float(infos[u].get("error_estimate") or 0.0) for u in kin), default=0.0)
+    tol_used = max(tol, TEAR_NOISE_FACTOR * noise)
+    scale = np.concatenate([np.full(nv, max(float(np.sum(X0[:nv])), 1e-300)),
+                            np.maximum(np.abs(X0[nv:]), 1.0)])
+    first_recovery = nv + len(wet) + len(torn) + len(wet_o)
+
+    def project(x):  # flows, water and throughputs >= 0, corrected recoveries in [0, 1]
+        x = np.maximum(np.asarray(x, dtype=float), 0.0)
+        x[first_recovery:] = np.minimum(x[first_recovery:], 1.0)
+        return x
+
+    def bound(x, gx):  # an extrapolated Wegstein component outside its range takes the substitution step
+        x = np.where(x < 0, gx, x)
+        x[first_recovery:] = np.where(x[first_recovery:] > 1, gx[first_recovery:], x[first_recovery:])
+        return x
+
+    tears = {"wegstein": functools.partial(_wegstein, err=err, bound=bound, stall=TEAR_STALL),
+             "substitution": functools.partial(_substitution, err=err),
+             "newton": functools.partial(_vector_newton, err=err, scale=scale, project=project)}
+    X, its, hist, ok = tears[method](g, X0, tol_used, maxiter)
+    fallback = None
+    if not ok and method == "wegstein":
+        # Wegstein's componentwise secant slopes stall where the torn flows are coupled
+        # (a non-linear mill in a recycle): Newton on the tear from where it stopped
+        X2, its2, hist2, ok = tears["newton"](g, np.asarray(X, dtype=float), tol_used, maxiter)
+        fallback = (f"wegstein stalled after {its} iterations at a relative change of "
+                    f"{hist[-1] if hist else float('nan'):.3g}; newton on the tear from there "
+                    f"{'converged' if ok else 'did not converge either'} in {its2} evaluations")
+        if ok:
+            _note_once(f"units {', '.join(kin)}: the Wegstein tear on the inlet flows stalled; Newton on the tear "
+                       "took over and converged (the summary's solver.tear.fallback)")
+        X, its, hist = X2, its + its2, hist + hist2
+    also = f" (and the throughput of {', '.join(torn)})" if torn else ""
     if not ok:
-        raise SolverError(f"tear iterations on the inlet flows of {', '.join(kin)} (non-linear kinetics) did not "
-                          f"converge ({method}, {its} iterations, last relative change "
-                          f"{hist[-1] if hist else float('nan'):.3g})")
+        raise SolverError(f"tear iterations on the inlet flows of {', '.join(kin)} (non-linear kinetics){also} did "
+                          f"not converge ({method}{', then newton from where it stalled' if fallback else ''}, "
+                          f"{its} iterations, last relative change {hist[-1] if hist else float('nan'):.3g}, "
+                          f"tolerance {tol_used:.2g}); the tear method is chosen with --tear-method "
+                          "newton|wegstein|substitution (method= of millflow.flowsheet.solve)")
     g(np.asarray(X))  # final consistent pass
     flows, lin = state["flows"], state["info"]
     water = solve_water(fs, flows, infos)
@@ -514,9 +611,21 @@ def _solve_kinetic(fs, kin, method, tol, maxiter, t0, mass_tol=MASS_TOL):
     from millflow.flowsheet.cyclone import report_operation
     report_operation(fs, flows, water, reports)
     solver = dict(lin)
-    solver["structure"] = "non-linear kinetics: tear iterations on the inlet flow vectors of " + ", ".join(kin)
-    solver["tear"] = {"method": method, "torn_units": kin, "torn": "inlet flow vector", "iterations": int(its),
-                      "converged": True, "residual_history": [float(h) for h in hist], "tolerance": tol}
+    solver["structure"] = ("non-linear kinetics: tear iterations on the inlet flow vectors of " + ", ".join(kin)
+                           + (f" and the throughput of {', '.join(torn)}" if torn else ""))
+    solver["tear"] = {"method": method, "torn_units": kin + torn, "iterations": int(its), "converged": True,
+                      "torn": "inlet flow vector"
+                              + (f" (and the solids throughput of {', '.join(torn)})" if torn else "")
+                              + (f" (and water of {', '.join(wet + wet_o)})" if wet or wet_o else "")
+                              + (f" (and corrected recovery C of {', '.join(recov)})" if recov else ""),
+                      "residual_history": [float(h) for h in hist], "tolerance": tol}
+    if tol_used > tol:
+        solver["tear"]["tolerance_in_effect"] = tol_used
+        solver["tear"]["tolerance_note"] = (f"{TEAR_NOISE_FACTOR:g} x the largest error estimate of the non-linear "
+                                            f"mills' products ({noise:.2g}): the tear cannot resolve changes below "
+                                            "the error of the solves it iterates")
+    if fallback:
+        solver["tear"]["fallback"] = fallback
     return FlowsheetSolution(flowsheet=fs, flows=flows, units=reports, solver=solver,
                              runtime_s=time.perf_counter() - t0, unit_blocks=blocks, water=water)
 
@@ -552,4 +661,9 @@ def _unit_reports(fs, flows, infos, mass_tol: float = MASS_TOL, water=None) -> d
             rep["power_kW"] = unit.power / 1e3
             rep["specific_energy_kWh_per_t"] = (unit.power / 1e3) / (fin * 3.6)
         out[uname] = rep
+    if water is not None and not water.overall_error <= mass_tol:
+        # every unit may close while the flowsheet does not (water in a loop the tear left
+        # unconverged): the overall balance is checked like the solids'
+        raise SolverError(f"water balance of the flowsheet: error {water.overall_error:.2g} (water fed and added vs "
+                          f"water in the products) above mass_tol {mass_tol:.2g}")
     return out

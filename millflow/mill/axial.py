@@ -222,6 +222,12 @@ def solve_axial(S, b, feed, tau: float, pe: float, d=None, w=None, *, tol: float
     w_arr = np.ones(n_cls) if w is None else np.asarray(w, float)
     if pe * float(np.min(v_arr / w_arr)) < PE_MIXED:
         return _perfectly_mixed_limit(S, b, feed, tau, pe, v_arr, w_arr)
+    if m_cells is None and large_peclet_applies(pe, v_arr, w_arr, m_max):
+        # the finest grid cannot resolve 1/Pe: the plug-flow limit and its 1/Pe terms
+        def at(pe_j, tol_j):
+            return solve_axial(S, b, feed, tau, pe_j, d, w, tol=tol_j, m_start=m_start, m_max=m_max)
+
+        return large_peclet_limit(at, S, b, feed, tau, pe, v_arr, w_arr, tol=tol, m_max=m_max)
     if m_cells is not None:
         z, c, p = solve_axial_grid(S, b, feed, tau, pe, m_cells, d, w)
         return AxialSolution(p, z, tau * c, _holdup(z, tau * c), float("nan"), float("nan"), [])
@@ -232,13 +238,21 @@ def solve_axial(S, b, feed, tau: float, pe: float, d=None, w=None, *, tol: float
         z, c, p = solve_axial_grid(S, b, feed, tau, pe, M, d, w)
         return z, c, np.concatenate([p, _holdup(z, c)])
 
+    cols = int(np.prod(np.shape(feed)[1:], dtype=int))
     both, estimate, order, history, finest, _, _ = refine_grids(
-        grid, float(ratio.max()) * pe, tol=tol, m_start=m_start, m_max=m_max)
+        grid, float(ratio.max()) * pe, tol=tol, m_start=m_start, m_max=m_max,
+        bytes_per_cell=8.0 * 6 * n_cls * cols)  # c, w c, tau c and three kept grids
     z, c, _ = finest
     return AxialSolution(both[:n_cls], z, tau * c, tau * both[n_cls:], estimate, order, history)
 
 
-def refine_grids(solve_grid, cell_pe: float, *, tol: float, m_start: int, m_max: int):
+#: Share of the memory budget (MILLFLOW_MEMORY_BUDGET_GB) the finite-volume grids may hold:
+#: a transfer matrix solves N columns at once, (M + 1) N^2 numbers per grid.
+FV_MEMORY_SHARE = 0.25
+
+
+def refine_grids(solve_grid, cell_pe: float, *, tol: float, m_start: int, m_max: int,
+                 bytes_per_cell: float = 0.0):
     """Grids of M, 2M, 4M, ... volumes until the error estimate of the product is below ``tol``.
 
     ``solve_grid(M)`` returns a tuple whose third item is the product on that grid;
@@ -247,9 +261,15 @@ def refine_grids(solve_grid, cell_pe: float, *, tol: float, m_start: int, m_max:
     when it is 2 and stable and the cell Peclet number <= 1 the product is
     Richardson-extrapolated (estimate: the change of the extrapolation since the previous
     grid), otherwise the finest product is taken with the estimate |p_4M - p_2M| / (2^q - 1).
+    ``bytes_per_cell``: what one volume of a grid costs in memory (every array the solve and
+    the kept grids hold); refinement stops before a grid would exceed
+    :data:`FV_MEMORY_SHARE` of the memory budget (the history says so, the estimate stays).
     Returns (product >= 0, estimate, order, history, finest grid's tuple, the one before,
     extrapolated: True when the product is the Richardson extrapolation).
     """
+    from millflow.grid import memory_budget_bytes
+
+    limit = FV_MEMORY_SHARE * memory_budget_bytes()
     M = int(m_start)
     grids = [solve_grid(M * k) for k in (1, 2)]
     history = [(M, float("nan")), (2 * M, float(np.abs(grids[1][2] - grids[0][2]).max()))]
@@ -284,6 +304,9 @@ def refine_grids(solve_grid, cell_pe: float, *, tol: float, m_start: int, m_max:
         converged = estimate <= tol
         if converged or 2 * M > m_max:
             break
+        if bytes_per_cell * (2 * M + 1) > limit:
+            history.append(("memory budget", 2 * M))
+            break
     product = np.maximum(product, 0.0)  # extrapolation may dip below 0 by < estimate
     history.append(("converged", bool(converged)))
     return product, float(estimate), order, history, grids[-1], grids[-2], q is not None and d2 != 0.0
@@ -291,6 +314,103 @@ def refine_grids(solve_grid, cell_pe: float, *, tol: float, m_start: int, m_max:
 
 #: Below this Pe v/w the mill is solved as its Pe -> 0 limit (1/Pe would overflow on fine grids).
 PE_MIXED = 1e-250
+
+#: Large-Pe route: the finite-volume references are solved at Pe_hi, Pe_hi/2, Pe_hi/4 with
+#: Pe_hi max(v/w) = m_max / LARGE_PE_NODE_CELLS (cell Peclet number <= 1 from m_max/8 volumes on).
+LARGE_PE_NODE_CELLS = 8
+#: ... and only when every class's own Peclet number Pe_j v_i/w_i at the smallest node is at
+#: least this: below it a class is not in the plug-flow regime at the nodes (a class retained
+#: by classification, v << w, breaks in a dispersion layer of width sqrt(w/(Pe tau S)), which
+#: makes the deviation from plug flow O(Pe^-1/2), not a power series in 1/Pe).
+LARGE_PE_MIN_CLASS_PECLET = 100.0
+
+
+def large_peclet_applies(pe: float, v, w, m_max: int) -> bool:
+    """Whether the large-Pe route applies: the finest grid cannot resolve 1/Pe (Pe max(v/w) >
+    m_max) and every class is in the plug-flow regime at the route's nodes
+    (:data:`LARGE_PE_MIN_CLASS_PECLET`), i.e. max(v/w) / min(v/w) <= m_max / (32 x 100)."""
+    ratio = np.asarray(v, float) / np.asarray(w, float)
+    pe_lo = m_max / LARGE_PE_NODE_CELLS / float(ratio.max()) / 4.0
+    return pe * float(ratio.max()) > m_max and pe_lo * float(ratio.min()) >= LARGE_PE_MIN_CLASS_PECLET
+
+
+def plug_flow_limit(S, b, feed, tau: float, v, positions: int = 65):
+    """Pe -> inf: class i travels at v_i u without dispersion (rates S/v over the contact time tau).
+
+    Flux F(z) = exp(K' tau z) f with K' the breakage matrix of rates S/v (the batch solution
+    at time tau z); product F(1), hold-up per unit feed rate int_0^tau exp(K' t) f dt / v_i [s],
+    density tau F(z)/v_i at ``positions`` nodes. Returns (z, density, product, holdup, error)
+    with the plug-flow path's rounding estimate (:func:`millflow.mill.segregated.plug_flow`).
+    """
+    from millflow.linalg import SpectralBlocks
+    from millflow.mill.segregated import plug_flow
+
+    S = np.asarray(S, dtype=float)
+    feed = np.asarray(feed, dtype=float)
+    v = np.asarray(v, dtype=float)
+    rates = S / v
+    blocks, _, _ = SpectralBlocks.decompose(rates, b)
+    product, hold, err, _ = plug_flow(rates, b, feed, tau, blocks=blocks)
+    vk = v.reshape((-1,) + (1,) * (feed.ndim - 1))
+    z = np.linspace(0.0, 1.0, positions)
+    cols = [feed] if feed.ndim == 1 else [feed[:, k] for k in range(feed.shape[1])]
+    flux = np.stack([blocks.expm_apply(c, tau * z) for c in cols], axis=-1)  # (M, N, m)
+    density = tau * flux / v[None, :, None]
+    if feed.ndim == 1:
+        density = density[..., 0]
+    return z, density, product, hold / vk, float(err)
+
+
+def large_peclet_limit(solve_at, S, b, feed, tau: float, pe: float, v, w, *, tol: float, m_max: int,
+                       unit: float | None = None) -> AxialSolution:
+    """The axial mill at a Peclet number the finite volumes cannot resolve (Pe max(v/w) > m_max).
+
+    The product and hold-up are analytic in x = 1/Pe at x = 0 (the plug-flow limit,
+    :func:`plug_flow_limit`, exact to rounding) up to terms exp(-Pe ...) of the boundary
+    layers: y(x) = y(0) + c1 x + c2 x^2 + c3 x^3 + ... (for one class without
+    classification, ln(p/f) = -k + k^2/Pe - 2 k^3/Pe^2 + ..., k = S tau). The coefficients
+    are fitted from finite-volume solutions at Pe_j = Pe_hi / 2^j, j = 0, 1, 2, where the
+    grid resolves 1/Pe (``solve_at(pe_j, tol_j)``): y at x is the cubic through x = 0 and the
+    three x_j. Error estimate: the cubic minus the quadratic through (0, x_0, x_1) at x (the
+    size of the last term kept, the Richardson argument in x), plus the references' own
+    estimates times sum |L_j(x)| of the cubic's Lagrange basis (<= 0.43 for x <= x_0/8),
+    plus the plug-flow rounding. In units of the feed for the product and of ``unit``
+    (default tau) for the hold-up. At Pe = 1e6 with k ~ 1 the first-order term is ~1e-6 and
+    the estimate ~1e-12; outside the asymptotic range (a class whose Peclet number Pe_j v/w
+    is small at the nodes, or k^2 comparable to Pe_j) the estimate says so.
+    """
+    unit = tau if unit is None else float(unit)
+    n_cls = np.asarray(S).size
+    z, dens, p0, h0, err0 = plug_flow_limit(S, b, feed, tau, v)
+    pe_hi = m_max / LARGE_PE_NODE_CELLS / float(np.max(np.asarray(v) / np.asarray(w)))
+    nodes = np.array([0.0, 1.0 / pe_hi, 2.0 / pe_hi, 4.0 / pe_hi])
+    x = 1.0 / pe
+    ys = [np.concatenate([p0, h0 / unit])]
+    refs_err, history = [], [("plug-flow limit", 0.0)]
+    for xj in nodes[1:]:
+        sol = solve_at(1.0 / xj, 0.25 * tol)
+        ys.append(np.concatenate([sol.product, sol.holdup / unit]))
+        refs_err.append(sol.error_estimate)
+        history.append((f"finite volumes at Pe = {1.0 / xj:.4g}", sol.error_estimate))
+    ys = np.stack(ys)
+
+    def lagrange(points, at):
+        out = []
+        for j, xj in enumerate(points):
+            others = np.delete(points, j)
+            out.append(float(np.prod((at - others) / (xj - others))))
+        return np.array(out)
+
+    L3 = lagrange(nodes, x)
+    L2 = lagrange(nodes[:3], x)
+    cubic = np.tensordot(L3, ys, axes=1)
+    quad = np.tensordot(L2, ys[:3], axes=1)
+    truncation = float(np.abs(cubic - quad).max(initial=0.0))
+    propagated = float(np.abs(L3[1:]) @ np.array(refs_err))
+    estimate = truncation + propagated + err0 * max(1.0, tau / unit)
+    both = np.maximum(cubic, 0.0)
+    history.append(("large-Pe limit: plug flow + 1/Pe terms", estimate))
+    return AxialSolution(both[:n_cls], z, dens, unit * both[n_cls:], estimate, float("nan"), history)
 
 
 def _perfectly_mixed_limit(S, b, feed, tau, pe, v, w) -> AxialSolution:

@@ -55,7 +55,8 @@ import numpy as np
 from scipy.linalg import lapack
 
 from millflow.errors import InputError, SolverError
-from millflow.mill.axial import AxialSolution, _bernoulli, _gth_factors, refine_grids
+from millflow.mill.axial import (AxialSolution, _bernoulli, _gth_factors, large_peclet_applies, large_peclet_limit,
+                                 refine_grids)
 
 __all__ = ["DISCHARGES", "OpenGrid", "solve_axial_open", "solve_axial_open_grid", "open_nodes", "open_grid",
            "back_layer_matrix", "tail_length"]
@@ -301,6 +302,14 @@ def solve_axial_open(S, b, feed, tau: float, pe: float, d=None, w=None, *, disch
     v = np.ones(S.size) if d is None else np.asarray(d, dtype=float)
     w_arr = v.copy() if w is None else np.asarray(w, dtype=float)
     discharge = check_discharge(discharge, v, w_arr)
+    if m_cells is None and large_peclet_applies(pe, v, w_arr, m_max):
+        # the finest grid cannot resolve 1/Pe: the plug-flow limit and its 1/Pe terms; the
+        # hold-up's estimate in units of tau (<= the mean tau (1 + 2/Pe), as stated)
+        def at(pe_j, tol_j):
+            return solve_axial_open(S, b, feed, tau, pe_j, v, w_arr, discharge=discharge, tol=tol_j,
+                                    m_start=m_start, m_max=m_max)
+
+        return large_peclet_limit(at, S, b, feed, tau, pe, v, w_arr, tol=tol, m_max=m_max)
     L_t = tail_length(S, tau, pe, v, w_arr)
 
     n_cls = S.size
@@ -316,7 +325,9 @@ def solve_axial_open(S, b, feed, tau: float, pe: float, d=None, w=None, *, disch
     if m_cells is not None:
         z, c, p, hold = solve_axial_open_grid(S, b, feed, tau, pe, m_cells, v, w_arr, discharge, tail=L_t)
         return AxialSolution(np.maximum(p, 0.0), z, tau * c, hold, float("nan"), float("nan"), [])
+    cols = int(np.prod(np.shape(feed)[1:], dtype=int))
     both, estimate, order, history, finest, coarser, extrapolated = refine_grids(
-        grid, float((v / w_arr).max()) * pe, tol=tol, m_start=m_start, m_max=m_max)
+        grid, float((v / w_arr).max()) * pe, tol=tol, m_start=m_start, m_max=m_max,
+        bytes_per_cell=8.0 * 3 * 8 * n_cls * cols)  # the mill and two tails; c, back layer, kept grids
     z, c, _, _ = finest
     return AxialSolution(both[:n_cls], z, tau * c, mean * both[n_cls:], estimate, order, history)

@@ -21,8 +21,10 @@ import numpy as np
 
 from millflow.errors import SolverError
 from millflow.linalg import SpectralBlocks, contour_funm
+from rtd.base import survival_of
+from rtd.base import survival_error as _survival_error
 
-__all__ = ["decompose", "apply_function", "survival_transform", "segregated", "plug_flow"]
+__all__ = ["decompose", "apply_function", "survival_transform", "survival_error", "segregated", "plug_flow"]
 
 _TARGET = 1e-13
 
@@ -91,19 +93,18 @@ def apply_function(blocks: SpectralBlocks, fun, V, analytic_left: float = 0.0,
 
 
 def survival_transform(model):
-    """G(s) = (1 - E_hat(s)) / s, the transform of 1 - F(t); G(0) = mean [s]."""
-    m1 = float(model.mean)
-    m2 = float(model.variance) + m1 * m1
+    """G(s) = (1 - E_hat(s)) / s, the transform of 1 - F(t); G(0) = mean [s].
 
-    def G(s):
-        s = np.asarray(s)
-        small = np.abs(s) * m1 < 1e-5
-        safe = np.where(small, 1.0, s)
-        out = (1.0 - np.asarray(model.laplace(safe))) / safe
-        # two Taylor terms: relative error ~ (|s| m1)^2 < 1e-10 times m3/m1^3
-        return np.where(small, m1 - 0.5 * m2 * s, out)
+    The model's own closed form (``survival_laplace``: no cancellation, every rtd model),
+    else the generic quotient, whose error :func:`survival_error` bounds.
+    """
+    return lambda s: survival_of(model, s)
 
-    return G
+
+def survival_error(model, rates) -> np.ndarray:
+    """Bound of the absolute error [s] of G at each rate: a few ulp of G for the closed forms,
+    eps (1 + E_hat)/s for the generic quotient (:func:`rtd.base.survival_error`)."""
+    return np.asarray(_survival_error(model, np.asarray(rates, dtype=float)), dtype=float)
 
 
 def segregated(S, b, feed, model, *, holdup: bool = True, blocks: SpectralBlocks | None = None):
@@ -129,6 +130,11 @@ def segregated(S, b, feed, model, *, holdup: bool = True, blocks: SpectralBlocks
     hold = None
     if holdup:
         hold = apply_function(blocks, survival_transform(model), feed, left, errors=errors, w=w)
+        # G's own evaluation error at the separated rates, mapped back through X (the
+        # clusters' contour integrals are in errors[-1] already)
+        delta = survival_error(model, blocks.S)
+        delta = (delta if feed.ndim == 1 else delta[:, np.newaxis]) * np.abs(w)
+        errors[-1] += float((np.abs(blocks.X) @ delta).max()) if delta.size else 0.0
         errors[-1] /= max(float(model.mean), 1e-300)  # hold-up error in units of tau
     scale = float(np.abs(feed).sum(axis=0).max()) if feed.size else 0.0
     if cancel is None:

@@ -177,7 +177,32 @@ def _axial_fv(sc, feed, out, *, tol, holdup, cache):
     out["extras"].update(order=sol.order, control_volumes=int(sol.z.size - 1))
     if sc.kind == "axial_open":
         out["extras"]["discharge"] = sc.discharge or "sampled"
+    if sol.history and sol.history[0][0] == "plug-flow limit":
+        out["extras"]["limit"] = "; ".join(f"{what} (estimate {est:.2g})" for what, est in sol.history)
+        out["extras"].pop("control_volumes")
+    elif sol.error_estimate > tol:
+        stopped = [m for what, m in sol.history if what == "memory budget"]
+        memory = (f"grid refinement stopped before {stopped[0]} volumes: that grid would hold more than a quarter "
+                  "of the memory budget (MILLFLOW_MEMORY_BUDGET_GB) for these columns" if stopped else None)
+        advice = "; ".join(a for a in (_axial_advice(sc), memory) if a)
+        if advice:
+            out["extras"]["advice"] = advice
     return sc
+
+
+def _axial_advice(sc) -> str | None:
+    """Why the finite volumes missed the tolerance, when the reason is the Peclet number."""
+    n = sc.S.size
+    v = np.ones(n) if sc.d is None else sc.d
+    w = sc.dispersion if sc.dispersion is not None else (v if sc.kind == "axial_open" else np.ones(n))
+    ratio = v / w
+    pe = float(sc.transport.pe)
+    if pe * float(ratio.max()) <= 16384:
+        return None
+    return (f"the finest grid (16384 volumes) does not resolve the largest class Peclet number Pe d*/dispersion "
+            f"= {pe * float(ratio.max()):.3g}, and the plug-flow limit needs every class's Peclet number to be "
+            f"large, here down to {pe * float(ratio.min()):.3g} (a class retained by classification breaks in a "
+            "dispersion layer at the feed end); the estimate is honest")
 
 
 #: Method name -> solver(scene, feed, out, *, tol, holdup, cache) -> scene. A solver fills

@@ -89,3 +89,21 @@ def test_rtd_arrays_beyond_the_memory_budget_are_refused():
         net.pdf(t)
     with pytest.raises(rtd.ParameterError, match="RTD_MEMORY_BUDGET_GB"):
         rtd.TanksInSeries(600.0, 1e9).network()
+
+
+@pytest.mark.parametrize("header, match", [
+    ("time_min,concentration,F", "both 'concentration' and 'F'"),
+    ("time_min,Concentration", r"no column 'concentration'.*\('Concentration' is not 'concentration'"),
+    ("time_min,concentration,Inlet", r"unknown column \['Inlet'\] \('Inlet' is not 'inlet'"),
+    ("time_min,concentration,temperature", r"unknown column \['temperature'\]"),
+    ("time_min,f", r"'f' is not 'F'"),
+])
+def test_ambiguous_and_unknown_columns_are_named(tmp_path, header, match):
+    # both columns: F was used silently (then "tau = -4.9e6"); 'Concentration' was ignored
+    n = header.count(",") + 1
+    rows = "".join(",".join([repr(float(t))] + [repr(float(c))] * (n - 1)) + "\n" for t, c in zip(T, C))
+    path = tmp_path / "c.csv"
+    path.write_text(header + "\n" + rows)
+    with pytest.raises(rtd.TracerError, match=match):
+        rtd.read_tracer_csv(path)
+

@@ -74,3 +74,16 @@ def test_fit_rtd_with_inlet_column_and_step_file(tmp_path, capsys):
     assert main(["fit-rtd", str(step), "--model", "ad-closed", "--json", "--no-plots"]) == 0
     params = json.loads(capsys.readouterr().out)["params"]
     assert params["pe"]["value"] == pytest.approx(12.0, rel=1e-5)
+
+
+def test_both_columns_on_the_command_line_is_one_line_exit_2(tmp_path, capsys):
+    import numpy as np
+
+    from millflow.cli import main
+
+    t = np.linspace(0.0, 60.0, 61)
+    path = tmp_path / "c.csv"
+    path.write_text("time_min,concentration,F\n" + "".join(f"{a!r},{a * np.exp(-a / 10)!r},0.5\n" for a in t))
+    assert main(["fit-rtd", str(path), "--quiet"]) == 2
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and "both 'concentration' and 'F'" in err and "Traceback" not in err

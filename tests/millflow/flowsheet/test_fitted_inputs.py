@@ -2,6 +2,7 @@
 alone, with a feed CSV, a fitted RTD (python -m rtd fit --json) and a fitted breakage model
 (millflow fit --json)."""
 import json
+import re
 import math
 import subprocess
 import sys
@@ -121,3 +122,31 @@ def test_process_value_the_fit_does_not_have_is_named(files):
     (files / "circuit.toml").write_text(text)
     with pytest.raises(InputError, match="process.speed: not a process variable"):
         load(files / "circuit.toml")
+
+
+@pytest.mark.parametrize("unit", [["min"], {"unit": "min"}, 60, None, "fortnight"])
+def test_rtd_fit_time_unit_of_the_wrong_type_is_named(files, unit):
+    # a list (or any non-string) time_unit was an unhandled TypeError once; now one line
+    d = json.loads((files / "tracer-fit.json").read_text())
+    d["time_unit"] = unit
+    (files / "tracer-fit.json").write_text(json.dumps(d))
+    with pytest.raises(InputError, match=r"time_unit = .*expected one of s, min, h"):
+        load(files / "circuit.toml")
+
+
+def test_fitted_real_n_with_non_linear_kinetics_is_rounded_and_said(files):
+    # a fitted n = 3.4 reaching a mill with non-linear kinetics (solved tank by tank) was
+    # refused naming units.mill.transport.n, a key the file never wrote; it now takes the
+    # nearest whole n as the classified case does and says so, naming the fit file
+    from millflow.flowsheet import solve
+
+    text = CIRCUIT.replace('classification = {curve = "screen", d50_um = 2000, m = 6}',
+                           '[units.mill.kinetics]\ncushion_lambda = -0.5\nfines_um = 75')
+    (files / "circuit.toml").write_text(text)
+    fs = load(files / "circuit.toml")
+    assert fs.units["mill"].transport_params["n"] == 3.0
+    sol = solve(fs)
+    method = sol.units["mill"]["method"]
+    assert "non-linear kinetics" in method
+    assert re.search(r"fitted n = 3\.4\d* in tracer-fit\.json -> 3 tanks \(nearest whole n: non-linear kinetics",
+                     method), method

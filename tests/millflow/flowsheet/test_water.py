@@ -212,3 +212,24 @@ def test_screen_with_wet_feed_must_say_where_water_goes():
         "cyclones.overflow", "cyclones.undersize")
     with pytest.raises(InputError, match="units.cyclones: its feed carries .* water_to_coarse"):
         solve(loads(text.replace("MILL", "tau_min = 4").replace("CYCLONE", "")))
+
+
+def test_overall_water_balance_is_checked_like_the_solids(monkeypatch):
+    # the overall water error used to be reported but never compared: a loop closing its
+    # water to 9.5e-5 ran with exit 0 and nothing said. Every unit may close while the
+    # flowsheet does not; the overall error is now held to mass_tol like the solids.
+    import dataclasses
+    import sys
+
+    solve_mod = sys.modules["millflow.flowsheet.solve"]  # the module (the package exports the function)
+
+    real = solve_mod.solve_water
+
+    def leaky(fs, flows, infos):
+        return dataclasses.replace(real(fs, flows, infos), overall_error=9.5e-5)
+
+    monkeypatch.setattr(solve_mod, "solve_water", leaky)
+    with pytest.raises(SolverError, match=r"water balance of the flowsheet: error 9.5e-05 .* above mass_tol 1e-09"):
+        solve(wet())
+    monkeypatch.setattr(solve_mod, "solve_water", real)
+    assert mass_balance(solve(wet()))["water"] <= solve_mod.MASS_TOL
