@@ -27,6 +27,8 @@ def test_sigint_never_prints_a_traceback(tmp_path, delay):
     _, err = proc.communicate(timeout=300)
     if "init_import_site" in err:  # the signal came during Python's own start-up, before any millflow code
         return
+    if "Traceback" in err and "millflow" not in err.split("Traceback", 1)[1].split("KeyboardInterrupt", 1)[0]:
+        return  # raised in runpy's own frames, before the first line of millflow ran (no millflow frame)
     assert "Traceback" not in err, err
     # killed quietly while importing (-SIGINT), interrupted (130) or already done (0)
     assert proc.returncode in (0, 130, -signal.SIGINT), (proc.returncode, err)
