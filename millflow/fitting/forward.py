@@ -52,39 +52,47 @@ Parameters (positive ones in logs, named ``ln_...``):
   one array operation for the whole population): prefer local fits from a good start
   (``fit(..., global_search=False)``) or a small differential-evolution population.
 
-The model curve (cumulative passing at the grid edges, 0 at size 0, 1 above the grid)
-is interpolated linearly in size at each measured sieve: one sparse-in-effect matrix
-product per evaluation.
+The parameter vectors are decoded by :class:`~millflow.fitting.translate.Translator` (the
+one translator of a fit vector into S, b, d* and transport values, eq. 10 included), which
+puts the continuous forms on the grid by class averages (second order in the class width,
+:mod:`millflow.breakage.averaged`; Austin's upper edges on a grid with ``scheme =
+"upper_edge"``), so that the fitted parameters are those of the continuous model, not of
+one grid (Principle IV: solve fine, reduce to the sieves). The model's cumulative passing
+is exact at the grid edges; measured sizes on an edge read it there, others by a monotone
+cubic in ln x (:mod:`millflow.fitting.sieves`).
 """
 from __future__ import annotations
 
 import numpy as np
 
 from millflow.batch import batch_grind_population
-from millflow.breakage.distributions import breakage_population
-from millflow.breakage.rates import austin_rates_population, ln_process_power_law, power_law_rates_population
-from millflow.classifiers import screen_discharge, screen_power_discharge
-from millflow.errors import InputError, SolverError
+from millflow.errors import InputError
 from millflow.fitting.data import PSDData
+from millflow.fitting.sieves import SieveReduction
 from millflow.fitting.spec import (_AXIAL_TRANSPORTS, _CELL_TRANSPORTS, _NONLINEAR_CLASSIFIED, FORWARD_TOL,
                                    ModelSpec, canonical_location)
+from millflow.fitting.translate import Translator
 from millflow.grid import SizeGrid
-from millflow.mill.well_mixed import well_mixed_population, well_mixed_population_geometric
+from millflow.mill.well_mixed import well_mixed_population, well_mixed_population_separable
 from millflow.psd import from_sieves
 
 __all__ = ["ForwardModel", "auto_grid"]
 
 
 def auto_grid(data: PSDData, ratio: float = 2 ** 0.25, conditions=None) -> SizeGrid:
-    """Geometric grid from just above the coarsest feed or sample size down to half the
-    finest positive sieve."""
+    """Geometric grid from the coarsest feed or sample size down to half the finest positive
+    sieve (the finest edge then at or below it).
+
+    Its top is the coarsest measured size itself, so that a geometric sieve series whose
+    ratio is a whole power of ``ratio`` (2^(1/2) sieves on the default 2^(1/4) grid) falls
+    on grid edges, where the model's passing is exact (:mod:`millflow.fitting.sieves`).
+    """
     t = data.table
     sizes = t.size_m.to_numpy()
     pos = sizes[sizes > 0]
     if pos.size == 0:
         raise InputError(f"{data.source}: no positive sieve sizes")
-    top = float(pos.max()) * 1.0001
-    return SizeGrid.between(top, float(pos.min()) / 2.0, ratio)
+    return SizeGrid.between(float(pos.max()), float(pos.min()) / 2.0, ratio)
 
 
 class ForwardModel:
@@ -108,13 +116,19 @@ class ForwardModel:
         self.x, self.n = x, x.size
         self._feeds = np.array([self._feed(c) for c in self.conditions])  # (C, N)
         self._proc = self._process_matrix()
+        screen_ref = None
+        if spec.classification in ("screen_power", "screen_power_cut"):
+            col = spec.screen_column
+            screen_ref = float(np.exp(np.log(data.process[col].to_numpy(float)).mean())) * self._factor[col]
+        #: the one decoder of this model's parameter vectors (S, b, d*, transport values)
+        self.translator = Translator.from_spec(spec, self._ref, screen_ref)
         samples = data.samples(self.conditions)
         self._build_groups(samples)
         self._build_tracer()
         # eq. 6 on a geometric grid (fixed ratio to rounding): eq. 3 by O(N) recurrences
         log_ratio = np.log(x[:-1] / x[1:])
         geometric = x.size > 1 and float(np.ptp(log_ratio)) <= 1e-12 * float(log_ratio.mean())
-        self._ratio = (float(np.exp(log_ratio.mean())) if geometric and spec.breakage in ("normalized", "single")
+        self._ratio = (float(np.exp(log_ratio.mean())) if geometric and spec.breakage != "fixed"
                        and not spec.kinetics else None)
         self._nonlinear = None
         #: relative noise of the predictions, for the finite-difference step of the
@@ -134,6 +148,26 @@ class ForwardModel:
                 if bad:
                     raise InputError(f"{data.source}: locations {bad}: a mill with non-linear kinetics is fitted to "
                                      "product samples, and with well-mixed cells to holdup and cell:K samples")
+
+    def solver_accuracy(self) -> tuple[float, str]:
+        """(relative error bound of the predicted values, how): what the forward solves add
+        to the predictions, beside the grid (:meth:`grid_order`)."""
+        if self._nonlinear is not None and self.fd_noise > float(np.finfo(float).eps):
+            return self.fd_noise, "non-linear kinetics: stiff ODE / Newton solves at their relative tolerance"
+        if self.spec.mode == "mill" and self._chain_cells() is None and not (
+                self.spec.transport == "recirculating_cells" or self.spec.transport == "plug_flow"):
+            return FORWARD_TOL, "mill solves refined to FORWARD_TOL of the feed (millflow.mill)"
+        return float(np.finfo(float).eps) * self.n, ("exact linear solves (triangular substitution or the "
+                                                     "eigenbasis of eq. 4): rounding, ~N eps")
+
+    def grid_order(self) -> tuple[int | None, str]:
+        """(order p of the size discretisation in the class width, how); None for a b matrix
+        given on this grid (the discrete model itself: no grid error of its own)."""
+        if self.spec.breakage == "fixed":
+            return None, "b given on the numerical grid: the discrete model itself, no grid error of its own"
+        if self.grid.scheme == "upper_edge":
+            return 1, "continuous forms at the upper class edges (Austin): first order"
+        return 2, "continuous forms averaged over each class (millflow.breakage.averaged): second order"
 
     # ----------------------------------------------------------------- compilation
     def _build_tracer(self):
@@ -181,21 +215,9 @@ class ForwardModel:
 
     def transport_values(self, p):
         """Per member and condition: tau [s] (P, C) and the fitted transport parameters
-        (name -> (P,)) of mode "mill"."""
-        spec = self.spec
-        col = self._proc[spec.tau_column] if spec.tau_column else np.ones(len(self.conditions))
-        n_pop = next(iter(p.values())).shape[0]
-        if "tau" in spec.transport_fit:
-            scale = col / float(np.exp(np.log(col).mean())) if spec.tau_column else col
-            tau = np.exp(p["ln_tau"])[:, None] * scale[None, :]
-        else:
-            tau = np.broadcast_to(col, (n_pop, col.size))
-        extra = {}
-        if "pe" in spec.transport_fit:
-            extra["pe"] = np.exp(p["ln_pe"])
-        if "r" in spec.transport_fit:
-            extra["r"] = p["r"]
-        return tau, extra
+        (name -> (P,)) of mode "mill" (:meth:`Translator.transport_values`)."""
+        col = self._proc[self.spec.tau_column] if self.spec.tau_column else None
+        return self.translator.transport_values(p, col, len(self.conditions))
 
     def _transport(self, tau, extra, k):
         return self.spec.make_transport(float(tau), **{n: float(v[k]) for n, v in extra.items()})
@@ -245,7 +267,7 @@ class ForwardModel:
         return out
 
     def _build_groups(self, samples):
-        groups, rows, ys, ws, sizes, conds = [], [], [], [], [], []
+        groups, ys, ws, sizes, conds = [], [], [], [], []
         cond_index = {c: k for k, c in enumerate(self.conditions)}
         for (cond, loc, t), grp in samples.groupby(["condition", "location", "time_s"], sort=False):
             loc = canonical_location(loc)
@@ -268,35 +290,9 @@ class ForwardModel:
         self.condition_of_value = np.concatenate(conds)
         y_cum = np.concatenate(ys)
         self.y_cum = y_cum
-        # linear interpolation in size of the curve (0, 0), (x_N, P_N), ..., (x_1, P_1), 1 above
-        N, G = self.n, len(groups)
-        xc = np.concatenate([[0.0], self.x[::-1]])
-        W = np.zeros((y_cum.size, G * N))
-        const = np.zeros(y_cum.size)
-        r = 0
-        for g, s in enumerate(sizes):
-            for sz in s:
-                if sz >= xc[-1]:
-                    const[r] = 1.0
-                else:
-                    k = int(np.searchsorted(xc, sz, side="right")) - 1  # xc[k] <= sz < xc[k+1]
-                    u = (sz - xc[k]) / (xc[k + 1] - xc[k])
-                    # curve point m >= 1 of xc is grid edge N - m (0-based)
-                    if k >= 1:
-                        W[r, g * N + (N - k)] += 1.0 - u
-                    W[r, g * N + (N - k - 1)] += u
-                r += 1
-        self._W, self._const = W, const
-        # the same interpolation as two gathers: each row has at most two weights
-        rows = np.arange(W.shape[0])
-        if (np.count_nonzero(W, axis=1) > 2).any():
-            raise SolverError("internal: an interpolation row with more than two weights")
-        rest = W.copy()
-        self._i1 = np.argmax(rest != 0, axis=1)
-        self._w1 = rest[rows, self._i1].copy()
-        rest[rows, self._i1] = 0.0
-        self._i2 = np.argmax(rest != 0, axis=1)
-        self._w2 = rest[rows, self._i2].copy()
+        # the grid's cumulative passing read at every measured size (exact on edges)
+        G = len(groups)
+        self._reduction = SieveReduction(self.x, sizes)
         if self.spec.objective == "fractional":
             D = np.zeros((y_cum.size, y_cum.size))
             for g in range(G):
@@ -362,6 +358,19 @@ class ForwardModel:
         sizes = sizes[sizes > 0]
         return [float(sizes.min()), float(sizes.max())] if sizes.size else []
 
+    def _grinding_times(self) -> list:
+        """[shortest, longest] grinding time of the fitted data [s]: the batch sample times
+        (> 0), or the conditions' mean residence times of a continuous mill (tau column);
+        [] when unknown (tau = 1 without a column). With the lab mill's power per hold-up it
+        gives the specific-energy range the fit is calibrated on (scale-up warns outside it)."""
+        if self.spec.mode == "batch":
+            t = [g[2] for g in self.groups if g[2] > 0]
+        elif self.spec.tau_column:
+            t = [float(v) for v in self._proc[self.spec.tau_column]]
+        else:
+            t = []
+        return [float(min(t)), float(max(t))] if t else []
+
     def describe(self) -> dict:
         """The spec, grid and eq. 10 reference values as plain JSON-able data (for the fit
         JSON: what another program needs to evaluate S and B of this model elsewhere)."""
@@ -375,6 +384,7 @@ class ForwardModel:
                 "param_names": list(s.param_names),
                 "grid_upper_m": [float(v) for v in self.x], "process_ref": dict(self._ref),
                 "measured_size_range_m": self._measured_sizes(),
+                "grinding_time_range_s": self._grinding_times(),
                 "process": {str(c): {str(k): float(v) for k, v in proc.loc[c].items()
                                      if isinstance(v, (int, float, np.floating, np.integer))}
                             for c in self.conditions if c in proc.index}}
@@ -393,91 +403,41 @@ class ForwardModel:
 
     def cond_param(self, p, name):
         """Parameter ``name`` per condition (P, C): value * prod (p_k/p_ref_k)^e_k (eq. 10)."""
-        v = np.repeat(p[name][:, None], len(self.conditions), axis=1)
-        for par, col in self.spec.param_process:
-            if par == name:
-                v = v * np.exp(ln_process_power_law(0.0, {col: self._proc[col]}, {col: p[f"{name}_{col}"][:, None]},
-                                                    {col: self._ref[col]}))  # eq. 10 for any parameter
-        return v
+        return self.translator.condition_values(p, name, self._proc, len(self.conditions))
 
-    def _depends(self, name) -> bool:
-        return any(par == name for par, _ in self.spec.param_process)
+    def breakage(self, p):
+        """(S (P, C, N) [1/s] (or tau*S if no tau column), b (P, N, N) or (P, C, N, N) [-]) of the
+        members on this model's grid: class averages of eqs. 5-8 with eq. 10 (the grid's
+        ``scheme`` "upper_edge": Austin's edge values), by :class:`Translator`."""
+        S, b = self.translator.breakage_on_grid(p, self._proc, len(self.conditions), self.grid)
+        return S, (b[:, 0] if b.shape[1] == 1 else b)
 
     def rates(self, p):
-        """S (P, C, N) [1/s] (or tau*S if no tau column): eq. 5 or 7 with A (and
-        exponents) per condition by eq. 10, from :mod:`millflow.breakage.rates`."""
-        cols = self.spec.rate_process  # eq. 10: A per condition, exponents (P, C), process values (C,)
-        lnA = ln_process_power_law(p["ln_A0"][:, None], {c: self._proc[c] for c in cols},
-                                   {c: self.cond_param(p, f"a_{c}") for c in cols}, {c: self._ref[c] for c in cols})
-        A = np.exp(np.minimum(lnA, 600.0))
-        alpha = self.cond_param(p, "alpha")
-        x0 = self.spec.x0_m
-        if self.spec.rate == "austin":
-            mu0 = np.exp(p["ln_mu"])[:, None] * x0
-            return austin_rates_population(self.x, A, alpha, mu0, p["Lambda"][:, None], x0=x0)
-        if self.spec.rate == "austin_ball":  # eq. 7 with x_b per condition, x_b0 the geometric mean
-            col = self.spec.ball_column
-            mu0 = np.exp(p["ln_mu"])[:, None] * x0
-            return austin_rates_population(self.x, A, alpha, mu0, p["Lambda"][:, None], p["xi"][:, None],
-                                           self._proc[col] * 1e-3, self._ref[col] * 1e-3, p["eta"][:, None], x0=x0)
-        return power_law_rates_population(self.x, A, alpha, x0)
+        """S (P, C, N) [1/s]: the leaving rates of :meth:`breakage`."""
+        return self.breakage(p)[0]
 
-    def _eq6(self, p):
-        """phi, gamma, beta of eq. 6 shaped (P, 1) or (P, C) (gamma per condition)."""
-        gamma = self.cond_param(p, "gamma") if self._depends("gamma") else p["gamma"][:, None]
-        if self.spec.breakage == "single":
-            return 1.0, gamma, gamma
-        return p["phi"][:, None], gamma, p["beta"][:, None]
+    def frac_b(self, p, n_pop=None):
+        """Fractional b (P, N, N), or (P, C, N, N) when it depends on the condition: that of :meth:`breakage`."""
+        return self.breakage(p)[1]
 
-    def frac_b(self, p, n_pop):
-        """Fractional b, (P, N, N), or (P, C, N, N) when gamma depends on the process
-        (eq. 6 from :func:`millflow.breakage.distributions.breakage_population`)."""
-        N = self.n
-        if self.spec.breakage == "fixed":
-            return np.broadcast_to(np.asarray(self.spec.b_matrix, float), (n_pop, N, N))
-        gamma = p["gamma"]
-        if self._depends("gamma"):
-            gamma = self.cond_param(p, "gamma")
-        if self.spec.breakage == "single":  # B = r^gamma: eq. 6 with phi = 1
-            return breakage_population(self.x, 1.0, gamma, gamma, kind="b")
-        phi, beta = p["phi"], p["beta"]
-        theta = p["theta"] if self.spec.breakage == "non_normalized" else 0.0
-        if gamma.ndim == 2:
-            phi, beta = phi[:, None], beta[:, None]
-            theta = theta[:, None] if np.ndim(theta) else theta
-        return breakage_population(self.x, phi, gamma, beta, theta, kind="b")
-
-    def discharge(self, p, n_pop):
-        """Normalised discharge d* (P, C, N), ones without classification; the curves
-        of :mod:`millflow.classifiers` (``screen_discharge``, ``screen_power_discharge``)."""
-        C = len(self.conditions)
-        if self.spec.classification is None:
-            return np.ones((n_pop, C, self.n))
-        screen = self._proc[self.spec.screen_column] * 1e-3
-        if self.spec.classification in ("screen_power", "screen_power_cut"):
-            # normalised so that d* = 1 at x = x0 for the geometric-mean screen: ln_A0 is
-            # then the rate at x0 for a typical screen, which decorrelates it from n_screen
-            col = self.spec.screen_column
-            ref = float(np.exp(np.log(self.data.process[col].to_numpy(float)).mean())) * self._factor[col] * 1e-3
-            d = screen_power_discharge(self.x, self.cond_param(p, "n_screen"), self.spec.x0_m * screen / ref)
-            if self.spec.classification == "screen_power_cut":
-                # hard cut: a class whose lower edge is at or above the opening cannot pass
-                # (d* = 1e-12: it leaves only as breakage products, as in the flowsheet mill)
-                lower = np.r_[self.x[1:], 0.0]
-                d = np.where((lower[None, :] >= screen[:, None])[None], 1e-12, d)
-            return d
-        d50 = np.exp(p["ln_c50"])[:, None] * screen[None, :]
-        return screen_discharge(self.x, d50, np.exp(p["ln_sharp"])[:, None])
+    def discharge(self, p, n_pop=None):
+        """Normalised discharge d* (P, C, N), ones without classification (class averages of the
+        curves of :mod:`millflow.classifiers`, by :meth:`Translator.discharge`)."""
+        return self.translator.discharge(p, self._proc, len(self.conditions), self.grid)
 
     def predict_grid(self, theta):
         """Mass fractions (P, G, N) on the grid for every sample group."""
         theta = np.atleast_2d(np.asarray(theta, dtype=float))
         n_pop = theta.shape[0]
         p = self._unpack(theta)
-        S = self.rates(p)
         mode = self.spec.mode
         geometric = self._ratio is not None and (mode == "well_mixed" or (mode == "mill" and self._chain_cells()))
-        b = None if geometric else self.frac_b(p, n_pop)
+        sep = None
+        if geometric:  # eqs. 6/8 on a geometric grid: eq. 3 by the O(N) recurrences, no b formed
+            S, *sep = self.translator.separable_on_grid(p, self._proc, len(self.conditions), self.grid, self._ratio)
+            b = None
+        else:
+            S, b = self.breakage(p)
         tau = self._proc[self.spec.tau_column] if self.spec.tau_column else np.ones(len(self.conditions))
         out = np.empty((n_pop, len(self.groups), self.n))
         if self._nonlinear is not None:
@@ -486,13 +446,11 @@ class ForwardModel:
             d = self.discharge(p, n_pop)
             prod = self._feeds
             tau_k = tau[None, :] / self.spec.n_tanks
-            if b is None:  # eq. 6 on a geometric grid: the O(N) recurrences of eq. 3
-                phi, gamma, beta = self._eq6(p)
-            else:
+            if b is not None:
                 b_pc = b if b.ndim == 4 else b[:, None]
             for _ in range(self.spec.n_tanks):  # equal well-mixed tanks in series, tau/n each (eq. 3)
                 if b is None:
-                    prod = well_mixed_population_geometric(S, prod, phi, gamma, beta, self._ratio, tau_k, d)
+                    prod = well_mixed_population_separable(S, prod, *sep, tau_k, d)
                 else:
                     prod = well_mixed_population(S, b_pc, prod, tau_k, d)
             for g, (c, loc, _) in enumerate(self.groups):
@@ -505,7 +463,7 @@ class ForwardModel:
             d = self.discharge(p, n_pop) if self.spec.classification else None
             tau_pc, extra = self.transport_values(p)
             if self._chain_cells() is not None:
-                self._predict_chain(S, b, d, tau_pc, out, p)
+                self._predict_chain(S, b, d, tau_pc, out, sep)
             elif self.spec.transport == "recirculating_cells" and self.spec.where in (None, "discharge", "cells"):
                 self._predict_network(S, b, d, tau_pc, extra, out)
             elif self.spec.transport == "plug_flow" and all(g[1] != "holdup" for g in self.groups):
@@ -585,27 +543,25 @@ class ForwardModel:
             return int(n)
         return None
 
-    def _predict_chain(self, S, b, d, tau, out, p):
+    def _predict_chain(self, S, b, d, tau, out, sep):
         """Mode "mill" for a chain of equal well-mixed cells, vectorised over the population
         and the conditions: eq. 3 per cell (tau/n each) by
         :func:`millflow.mill.well_mixed.well_mixed_population`, classification at the
         discharge (the last cell's outflow) or at every cell outlet (``where="cells"``).
         Cell content per unit feed rate is tau_k p_k / d (classified outlet) or tau_k p_k.
-        ``b`` None: eq. 6 on a geometric grid, by the O(N) recurrences
-        (:func:`millflow.mill.well_mixed.well_mixed_population_geometric`)."""
+        ``b`` None: eqs. 6/8 on a geometric grid, by the O(N) recurrences of ``sep``
+        (:func:`millflow.mill.well_mixed.well_mixed_population_separable`)."""
         n = self._chain_cells()
         ones = np.ones_like(S)
         stream = np.broadcast_to(self._feeds, S.shape)
         contents = []
-        if b is None:  # eq. 6 on a geometric grid: the O(N) recurrences
-            phi, gamma, beta = self._eq6(p)
-        else:
+        if b is not None:
             b_pc = b if b.ndim == 4 else b[:, None]
         for k in range(n):
             classified = d is not None and (self.spec.where == "cells" or k == n - 1)
             dk = d if classified else ones
             if b is None:
-                stream = well_mixed_population_geometric(S, stream, phi, gamma, beta, self._ratio, tau / n, dk)
+                stream = well_mixed_population_separable(S, stream, *sep, tau / n, dk)
             else:
                 stream = well_mixed_population(S, b_pc, stream, tau / n, dk)
             contents.append(stream / dk)
@@ -713,11 +669,11 @@ class ForwardModel:
                         out[k, g] = ds["product"].values if loc == "product" else vals[r]
 
     def _cum_at_rows(self, theta):
-        """Cumulative passing of the grid solution, interpolated to every measured row; (P, rows)."""
+        """Cumulative passing of the grid solution read at every measured row
+        (:class:`~millflow.fitting.sieves.SieveReduction`); (P, rows)."""
         M = self.predict_grid(theta)
         P = np.cumsum(M[..., ::-1], axis=-1)[..., ::-1]
-        flat = P.reshape(P.shape[0], -1)
-        return flat[:, self._i1] * self._w1 + flat[:, self._i2] * self._w2 + self._const
+        return self._reduction.reduce(P)
 
     def predict(self, theta):
         theta = np.asarray(theta, dtype=float)
