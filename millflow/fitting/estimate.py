@@ -353,6 +353,8 @@ def error_estimate(model: ForwardModel, gc: dict) -> dict:
     """
     from millflow.grid import SAFETY_FACTOR
 
+    if not (hasattr(model, "solver_accuracy") and hasattr(model, "grid_order")):
+        return {}  # a model of its own (e.g. a survey's circuit) states its errors itself
     acc, how = model.solver_accuracy()
     out = {"solver": {"value": acc, "unit": "relative (predicted values)", "method": how}}
     order, why = model.grid_order()
