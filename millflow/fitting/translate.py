@@ -103,6 +103,17 @@ class Translator:
                              f"({', '.join(self.names)})")
         return {name: t[:, k] for k, name in enumerate(self.names)}
 
+    def physical(self, theta) -> np.ndarray:
+        """Mask (P,) of parameter vectors inside the physical domain of the rate and breakage
+        forms: gamma > 0; eq. 6: 0 <= phi <= 1, beta > 0; eq. 7: Lambda > 0."""
+        p = self.unpack(theta)
+        ok = p["gamma"] > 0 if "gamma" in p else np.ones(next(iter(p.values())).shape, bool)
+        if self.breakage in ("normalized", "non_normalized"):
+            ok &= (p["phi"] >= 0) & (p["phi"] <= 1) & (p["beta"] > 0)
+        if self.rate in ("austin", "austin_ball"):
+            ok &= p["Lambda"] > 0
+        return ok
+
     def depends(self, name: str) -> bool:
         """True when eq. 10 makes parameter ``name`` condition-dependent."""
         return any(par == name for par, _ in self.param_process)
@@ -178,10 +189,7 @@ class Translator:
             return S, b
         phi0, gamma, beta, theta = self.distribution(p, process, n)
         if scheme == "upper_edge":
-            S = self._edge_rates(p, process, n, x, A_factor, mu_factor)
-            if gamma.shape[-1] == 1:
-                return S, breakage_population(x, phi0[:, 0], gamma[:, 0], beta[:, 0], theta[:, 0], kind="b")[:, None]
-            return S, breakage_population(x, phi0, gamma, beta, theta, kind="b")
+            return self._edge_rates(p, process, n, x, A_factor, mu_factor), self.edge_b(p, process, n, x)
         free = self.condition_free_breakage()
         S_nodes = self.rate_at(p, process, n, node_sizes(x), A_factor, mu_factor)
         if free and n > 1:  # b of the first condition serves all (A cancels in b); S per condition, O(N)
@@ -204,6 +212,13 @@ class Translator:
         S_nodes = self.rate_at(p, process, n, node_sizes(x), A_factor, mu_factor)
         S, a1, a2 = averaged_power_terms(x, S_nodes, phi0, gamma, beta, theta)
         return S, c1[..., None] * a1, c1, c2[..., None] * a2, c2
+
+    def edge_b(self, p: dict, process: dict, n: int, x) -> np.ndarray:
+        """Austin's discrete b (P, n or 1, N, N) of eqs. 6/8 at the upper edges x [m]."""
+        phi0, gamma, beta, theta = self.distribution(p, process, n)
+        if gamma.shape[-1] == 1:
+            return breakage_population(x, phi0[:, 0], gamma[:, 0], beta[:, 0], theta[:, 0], kind="b")[:, None]
+        return breakage_population(x, phi0, gamma, beta, theta, kind="b")
 
     def _edge_rates(self, p, process, n, x, A_factor, mu_factor):
         S = self.rate_at(p, process, n, x, A_factor, mu_factor)

@@ -32,7 +32,9 @@ class ScaleupResult:
 
 
 def _quantities(su, target):
-    """g(theta_varying) -> [P(x_1..x_N), p80, (feed_tph, E)] and the names of the scalars."""
+    """g(theta_varying) -> [P(x_1..x_N), p80, (feed_tph, E)], the same for many vectors at
+    once (g_pop: (M, V) -> (M, Q), NaN rows where a member's solve fails) and the names of
+    the scalars."""
     names = ["p80_um"] + (["throughput_tph", "specific_energy_kWh_t"] if target is not None else [])
 
     def g(v):
@@ -44,7 +46,17 @@ def _quantities(su, target):
             t = su.throughput_for_p80(theta, target)
             out.append([t["feed_tph"], t["specific_energy_kWh_t"]])
         return np.concatenate(out)
-    return g, names
+
+    def g_pop(V):
+        thetas = su.fit.full(np.atleast_2d(V))
+        r = su.operate_population(thetas)
+        P = np.cumsum(r["product"][:, ::-1], axis=1)[:, ::-1]
+        cols = [P, (r["p80_m"] * 1e6)[:, None]]
+        if target is not None:
+            t = su.throughput_population(thetas, target)
+            cols.append(np.column_stack([t["feed_tph"], t["specific_energy_kWh_t"]]))
+        return np.concatenate(cols, axis=1)
+    return g, g_pop, names
 
 
 def calibrated_range_notes(fit, su, p80_m: float, target_p80_m=None) -> list[str]:
@@ -76,16 +88,16 @@ def predict_plant(su, target_p80_m=None, methods=("delta", "mc"), n_draws: int =
     t0 = time.perf_counter()
     fit = su.fit
     v0 = fit.theta[fit.index]
-    g, names = _quantities(su, target_p80_m)
+    g, g_pop, names = _quantities(su, target_p80_m)
     point = su.operate(fit.theta)
     res, timing = {}, {}
     for m in methods:
         t = time.perf_counter()
         if m == "delta":
-            res[m] = delta_method(g, v0, fit.cov, rel_step)
+            res[m] = delta_method(g, v0, fit.cov, rel_step, g_pop=g_pop)
         elif m == "mc":
             res[m] = monte_carlo(g, v0, fit.cov, n_draws, seed, physical=lambda z: fit.physical(fit.full(z)),
-                                 skip_errors=(MillflowError,))
+                                 skip_errors=(MillflowError,), g_pop=g_pop)
         else:
             raise ValueError(f"method {m!r}: expected 'delta' or 'mc'")
         timing[m] = time.perf_counter() - t
