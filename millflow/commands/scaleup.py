@@ -164,15 +164,23 @@ class _Progress:
 
 
 def _model_form(args, fit, su, target, summary):
-    """Model-form contributions to the band (:func:`millflow.scaleup.modelform.contributions`)."""
-    from millflow.scaleup.modelform import contributions
+    """Model-form contributions to the band (:func:`millflow.scaleup.modelform.contributions`)
+    and the reported quantity's error split into solver and grid parts (``summary["error_estimate"]``)."""
+    from millflow.errors import InputError
+    from millflow.scaleup.modelform import contributions, error_estimate
     from millflow.scaleup.plantfile import load_plant
 
     key = "throughput_tph" if target is not None else "p80_um"
     bands = summary["bands"].get(key, {})
     band = bands.get("mc") or bands.get("delta")
     refined, _ = load_plant(args.plant, fit, refine=1)
-    return contributions(su, target, band, refined)
+    try:
+        coarse, _ = load_plant(args.plant, fit, refine=-1)
+    except InputError:  # the classes do not pair up: two grids only
+        coarse = None
+    out = contributions(su, target, band, refined, coarse)
+    summary["error_estimate"] = error_estimate(su, target, out["contributions"].get("size_grid"))
+    return out
 
 
 def _write_contributions(s, out: Path, plots: bool):

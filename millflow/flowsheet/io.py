@@ -616,7 +616,7 @@ def _mill(name: str, t: _Table, materials: dict, slurry=None, base: Path | None 
     design = None
     from millflow.scaleup.flowsheet import ScaledRate, design_from_table, is_design
     if is_design(t.data):  # a mill by dimensions and operation: hold-up, power (and rate) computed
-        design = design_from_table(f"units.{name}", t.data)
+        design = design_from_table(f"units.{name}", t.data, slurry)
         t.used.update(design["keys"])
         if design["rate_factor"] != 1.0:
             if getattr(rate, "basis", "time") == "energy":

@@ -7,6 +7,7 @@ throughput that meets it and the specific energy there.
 """
 from __future__ import annotations
 
+import math
 import time
 import warnings
 from dataclasses import dataclass
@@ -59,10 +60,24 @@ def _quantities(su, target):
     return g, g_pop, names
 
 
-def calibrated_range_notes(fit, su, p80_m: float, target_p80_m=None) -> list[str]:
+def lab_energy_range(fit, su) -> list:
+    """[lowest, highest] specific energy [kWh/t] of the fitted lab tests: P_lab t / H_lab over
+    the fit's grinding times t (batch times or mean residence times, ``grinding_time_range_s``
+    of the fit JSON) with the lab mill's net power and hold-up; [] when the fit does not
+    record its times."""
+    t = fit.spec.get("grinding_time_range_s") or []
+    if len(t) != 2:
+        return []
+    f = su.factors()
+    per_s = f["lab_power_kW"] / (f["lab_holdup_kg"] / 1000.0) / 3600.0  # kWh/t per second of grinding
+    return [per_s * float(t[0]), per_s * float(t[1])]
+
+
+def calibrated_range_notes(fit, su, p80_m: float, target_p80_m=None, energies=None) -> list[str]:
     """Where the prediction leaves what the lab data calibrated: a P80 (predicted or
     target) outside the measured sieve range, an eq. 10 process value outside the range of
-    the fitted conditions."""
+    the fitted conditions, a plant specific energy (``energies``: what -> kWh/t) outside the
+    lab tests' range (:func:`lab_energy_range`)."""
     notes = []
     lo_hi = fit.spec.get("measured_size_range_m") or []
     if len(lo_hi) == 2:
@@ -79,6 +94,13 @@ def calibrated_range_notes(fit, su, p80_m: float, target_p80_m=None) -> list[str
         if seen and v is not None and not min(seen) <= float(v) <= max(seen):
             notes.append(f"process value {c} = {float(v):.4g} is outside the fitted conditions' range "
                          f"{min(seen):.4g}..{max(seen):.4g}: eq. 10 is extrapolated")
+    rng = lab_energy_range(fit, su)
+    for what, e in (energies or {}).items():
+        if rng and e is not None and math.isfinite(e) and not rng[0] <= e <= rng[1]:
+            side = "below" if e < rng[0] else "above"
+            notes.append(f"specific energy {e:.4g} kWh/t {what} is {side} the lab tests' range "
+                         f"{rng[0]:.4g}..{rng[1]:.4g} kWh/t (lab net power x grinding time / hold-up): the breakage "
+                         "model is extrapolated in energy")
     return notes
 
 
@@ -148,7 +170,11 @@ def predict_plant(su, target_p80_m=None, methods=("delta", "mc"), n_draws: int =
         summary["mc"] = {"n": res["mc"]["n"], "rejected": res["mc"]["rejected"], "failed": res["mc"]["failed"]}
     if "delta" in res:
         summary["delta_step"] = {n: float(h) for n, h in zip(fit.varying, res["delta"]["step"])}
-    summary["extrapolation"] = calibrated_range_notes(fit, su, point["p80_m"], target_p80_m)
+    energies = {f"at {su.feed_tph:.4g} t/h": point["specific_energy_kWh_t"]}
+    if target_p80_m is not None:
+        energies[f"at the target P80 {target_p80_m * 1e6:.4g} um"] = summary["specific_energy_at_target_kWh_t"]
+    summary["lab_specific_energy_kWh_t"] = lab_energy_range(fit, su)
+    summary["extrapolation"] = calibrated_range_notes(fit, su, point["p80_m"], target_p80_m, energies)
     for note in summary["extrapolation"]:
         warnings.warn(note, UserWarning, stacklevel=2)
     summary["runtime_s"] = time.perf_counter() - t0

@@ -70,6 +70,9 @@ class FittedBreakage:
         if C.shape != (len(self.varying),) * 2 or not np.all(np.isfinite(C)):
             raise InputError(f"{src}: covariance has shape {C.shape} or non-finite entries; expected a finite "
                              f"({len(self.varying)}, {len(self.varying)}) matrix")
+        from millflow.scaleup.uncertainty import check_covariance
+
+        check_covariance(C, list(self.varying), f"{src}: covariance")
         object.__setattr__(self, "cov", C)
         object.__setattr__(self, "theta", np.asarray(self.theta, float))
 
