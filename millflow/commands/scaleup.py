@@ -174,11 +174,13 @@ def _model_form(args, fit, su, target, summary):
     bands = summary["bands"].get(key, {})
     band = bands.get("mc") or bands.get("delta")
     refined, _ = load_plant(args.plant, fit, refine=1)
+    finer = None
     try:
         coarse, _ = load_plant(args.plant, fit, refine=-1)
-    except InputError:  # the classes do not pair up: two grids only
+    except InputError:  # the classes do not pair up: the third grid is the one refined twice
         coarse = None
-    out = contributions(su, target, band, refined, coarse)
+        finer, _ = load_plant(args.plant, fit, refine=2)
+    out = contributions(su, target, band, refined, coarse, finer)
     summary["error_estimate"] = error_estimate(su, target, out["contributions"].get("size_grid"))
     return out
 

@@ -101,18 +101,23 @@ def _safe(fun, *args):
 SAFETY_THREE_GRIDS, SAFETY_TWO_GRIDS, ASYMPTOTIC_BAND = 1.25, 3.0, 0.5
 
 
-def grid_error(q0: float, q_fine: float, q_coarse: float | None = None, order: float = 2.0) -> dict:
+def grid_error(q0: float, q_fine: float, q_coarse: float | None = None, order: float = 2.0,
+               q_finer: float | None = None) -> dict:
     """Richardson's estimate of the grid error of q0 (module docstring): value (relative),
-    half_width, order p, observed (or None), safety_factor, converged, how."""
+    half_width, order p, observed (or None), safety_factor, converged, how. The observed
+    order comes from grids 2h, h, h/2 (``q_coarse``) or, where the classes do not pair up,
+    from h, h/2, h/4 (``q_finer``)."""
     if not (math.isfinite(q0) and math.isfinite(q_fine)):
         return {"value": math.nan, "half_width": math.nan, "order": order, "observed_order": None,
                 "safety_factor": SAFETY_TWO_GRIDS, "converged": math.nan, "how": "a refined prediction failed"}
-    observed = None
+    observed, grids = None, "h/2, h"
     if q_coarse is not None and math.isfinite(q_coarse) and q_fine != q0 and q_coarse != q0:
-        observed = math.log2(abs(q_coarse - q0) / abs(q0 - q_fine))
+        observed, grids = math.log2(abs(q_coarse - q0) / abs(q0 - q_fine)), "h/2, h, 2h"
+    elif q_finer is not None and math.isfinite(q_finer) and q_fine != q0 and q_finer != q_fine:
+        observed, grids = math.log2(abs(q0 - q_fine) / abs(q_fine - q_finer)), "h/4, h/2, h"
     if observed is not None and abs(observed - order) <= ASYMPTOTIC_BAND:
         p, fs = observed, SAFETY_THREE_GRIDS
-        how = (f"Richardson from grids h/2, h, 2h at the observed order {observed:.3g} (the scheme's is {order:g}), "
+        how = (f"Richardson from grids {grids} at the observed order {observed:.3g} (the scheme's is {order:g}), "
                f"safety factor {fs:g}")
     else:
         p = order if observed is None else max(min(observed, order), 0.5)
@@ -126,7 +131,8 @@ def grid_error(q0: float, q_fine: float, q_coarse: float | None = None, order: f
             "converged": ext, "how": how}
 
 
-def contributions(su, target_p80_m, parameter_band: dict | None, refined=None, coarsened=None) -> dict:
+def contributions(su, target_p80_m, parameter_band: dict | None, refined=None, coarsened=None,
+                  refined_twice=None) -> dict:
     """Each contribution's half-width and how it was found, and the total band.
 
     Parameters
@@ -135,8 +141,10 @@ def contributions(su, target_p80_m, parameter_band: dict | None, refined=None, c
     target_p80_m : float or None; the quantity is the throughput at it [t/h], else P80 [um].
     parameter_band : {"lo", "hi"} of the parameter 95 % band of the same quantity, or None.
     refined : the same ScaleUp on the grid with every class halved, or None (no grid term).
-    coarsened : the same ScaleUp on the grid with pairs of classes merged, or None (then the
-        grid term takes the scheme's order with the two-grid safety factor).
+    coarsened : the same ScaleUp on the grid with pairs of classes merged, or None;
+    refined_twice : the same on the grid with every class split in four (used when not
+        coarsened); with neither, the grid term takes the scheme's order with the two-grid
+        safety factor.
     """
     q0 = quantity(su, target_p80_m)
     rows = {}
@@ -160,9 +168,13 @@ def contributions(su, target_p80_m, parameter_band: dict | None, refined=None, c
     if refined is not None:
         q_fine = _safe(lambda: quantity(refined, target_p80_m))
         q_coarse = _safe(lambda: quantity(coarsened, target_p80_m)) if coarsened is not None else None
-        ge = grid_error(q0, q_fine, q_coarse, _scheme_order(su))
+        q_finer = None
+        if q_coarse is None and refined_twice is not None:
+            q_finer = _safe(lambda: quantity(refined_twice, target_p80_m))
+        ge = grid_error(q0, q_fine, q_coarse, _scheme_order(su), q_finer)
         h = ge["half_width"]
-        alts = {"base": q0, "halved": q_fine} | ({"doubled": q_coarse} if q_coarse is not None else {})
+        alts = ({"base": q0, "halved": q_fine} | ({"doubled": q_coarse} if q_coarse is not None else {})
+                | ({"quartered": q_finer} if q_finer is not None else {}))
         rows["size_grid"] = {"half_width": h, "log_factor": math.log(q0 / (q0 - h)) if h < q0 else math.inf,
                              "alternatives": alts, "how": ge["how"], "estimate": ge}
     for r in rows.values():

@@ -180,9 +180,9 @@ def _feed(table, grid, src):
     where = f"{src}: feed"
     if not isinstance(table, dict):
         raise InputError(f"{src}: [feed] table missing")
-    check_keys(table, unit_keys("feed", "mass_flow") | unit_keys("size", "length") | {"passing"}, where)
-    F = quantity(table, "feed", "mass_flow", where)
+    F = quantity(table, "feed", "mass_flow", where)  # a key without its unit is named first
     size = np.atleast_1d(quantity(table, "size", "length", where, array=True))
+    check_keys(table, unit_keys("feed", "mass_flow") | unit_keys("size", "length") | {"passing"}, where)
     if "passing" not in table:
         raise InputError(f"{where}: missing key 'passing' (cumulative passing fractions at the sizes)")
     P = table["passing"]
@@ -226,9 +226,9 @@ def _grid(d: dict, fit: FittedBreakage, src: str) -> SizeGrid:
     where = f"{src}: grid"
     if not isinstance(g, dict):
         raise InputError(f"{where}: expected a table [grid]")
-    check_keys(g, unit_keys("top", "length") | unit_keys("bottom", "length") | {"ratio"}, where)
     top = quantity(g, "top", "length", where)
     bottom = quantity(g, "bottom", "length", where, float(fit.x[-1]))
+    check_keys(g, unit_keys("top", "length") | unit_keys("bottom", "length") | {"ratio"}, where)
     ratio = number(g, "ratio", where, float(fit.x[0] / fit.x[1]), lo=1.0, lo_open=True)
     try:
         return SizeGrid.between(top, bottom, ratio)
@@ -256,8 +256,8 @@ def read_plant(path, fit: FittedBreakage, grid: SizeGrid | None = None) -> tuple
     search = d.get("search", {})
     if not isinstance(search, dict):
         raise InputError(f"{src}: search: expected a table [search]")
-    check_keys(search, unit_keys("throughput_range", "mass_flow"), f"{src}: search")
     rng = quantity(search, "throughput_range", "mass_flow", f"{src}: search", None, array=True)
+    check_keys(search, unit_keys("throughput_range", "mass_flow"), f"{src}: search")
     if rng is not None:
         rng = np.atleast_1d(rng) * 3.6
         if rng.size != 2:
