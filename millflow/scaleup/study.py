@@ -167,14 +167,17 @@ class PlantStudy:
         return out
 
 
-def bracketed_roots(h, u0, width: float = 0.05, expand: int = 12, xtol: float = 1e-12, maxiter: int = 100):
+def bracketed_roots(h, u0, width: float = 0.05, expand: int = 12, xtol: float = 1e-12, ftol: float = 1e-14,
+                    maxiter: int = 100):
     """Roots of increasing functions, one per member, vectorised over the members.
 
     ``h(u, idx)`` returns h at u (len(idx),) for the members ``idx`` (an index array): only
     members still searching are evaluated. From brackets [u0 - width, u0 + width] moved and
     widened (doubling) until h changes sign (at most ``expand`` times), regula falsi with
     a modification that keeps it superlinear (it never leaves its bracket) to |bracket| <= xtol (absolute
-    in u) or h = 0, with the Anderson-Bjorck weights (J. Anderson and A. Bjorck, BIT 13
+    in u), or until |h| <= ``ftol`` at an end (h here is the log of a ratio of two computed
+    values: 1e-14 is rounding, beyond which the secants carry no information), with the
+    Anderson-Bjorck weights (J. Anderson and A. Bjorck, BIT 13
     (1973) 253-264). Members whose h is not finite or whose bracket is not found get NaN.
     Returns u (P,).
     """
@@ -201,7 +204,7 @@ def bracketed_roots(h, u0, width: float = 0.05, expand: int = 12, xtol: float = 
     ok = np.isfinite(ha) & np.isfinite(hb) & (ha <= 0) & (hb >= 0)
     side = np.zeros(P)
     for _ in range(maxiter):
-        active = ok & (np.abs(b - a) > xtol) & (ha != 0) & (hb != 0)
+        active = ok & (np.abs(b - a) > xtol) & (np.abs(ha) > ftol) & (np.abs(hb) > ftol)
         if not active.any():
             break
         idx = every[active]
