@@ -76,8 +76,9 @@ def lab_energy_range(fit, su) -> list:
 def calibrated_range_notes(fit, su, p80_m: float, target_p80_m=None, energies=None) -> list[str]:
     """Where the prediction leaves what the lab data calibrated: a P80 (predicted or
     target) outside the measured sieve range, an eq. 10 process value outside the range of
-    the fitted conditions, a plant specific energy (``energies``: what -> kWh/t) outside the
-    lab tests' range (:func:`lab_energy_range`)."""
+    the fitted conditions, a plant specific energy per pass through the mill, P / F_mill
+    (``energies``: what -> kWh/t; P tau / H, what a batch test's P t / H calibrates), outside
+    the lab tests' range (:func:`lab_energy_range`)."""
     notes = []
     lo_hi = fit.spec.get("measured_size_range_m") or []
     if len(lo_hi) == 2:
@@ -98,9 +99,9 @@ def calibrated_range_notes(fit, su, p80_m: float, target_p80_m=None, energies=No
     for what, e in (energies or {}).items():
         if rng and e is not None and math.isfinite(e) and not rng[0] <= e <= rng[1]:
             side = "below" if e < rng[0] else "above"
-            notes.append(f"specific energy {e:.4g} kWh/t {what} is {side} the lab tests' range "
-                         f"{rng[0]:.4g}..{rng[1]:.4g} kWh/t (lab net power x grinding time / hold-up): the breakage "
-                         "model is extrapolated in energy")
+            notes.append(f"specific energy per pass through the mill {e:.4g} kWh/t (P / mill flow) {what} is {side} "
+                         f"the lab tests' range {rng[0]:.4g}..{rng[1]:.4g} kWh/t (lab net power x grinding time / "
+                         "hold-up): the breakage model is extrapolated in energy")
     return notes
 
 
@@ -170,11 +171,14 @@ def predict_plant(su, target_p80_m=None, methods=("delta", "mc"), n_draws: int =
         summary["mc"] = {"n": res["mc"]["n"], "rejected": res["mc"]["rejected"], "failed": res["mc"]["failed"]}
     if "delta" in res:
         summary["delta_step"] = {n: float(h) for n, h in zip(fit.varying, res["delta"]["step"])}
-    energies = {f"at {su.feed_tph:.4g} t/h": point["specific_energy_kWh_t"]}
+    # a particle's exposure per pass through the mill, P tau / H = P / F_mill, is what a batch
+    # test's P t / H calibrates (in a closed circuit below the energy per tonne of fresh feed)
+    per_pass = {f"at {su.feed_tph:.4g} t/h": su.power_kW / (point["mill_flow_kg_s"] * 3.6)}
     if target_p80_m is not None:
-        energies[f"at the target P80 {target_p80_m * 1e6:.4g} um"] = summary["specific_energy_at_target_kWh_t"]
+        per_pass[f"at the target P80 {target_p80_m * 1e6:.4g} um"] = su.power_kW / (tr["mill_flow_kg_s"] * 3.6)
+    summary["specific_energy_per_pass_kWh_t"] = dict(per_pass)
     summary["lab_specific_energy_kWh_t"] = lab_energy_range(fit, su)
-    summary["extrapolation"] = calibrated_range_notes(fit, su, point["p80_m"], target_p80_m, energies)
+    summary["extrapolation"] = calibrated_range_notes(fit, su, point["p80_m"], target_p80_m, per_pass)
     for note in summary["extrapolation"]:
         warnings.warn(note, UserWarning, stacklevel=2)
     summary["runtime_s"] = time.perf_counter() - t0
