@@ -399,7 +399,7 @@ class ForwardModel:
         return int(self.y.size)
 
     def _unpack(self, theta):
-        return {name: theta[:, k] for k, name in enumerate(self.param_names)}
+        return self.translator.unpack(theta)
 
     def cond_param(self, p, name):
         """Parameter ``name`` per condition (P, C): value * prod (p_k/p_ref_k)^e_k (eq. 10)."""
@@ -513,7 +513,7 @@ class ForwardModel:
                           "axial_dispersion" if tr == "axial_dispersion" else "well_mixed",
                           "n_tanks": int(tp.get("n", 1)) if tr == "tanks_in_series" else 1}
                     if tr == "axial_dispersion":
-                        kw["pe"] = float(np.exp(p["ln_pe"][k])) if "ln_pe" in p else float(tp["pe"])
+                        kw["pe"] = float(extra["pe"][k]) if "pe" in extra else float(tp["pe"])
                     tc = float(tau_pc[k, c])
                     if tr == "recirculating_cells":
                         try:
