@@ -340,3 +340,24 @@ def test_deprecated_circuit_solves_warn_and_use_the_flowsheet():
     with pytest.warns(DeprecationWarning, match="a plant study is a flowsheet"):
         r = su.circuit.at_mill_flow(S, b, FEED, 60.0, c)
     assert r["mass_balance"] < 1e-12 and r["fresh_kg_s"] < 60.0
+
+
+def test_scaleup_holds_no_mill_or_circuit_solve():
+    """A plant study is a flowsheet: no module of millflow.scaleup forms a transfer matrix,
+    solves a linear system or a matrix exponential, or calls the mill door itself (the
+    flowsheet does); roots in one scalar (Brent, regula falsi) are the study's own."""
+    import ast
+
+    from tests.paths import REPO
+
+    banned = {"transfer_matrix", "solve_triangular", "expm", "steady_mill", "solve_well_mixed", "lu_factor"}
+    for path in (REPO / "millflow" / "scaleup").glob("*.py"):
+        tree = ast.parse(path.read_text(encoding="utf-8"))
+        for node in ast.walk(tree):
+            if isinstance(node, ast.ImportFrom) and node.module and node.module.startswith("millflow.mill"):
+                raise AssertionError(f"{path.name} imports {node.module}")
+            if isinstance(node, ast.Attribute) and node.attr in banned | {"solve"} and \
+                    isinstance(node.value, ast.Attribute) and node.value.attr == "linalg":
+                raise AssertionError(f"{path.name} calls linalg.{node.attr}")
+            if isinstance(node, ast.Name) and node.id in banned:
+                raise AssertionError(f"{path.name} uses {node.id}")
