@@ -179,7 +179,8 @@ def test_aspect_ratio_correlation_needs_its_source(fit_json, tmp_path, capsys):
     ("d50c_um = 200", "d50c_mm = 0.2"),
     ("feed_tph = 100", f"feed_kg_s = {100 / 3.6!r}"),
     ("top_um = 4000", "top_mm = 4.0"),
-    ("solid_density_kg_m3 = 2700\npower_model", "solids_density_t_m3 = 2.7\npower_model"),
+    ("solids_density_kg_m3 = 2700\npower_model", "solids_density_t_m3 = 2.7\npower_model"),
+    ("solids_density_kg_m3 = 2700\npower_model", "solid_density_kg_m3 = 2700\npower_model"),  # earlier spelling
 ])
 def test_plant_file_reads_any_known_unit(tmp_path, fit_json, edit):
     """Every dimensional key of the plant file is read through millflow.inputs: another unit of
