@@ -33,14 +33,15 @@ ON_EDGE = 1e-9
 class SieveReduction:
     """Cumulative passing at measured sizes from cumulative passing at grid edges.
 
+    The rows of :meth:`reduce`'s result are the measured sizes, group after group; it takes
+    the passing at the grid edges of every group's solution for M members at once.
+
     Parameters
     ----------
-    x : (N,) upper edges of the grid [m], coarse -> fine.
-    sizes : list of 1-D arrays, the measured sizes [m] of each sample group g (the rows
-        of the result are these, group after group).
-
-    ``reduce(P)`` takes P of shape (M, G, N) (passing at the edges of every group's
-    solution, M members) and returns (M, rows).
+    x : numpy.ndarray
+        (N,) upper edges of the grid [m], coarse -> fine.
+    sizes : list of numpy.ndarray
+        The measured sizes [m] of each sample group.
     """
 
     def __init__(self, x, sizes):
@@ -107,7 +108,7 @@ class SieveReduction:
                      "H01": -2 * t ** 3 + 3 * t ** 2, "H11": t ** 3 - t ** 2}
 
     def reduce(self, P) -> np.ndarray:
-        """(M, rows) passing at the measured sizes from P (M, G, N) at the grid edges."""
+        """Passing at the measured sizes, (M, rows), from P (M, G, N) at the grid edges."""
         P = np.asarray(P, dtype=float)
         flat = P.reshape(P.shape[0], -1)
         out = np.empty((P.shape[0], self.rows))

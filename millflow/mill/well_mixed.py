@@ -115,6 +115,7 @@ def well_mixed_population_geometric(S, feed, phi, gamma, beta, ratio: float, tau
     with q_j = s_j p_j: the same products as :func:`well_mixed_population` with the
     b of :func:`millflow.breakage.distributions.breakage_population`, to rounding
     (every term is non-negative, nothing cancels), at a cost of O(N) instead of O(N^2).
+    It is :func:`well_mixed_population_separable` with the weights phi S and (1 - phi) S.
 
     Parameters
     ----------
@@ -123,49 +124,17 @@ def well_mixed_population_geometric(S, feed, phi, gamma, beta, ratio: float, tau
         ratio x_k/x_{k+1} (> 1); tau, d : as :func:`well_mixed_population`.
     """
     S = np.asarray(S, dtype=float)
-    tau = np.asarray(tau, dtype=float)
-    s = S * tau[..., np.newaxis] if tau.ndim else S * float(tau)
-    if d is not None:
-        s = s / np.asarray(d, dtype=float)
-    n = s.shape[-1]
-    f = np.asarray(feed, dtype=float)
     phi, gamma, beta = (np.asarray(v, dtype=float) for v in (phi, gamma, beta))
-    shape = np.broadcast_shapes(s.shape[:-1], f.shape[:-1], phi.shape, gamma.shape, beta.shape)
-    lead = shape or (1,)  # one member: a length-1 axis, so that every slice is an array
-    s = np.broadcast_to(s, lead + (n,))
-    f = np.broadcast_to(f, lead + (n,))
     log_r = -np.log(float(ratio))
     with np.errstate(over="ignore", invalid="ignore"):
-        c1 = np.broadcast_to(np.exp(gamma * log_r), lead)
-        c2 = np.broadcast_to(np.exp(beta * log_r), lead)
-        phi = np.broadcast_to(phi, lead)
-        w1, w2 = phi * (1.0 - c1), (1.0 - phi) * (1.0 - c2)
-        ok = (phi >= 0) & (phi <= 1) & (gamma >= 0) & (beta >= 0)
-        single = bool((phi == 1).all())  # B = r^gamma: one recurrence
-        # classes first: every step reads and writes contiguous (*L) slices, in place
-        sT = np.ascontiguousarray(np.moveaxis(s, -1, 0))
-        fT = np.ascontiguousarray(np.moveaxis(f, -1, 0))
-        dT = 1.0 + sT
-        pT = np.empty((n,) + lead)
-        h1, h2, acc, q = np.zeros(lead), np.zeros(lead), np.empty(lead), np.empty(lead)
-        np.divide(fT[0], dT[0], out=pT[0])
-        np.multiply(sT[0], pT[0], out=q)
-        for i in range(1, n):
-            last = i == n - 1
-            h1 *= c1
-            h1 += q
-            np.multiply(phi if last else w1, h1, out=acc)
-            if not single:
-                h2 *= c2
-                h2 += q
-                acc += (1.0 - phi if last else w2) * h2
-            acc += fT[i]
-            np.divide(acc, dT[i], out=pT[i])
-            np.multiply(sT[i], pT[i], out=q)
-        p = np.moveaxis(pT, 0, -1)
+        c1, c2 = np.exp(gamma * log_r), np.exp(beta * log_r)
+        # the upper-edge transfer S_j B_ij = S_j [phi c1^(i-1-j) + (1 - phi) c2^(i-1-j)]: weights phi S, (1 - phi) S
+        w1, w2 = phi[..., np.newaxis] * S, (1.0 - phi)[..., np.newaxis] * S
+    p = well_mixed_population_separable(S, feed, w1, c1, w2, c2, tau, d)
+    ok = np.broadcast_to((phi >= 0) & (phi <= 1) & (gamma >= 0) & (beta >= 0), p.shape[:-1])
     if not ok.all():
-        p[~ok] = np.nan  # outside eq. 6's domain, as breakage_population
-    return p.reshape(shape + (n,))
+        p = np.where(ok[..., np.newaxis], p, np.nan)  # outside eq. 6's domain, as breakage_population
+    return p
 
 
 def well_mixed_population_separable(S, feed, w1, c1, w2, c2, tau=1.0, d=None) -> np.ndarray:

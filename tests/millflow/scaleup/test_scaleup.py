@@ -268,8 +268,12 @@ def test_bench_suite_runs_quick():
     from millflow.bench import scaleup as bench
 
     rows = bench.run(quick=True)
-    assert [r["method"] for r in rows] == ["delta", "mc(200 draws)"]
-    for r in rows:
+    assert [r["method"] for r in rows] == ["delta", "mc(200 draws)", "flowsheet vs earlier circuit"]
+    ba = rows[-1]
+    # the earlier path (Austin's upper edges) and the flowsheet (class averages) answer the same
+    # question on the same 37-class grid: their throughputs differ by the first-order grid error
+    assert abs(ba["throughput_tph"] / ba["throughput_earlier_tph"] - 1) < 0.3 and ba["ratio_vs_baseline"] > 0
+    for r in rows[:2]:
         lo, hi = r["p80_band_um"]
         assert 0 < lo < hi and r["throughput_band_tph"][0] < r["throughput_band_tph"][1]
 
