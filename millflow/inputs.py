@@ -173,7 +173,7 @@ def check_keys(table: dict, allowed, where: str) -> None:
 #: Unit suffixes of keys per dimension, with the factor to SI: a key is written
 #: ``<name>_<unit>`` (``tau_min``, ``top_mm``, ``feed_tph``) and read in SI.
 UNITS = {
-    "length": {"um": 1e-6, "mm": 1e-3, "m": 1.0},
+    "length": {"um": 1e-6, "mm": 1e-3, "m": 1.0, "in": 0.0254, "ft": 0.3048},
     "time": {"s": 1.0, "min": 60.0, "h": 3600.0},
     "mass_flow": {"tph": 1000.0 / 3600.0, "kg_s": 1.0},
     "mass": {"t": 1000.0, "kg": 1.0},

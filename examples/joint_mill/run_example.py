@@ -99,7 +99,10 @@ def run(locations, seed: int = 0) -> dict:
                            "se": float(st["params"][n]["se"])} for n in names},
             "corr_lnA0_lnc50": float(corr[i, j]),
             "max_abs_corr": float(np.max(np.abs(corr - np.eye(len(names))))),
-            "information_share": information_shares(res)}
+            "information_share": information_shares(res),
+            # the tracer rows' weight relative to the sieves' (the fit weights each data kind by its
+            # own residual variance; 1 when not re-weighted): the SSR above is in these weights
+            "tracer_weight": float((st.get("variance_components") or {}).get("tracer_weight", 1.0))}
 
 
 def main(argv=None) -> int:

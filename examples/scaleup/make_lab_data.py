@@ -1,9 +1,10 @@
 """Make the SYNTHETIC lab data set of the scale-up example (not measurements).
 
-A 0.2 m x 0.2 m lab ball mill, batch grinding of a 1.4-4 mm feed for 1, 3 and 9 min,
+A 0.2 m x 0.2 m lab ball mill, batch grinding of a 1.4-4 mm feed for 1, 3, 9 and 30 min,
 at two speeds (0.65 and 0.80 of critical) so that eq. 10 (A ~ speed^a) is fitted.
 The "truth" below is a plausible limestone-like parameter set; the passing values are
-millflow's exact batch solution (eq. 4) on a 2^(1/4) grid plus Gaussian noise of sd
+millflow's exact batch solution (eq. 4) of the continuous model (class averages on a
+2^(1/16) grid: within ~1e-5 of the grid-converged passing) plus Gaussian noise of sd
 0.005 on cumulative passing (seed 2026). Run from this folder:
 
     python make_lab_data.py        # writes lab_psd.csv and lab_process.csv
@@ -20,7 +21,7 @@ from millflow.grid import SizeGrid
 TRUTH = {"ln_A0": math.log(1 / 240), "a_speed": 1.5, "alpha": 1.1, "phi": 0.45, "gamma": 0.9, "beta": 3.8}
 SIEVES_MM = 4.0 * 2 ** (-0.5 * np.arange(14))
 SPEEDS = {"lab_065": 0.65, "lab_080": 0.80}
-TIMES_MIN = (1.0, 3.0, 9.0)
+TIMES_MIN = (1.0, 3.0, 9.0, 30.0)
 NOISE = 0.005
 
 
@@ -33,7 +34,7 @@ def tables(rng=None):
                                       "passing": np.linspace(1, 0, SIEVES_MM.size)}))
     proc = pd.DataFrame({"condition": list(SPEEDS), "speed": list(SPEEDS.values())})
     spec = ModelSpec(mode="batch", breakage="normalized", rate_process=("speed",))
-    grid = SizeGrid.between(4e-3, 4e-3 / 2 ** 7.5, 2 ** 0.25)
+    grid = SizeGrid.between(4e-3, 4e-3 / 2 ** 7.5, 2 ** (1 / 16))
     model = ForwardModel(spec, psd_data_from_frames(pd.concat(rows), proc), grid)
     y = model.predict(np.array([TRUTH[n] for n in model.param_names]))
     if rng is not None:

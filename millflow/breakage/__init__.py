@@ -9,6 +9,9 @@ class edges [m], rates [1/s]; class N is the sink:
 S_N = 0 and column N of B and b is zero. A rate model is any callable ``x -> S``,
 a distribution model any callable ``x -> b``; the dataclasses here are such
 callables with validated parameters, and a user's own function plugs in the same way.
+:mod:`millflow.breakage.averaged` puts continuous forms on a grid by class averages
+(``breakage_on_grid``, ``averaged_breakage``, ``curve_on_grid``): second order in the class
+width, where calling a form with the upper edges is Austin's first-order discrete model.
 """
 from millflow.breakage.distributions import (
     COLUMN_TOL,
@@ -24,6 +27,7 @@ from millflow.breakage.distributions import (
     validate_B,
     validate_b,
 )
+from millflow.breakage.averaged import averaged_breakage, breakage_on_grid, class_average, curve_on_grid
 from millflow.breakage.energy import EnergySpecificRate
 from millflow.breakage.t10 import T10Breakage, T10Table, read_t10_table, t10_B
 from millflow.breakage.rates import (
@@ -42,6 +46,10 @@ from millflow.breakage.rates import (
 )
 
 __all__ = [
+    "averaged_breakage",
+    "breakage_on_grid",
+    "class_average",
+    "curve_on_grid",
     "power_law_rates",
     "austin_rates",
     "power_law_rates_population",

@@ -36,7 +36,8 @@ from millflow.breakage.rates import TabulatedRate, validate_rates
 from millflow.grid import SCHEMES, as_sizes  # noqa: F401  (SCHEMES re-exported)
 
 __all__ = ["NODES", "SCHEMES", "class_nodes", "class_average", "averaged_breakage", "continuous_rate",
-           "is_continuous", "breakage_on_grid", "curve_on_grid"]
+           "is_continuous", "breakage_on_grid", "curve_on_grid", "node_sizes", "average_at_nodes",
+           "averaged_power_terms", "averaged_power_population"]
 
 
 #: Gauss-Legendre points per class. 3 points integrate the smooth in-class integrands to
@@ -180,3 +181,132 @@ def curve_on_grid(fun, grid) -> np.ndarray:
     if getattr(grid, "scheme", "class_average") == "class_average":
         return class_average(fun, x)
     return np.asarray(fun(x), dtype=float)
+
+
+# ------------------------------------------------------------- populations (the fit)
+def node_sizes(grid, nodes: int = NODES) -> np.ndarray:
+    """The quadrature sizes of every breaking class followed by x_N (the sink's value), [m].
+
+    ``fun(node_sizes(x))`` evaluated once for a whole population (trailing axis the sizes)
+    is what :func:`average_at_nodes` and :func:`averaged_power_population` take: the
+    (N - 1) * nodes Gauss points of :func:`class_nodes`, coarse first, then x_N.
+    """
+    x = as_sizes(grid)
+    y, _ = class_nodes(x, nodes)
+    return np.append(y.ravel(), x[-1])
+
+
+def average_at_nodes(values, nodes: int = NODES) -> np.ndarray:
+    """Class averages (*L, N) of values (*L, (N - 1) nodes + 1) at :func:`node_sizes`.
+
+    The population form of :func:`class_average`: the Gauss-weighted mean over each
+    breaking class, the sink keeps its value at x_N. Non-finite members stay non-finite.
+    """
+    v = np.asarray(values, dtype=float)
+    _, w = _leggauss(int(nodes))
+    body = v[..., :-1].reshape(v.shape[:-1] + (-1, int(nodes)))
+    with np.errstate(invalid="ignore"):
+        avg = np.clip(body @ (w / 2.0), body.min(axis=-1), body.max(axis=-1))
+    return np.concatenate([avg, v[..., -1:]], axis=-1)
+
+
+def averaged_power_terms(grid, S_nodes, phi0, gamma, beta, theta=0.0, x_max=None, nodes: int = NODES,
+                         idle_split: bool = False):
+    """Class-averaged transfer of eqs. 6/8 in separable form, for a population of parameter sets.
+
+    With B(x; y) = phi(y) (x/y)^gamma + (1 - phi(y)) (x/y)^beta, phi(y) = phi0 (x_max/y)^theta
+    (eq. 8; theta = 0 is eq. 6) and the mass inside class j uniform in ln y (module
+    docstring), the class average of S(y) B(x_i; y) over class j separates for every
+    receiving edge x_i <= x_{j+1}:
+
+        T_ij = (x_i/x_j)^gamma a1_j + (x_i/x_j)^beta a2_j,
+        a1_j = sum_q w_q S(y_jq) phi(y_jq) (x_j/y_jq)^gamma,
+        a2_j = sum_q w_q S(y_jq) (1 - phi(y_jq)) (x_j/y_jq)^beta,
+
+    (Gauss points y_jq, weights w_q of :func:`class_nodes`), so that the leaving rate is
+    S_j = T_{j+1,j} and b_ij = (T_ij - T_{i+1,j}) / S_j, b_Nj = T_Nj / S_j: the same
+    numbers as :func:`averaged_breakage`, but O(N) per member instead of O(N^2), which is
+    what a fit evaluating hundreds of members needs (:func:`averaged_power_population`
+    forms b from them; :func:`millflow.mill.well_mixed.well_mixed_population_separable`
+    solves eq. 3 from them directly on a geometric grid).
+
+    Parameters
+    ----------
+    grid : SizeGrid or array_like of upper edges x [m] (N).
+    S_nodes : (*L, (N - 1) nodes + 1) rates S(y) [1/s] at :func:`node_sizes` (the last
+        value, at x_N, is not used).
+    phi0, gamma, beta, theta : parameters broadcasting to L; x_max [m] (default x_1).
+
+    Returns
+    -------
+    S : (*L, N) leaving rates [1/s] (S_N = 0); a1, a2 : (*L, N) [1/s] (last entry 0).
+    With ``idle_split`` a class whose leaving rate is 0 (S(y) = 0 throughout) gets the
+    weights of the distribution alone (as :func:`averaged_breakage`), so that its b column
+    still sums to 1; without, its weights are 0 (it sends nothing anywhere).
+    Members outside the domain (phi(y) outside [0, 1], negative or non-finite exponents)
+    get NaN, as :func:`~millflow.breakage.distributions.breakage_population`.
+    """
+    x = as_sizes(grid)
+    y, w = class_nodes(x, nodes)  # (N - 1, Q)
+    S_y = np.asarray(S_nodes, dtype=float)[..., :-1]
+    lead = S_y.shape[:-1]
+    S_y = S_y.reshape(lead + y.shape)
+    phi0, gamma, beta, theta = (np.asarray(v, dtype=float)[..., None, None] for v in (phi0, gamma, beta, theta))
+    x_max = x[0] if x_max is None else float(x_max)
+    ln_rel = np.log(x[:-1, None] / y)  # ln(x_j / y_jq) in [0, h_j): bounded powers
+    with np.errstate(over="ignore", invalid="ignore", divide="ignore"):
+        phi = phi0 * np.exp(theta * np.log(x_max / y)) if np.any(theta != 0) else phi0 + 0.0 * ln_rel
+        k1 = phi * np.exp(gamma * ln_rel) * w
+        k2 = (1.0 - phi) * np.exp(beta * ln_rel) * w
+        a1 = np.sum(S_y * k1, axis=-1)
+        a2 = np.sum(S_y * k2, axis=-1)
+        r = np.log(x[1:] / x[:-1])  # ln(x_{j+1}/x_j) < 0
+        g, bt = gamma[..., 0], beta[..., 0]
+        S = np.exp(g * r) * a1 + np.exp(bt * r) * a2
+        ok = ((phi >= 0) & (phi <= 1)).all(axis=(-1, -2)) & (g[..., 0] >= 0) & (bt[..., 0] >= 0)
+        ok &= np.isfinite(g[..., 0]) & np.isfinite(bt[..., 0])
+        zero = ~(S > 0) & np.isfinite(S)
+        if idle_split and zero.any():  # a class that does not break: b from the distribution alone
+            a10, a20 = np.sum(k1, axis=-1), np.sum(k2, axis=-1)
+            a10, a20 = np.broadcast_to(a10, a1.shape), np.broadcast_to(a20, a2.shape)
+            a1, a2 = np.where(zero, a10, a1), np.where(zero, a20, a2)
+    S = np.concatenate([S, np.zeros(S.shape[:-1] + (1,))], axis=-1)
+    a1 = np.concatenate([a1, np.zeros(a1.shape[:-1] + (1,))], axis=-1)
+    a2 = np.concatenate([a2, np.zeros(a2.shape[:-1] + (1,))], axis=-1)
+    if not np.all(ok):
+        bad = ~np.broadcast_to(ok, S.shape[:-1])
+        S, a1, a2 = (np.where(bad[..., None], np.nan, v) for v in (S, a1, a2))
+    return S, a1, a2
+
+
+def averaged_power_population(grid, S_nodes, phi0, gamma, beta, theta=0.0, x_max=None,
+                              nodes: int = NODES) -> tuple[np.ndarray, np.ndarray]:
+    """Class-averaged (S (*L, N) [1/s], b (*L, N, N) [-]) of eqs. 5-8 for a population.
+
+    The population form of :func:`averaged_breakage` for the power-law distributions of
+    eqs. 6 and 8 (arguments and separable form: :func:`averaged_power_terms`):
+    b_ij = [((x_i/x_j)^gamma - (x_{i+1}/x_j)^gamma) a1_j + (same in beta) a2_j] / S_j,
+    b_Nj = [(x_N/x_j)^gamma a1_j + (x_N/x_j)^beta a2_j] / S_j, each column summing to 1 by
+    telescoping. A class with S_j = 0 takes the distribution's own split.
+    """
+    x = as_sizes(grid)
+    n = x.size
+    S, a1, a2 = averaged_power_terms(x, S_nodes, phi0, gamma, beta, theta, x_max, nodes, idle_split=True)
+    gamma = np.asarray(gamma, dtype=float)[..., None]
+    beta = np.asarray(beta, dtype=float)[..., None]
+    lx = np.log(x / x[0])  # <= 0
+    with np.errstate(over="ignore", invalid="ignore", divide="ignore"):
+        # (x_i/x_1)^e and its drop to the next edge, (x_i/x_1)^e (1 - (x_{i+1}/x_i)^e), from expm1
+        step = np.log(x[1:] / x[:-1])
+        E1, E2 = np.exp(gamma * lx), np.exp(beta * lx)
+        # the sink row keeps all that passes x_N: T_Nj itself
+        d1 = np.concatenate([E1[..., :-1] * -np.expm1(gamma * step), E1[..., -1:]], axis=-1)
+        d2 = np.concatenate([E2[..., :-1] * -np.expm1(beta * step), E2[..., -1:]], axis=-1)
+        nxt = np.append(step, 0.0)
+        leave = np.where(S > 0, S, np.exp(gamma * nxt) * a1 + np.exp(beta * nxt) * a2)
+        g1 = a1 / (E1 * leave)
+        g2 = a2 / (E2 * leave)
+        b = d1[..., :, None] * g1[..., None, :] + d2[..., :, None] * g2[..., None, :]
+    b = b * np.tril(np.ones((n, n)), -1)
+    b[..., :, -1] = 0.0
+    return S, b

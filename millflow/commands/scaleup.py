@@ -145,15 +145,25 @@ def _finish(args, res, model_form, notes, su, t0, out):
 
 
 def _model_form(args, fit, su, target, summary):
-    """Model-form contributions to the band (:func:`millflow.scaleup.modelform.contributions`)."""
-    from millflow.scaleup.modelform import contributions
+    """Model-form contributions to the band (:func:`millflow.scaleup.modelform.contributions`)
+    and the reported quantity's error split into solver and grid parts (``summary["error_estimate"]``)."""
+    from millflow.errors import InputError
+    from millflow.scaleup.modelform import contributions, error_estimate
     from millflow.scaleup.plantfile import load_plant
 
     key = "throughput_tph" if target is not None else "p80_um"
     bands = summary["bands"].get(key, {})
     band = bands.get("mc") or bands.get("delta")
     refined, _ = load_plant(args.plant, fit, refine=1)
-    return contributions(su, target, band, refined)
+    finer = None
+    try:
+        coarse, _ = load_plant(args.plant, fit, refine=-1)
+    except InputError:  # the classes do not pair up: the third grid is the one refined twice
+        coarse = None
+        finer, _ = load_plant(args.plant, fit, refine=2)
+    out = contributions(su, target, band, refined, coarse, finer)
+    summary["error_estimate"] = error_estimate(su, target, out["contributions"].get("size_grid"))
+    return out
 
 
 #: Names of the scale-up's results in its files (scaleup.json, the CSVs, report.html) where
@@ -178,51 +188,51 @@ def file_names(summary: dict) -> dict:
 
 def circuit_summary(su, s: dict) -> dict:
     """The plant circuit at the estimate as a flowsheet summary (streams with solids t/h,
-    P80, P50 and cumulative passing; units with power, kWh/t, tau and hold-up) for report.html: the
-    mill's transfer matrix at the solved mill flow (fresh feed x (1 + circulating load))
-    applied to the mill feed of the closed loop, m = (I - C T)^-1 f."""
+    P80, P50 and cumulative passing; units with power, kWh/t, tau and hold-up) for report.html:
+    the plant flowsheet of the study (:class:`millflow.scaleup.study.PlantStudy`) solved at the
+    estimate's fresh feed, its flows scaled to that feed."""
     import numpy as np
 
+    from millflow.flowsheet.solve import solve_at
     from millflow.psd import percentile_size
+    from millflow.scaleup.study import MILL
 
-    x = np.asarray(su.x, float)
-    S, b = su.plant_rates(su.fit.theta)
-    c = su.circuit.partition(x)
-    feed = np.asarray(su.feed, float)
-    F = s["feed_tph"] / 3.6
-    load = float(s.get("circulating_load") or 0.0)
-    T, tau = su.circuit._mill_matrix(S, b, F * (1.0 + load))
-    if c is None:
-        m = feed
-    else:
-        m = np.linalg.solve(np.eye(x.size) - c[:, None] * T, feed)
-    d = T @ m
-    if c is None:
-        flows = {"fresh_feed": ("fresh_feed.out", "mill", feed), "product": ("mill.out", "product", d)}
-    else:
-        flows = {"fresh_feed": ("fresh_feed.out", "mixer", feed), "mill_feed": ("mixer.out", "mill", m),
-                 "mill_discharge": ("mill.out", "classifier", d),
-                 "classifier_coarse": ("classifier.coarse", "mixer", c * d),
-                 "product": ("classifier.fine", "product", (1 - c) * d)}
+    theta = su.fit.theta
+    state = su.operate(theta, feed_tph=s["feed_tph"])
+    fs = su.flowsheet(theta)
+    flows, _ = solve_at(fs, {MILL: {"throughput": state["mill_flow_kg_s"]}})
+    names = fs.stream_names
+    fresh = float(flows[names.index("fresh")].sum())
+    scale = s["feed_tph"] / fresh  # t/h per flow unit of the solve
+    x = np.asarray(su.grid.x if hasattr(su.grid, "x") else su.x, float)
+    closed = su.study.closed
+    # report names of the plant flowsheet's streams: (name, from, to)
+    layout = ({"fresh": ("fresh_feed", "fresh_feed.out", "mixer"), "mill_feed": ("mill_feed", "mixer.out", "mill"),
+               "mill_discharge": ("mill_discharge", "mill.out", "classifier"),
+               "recycle": ("classifier_coarse", "classifier.coarse", "mixer"),
+               "product": ("product", "classifier.fine", "product")} if closed else
+              {"fresh": ("fresh_feed", "fresh_feed.out", "mill"), "product": ("product", "mill.out", "product")})
     streams = {}
-    for n, (src, tgt, f) in flows.items():
+    for stream, (name, src, tgt) in layout.items():
+        f = np.asarray(flows[names.index(stream)], float)
         tot = float(f.sum())
         frac = f / tot if tot > 0 else f
-        streams[n] = {"from": src, "to": tgt, "solids_tph": tot * s["feed_tph"],
-                      "p80_um": percentile_size(x, frac, 80.0, validate=False) * 1e6,
-                      "p50_um": percentile_size(x, frac, 50.0, validate=False) * 1e6,
-                      "size_um": list(x * 1e6), "cum_passing": list(np.cumsum(frac[::-1])[::-1])}
-    mill_tph = streams["mill_feed" if c is not None else "fresh_feed"]["solids_tph"]
+        streams[name] = {"from": src, "to": tgt, "solids_tph": tot * scale,
+                         "p80_um": percentile_size(x, frac, 80.0, validate=False) * 1e6,
+                         "p50_um": percentile_size(x, frac, 50.0, validate=False) * 1e6,
+                         "size_um": list(x * 1e6), "cum_passing": list(np.cumsum(frac[::-1])[::-1])}
+    mill_tph = streams["mill_feed" if closed else "fresh_feed"]["solids_tph"]
     units = {"fresh_feed": {"type": "feed"}}
-    if c is not None:
+    if closed:
         units["mixer"] = {"type": "mixer"}
+    c = su.circuit
     units["mill"] = {"type": "mill", "solids_in_tph": mill_tph, "power_kW": s.get("power_net_kW"),
-                     "specific_energy_kWh_per_t": s.get("power_net_kW") / mill_tph, "tau_s": tau,
-                     "holdup_kg": s.get("holdup_kg"), "method": f"{su.circuit.transport} {su.circuit.transport_params}"}
-    if c is not None:
-        params = {k: v for k, v in su.circuit.classifier.items() if k != "curve"}
+                     "specific_energy_kWh_per_t": s.get("power_net_kW") / mill_tph, "tau_s": state["tau_s"],
+                     "holdup_kg": s.get("holdup_kg"), "method": f"{c.transport} {c.transport_params}"}
+    if closed:
+        params = {k: v for k, v in c.classifier.items() if k != "curve"}
         units["classifier"] = {"type": "classifier", "solids_in_tph": streams["mill_discharge"]["solids_tph"],
-                               "d50c_m": params.get("d50c"), "method": f"{su.circuit.classifier['curve']} curve"}
+                               "d50c_m": params.get("d50c"), "method": f"{c.classifier['curve']} curve"}
     units["product"] = {"type": "product"}
     return {"title": s.get("title"), "streams": streams, "units": units,
             "mass_balance_error": abs(streams["product"]["solids_tph"] - s["feed_tph"]) / s["feed_tph"]}

@@ -246,7 +246,7 @@ def load_config(path, data_dir: str | None = None) -> FitConfig:
         sizes = data.table.size_m[data.table.size_m > 0]
         top = quantity(g, "top", "length", gw, None)        # top_um, top_mm or top_m
         bottom = quantity(g, "bottom", "length", gw, None)
-        top = top if top is not None else float(sizes.max()) * 1.0001
+        top = top if top is not None else float(sizes.max())  # on the coarsest size: sieves fall on edges
         bottom = bottom if bottom is not None else float(sizes.min()) / 2
         if not bottom < top:
             raise InputError(f"{gw}: bottom {bottom * 1e3:g} mm is not below top {top * 1e3:g} mm")

@@ -32,7 +32,8 @@ from scipy.optimize import differential_evolution, least_squares
 from scipy.stats import qmc
 
 from millflow.errors import InputError, MillflowError
-from millflow.fitting.models import _AXIAL_TRANSPORTS, FORWARD_TOL, ForwardModel, Parameter, default_parameters
+from millflow.fitting.forward import ForwardModel
+from millflow.fitting.spec import _AXIAL_TRANSPORTS, FORWARD_TOL, Parameter, default_parameters
 from millflow.fitting.progress import reporter
 from millflow.fitting.statistics import information_criteria, jacobian, parameter_statistics
 
@@ -59,6 +60,7 @@ class FitResult:
     runtime_s: float
     grid_check: dict = field(default_factory=dict)
     message: str = ""
+    error_estimate: dict = field(default_factory=dict)
 
     @property
     def ser(self) -> float:
@@ -106,6 +108,7 @@ class FitResult:
                             "matrix": _jsonable(np.round(self.stats["correlation"], 4).tolist())},
             "criteria": {k: _jsonable(v) for k, v in self.criteria.items()},
             "grid_check": {k: _jsonable(v) for k, v in self.grid_check.items()},
+            "error_estimate": _jsonable_tree(self.error_estimate),
             "solutions": [{"ssr": s, "params": p} for s, p in self.solutions[:10]],
             "rmse_by_condition": self.rmse_by_condition(),
             "nfev": self.nfev, "runtime_s": self.runtime_s,
@@ -159,7 +162,20 @@ class FitResult:
                              f"{g['ssr_refined']:.6g} at the same parameters (change {g['relative_change']:.2e}), "
                              f"{g['ssr_refit']:.6g} re-fitted (change {g['relative_change_refit']:.2e}, largest "
                              f"parameter shift {g['max_param_shift_in_se']:.2g} SEP)")
+        ee = self.error_estimate
+        if ee:
+            gr, so = ee["grid"], ee["solver"]
+            shown = "not estimated" if gr.get("value") is None else f"{gr['value']:.2g} SE"
+            lines.append(f"error estimate: grid {shown} ({gr['method']}); solver {so['value']:.1e} relative "
+                         f"({so['method']})")
         return "\n".join(lines)
+
+
+def _jsonable_tree(v):
+    """A nested dict of plain values, numbers made JSON-able (NaN -> None)."""
+    if isinstance(v, dict):
+        return {k: _jsonable_tree(e) for k, e in v.items()}
+    return _jsonable(v) if isinstance(v, (float, np.floating)) else v
 
 
 def _jsonable(v):
@@ -356,6 +372,7 @@ def fit(model: ForwardModel, params: dict | None = None, *, global_search: bool 
     fitted = {n: Parameter(n, float(v), params[n].min, params[n].max, params[n].vary)
               for n, v in zip(model.param_names, theta)}
     gc = _grid_check(model, params, theta, zb, sb, st, prob.row_factor) if grid_check else {}
+    ee = error_estimate(model, gc)
     _flag_parameters(st, gc, sols, prob.names, model.n_data)
     if profile:
         _profile_intervals(prob, zb, sb, st, model.n_data)
@@ -363,7 +380,38 @@ def fit(model: ForwardModel, params: dict | None = None, *, global_search: bool 
     solutions = [(float(s), {n: float(v) for n, v in zip(names, z)}) for s, z in sols]
     say(f"done: SSR {sb:.6g}, spread {spread:.3g}, {time.perf_counter() - t0:.1f} s")
     return FitResult(model, fitted, st, sb, model.n_data, p, len(candidates), spread, solutions, prob.nfev,
-                     time.perf_counter() - t0, gc)
+                     time.perf_counter() - t0, gc, error_estimate=ee)
+
+
+def error_estimate(model: ForwardModel, gc: dict) -> dict:
+    """The fit's error split by source: ``solver`` (relative error of the predicted values from
+    the forward solves) and ``grid`` (how far the parameters are from those of the continuous
+    model, in SE: from the re-fit on the grid refined 2x in ln x, Richardson's estimate at the
+    scheme's order p, times the safety factor of :func:`millflow.grid.richardson`):
+
+        grid = F_s 2^p / (2^p - 1) max_k |theta_k,fine - theta_k| / SE_k.
+    """
+    from millflow.grid import SAFETY_FACTOR
+
+    if not (hasattr(model, "solver_accuracy") and hasattr(model, "grid_order")):
+        return {}  # a model of its own (e.g. a survey's circuit) states its errors itself
+    acc, how = model.solver_accuracy()
+    out = {"solver": {"value": acc, "unit": "relative (predicted values)", "method": how}}
+    order, why = model.grid_order()
+    if order is None:
+        out["grid"] = {"value": 0.0, "unit": "SE", "method": why}
+    elif not gc or "skipped" in gc:
+        out["grid"] = {"value": None, "unit": "SE",
+                       "method": "not estimated (" + (gc.get("skipped") if gc else "grid check off") + ")"}
+    else:
+        shift = gc["max_param_shift_in_se"]
+        factor = SAFETY_FACTOR * 2.0 ** order / (2.0 ** order - 1.0)
+        out["grid"] = {"value": factor * shift if math.isfinite(shift) else None, "unit": "SE",
+                       "shift_in_se": shift, "order": order,
+                       "method": (f"re-fit on the grid refined 2x in ln x ({gc['n_refined']} classes): largest "
+                                  f"parameter shift {shift:.3g} SE; Richardson at order {order} ({why}) with "
+                                  f"safety factor {SAFETY_FACTOR:g}: {factor:.3g} x the shift")}
+    return out
 
 
 #: Variance components: at most this many re-weighted fits, stopped when the tracer weight
@@ -472,13 +520,19 @@ def _profile_intervals(prob: _Problem, zb, sb: float, st: dict, n_data: int) -> 
 
         start = {"z": others}
 
-        def profile(v, sub_prob=sub_prob, k=k, keep=keep, start=start):
+        def profile(v, sub_prob=sub_prob, k=k, keep=keep, start=start, limit=limit, others=others):
             sub_prob.full[prob.idx[k]] = v
             if keep.size == 0:
                 r = sub_prob.resid(np.zeros(0))
                 return float(r @ r)
             z, ssr = _local(sub_prob, start["z"])
-            if np.all(np.isfinite(z)):
+            if ssr > limit and start["z"] is not others:
+                # a continuation start from far along the profile can strand the local fit
+                # (ill-conditioned models): the estimate's own values are the other start
+                z2, ssr2 = _local(sub_prob, others)
+                if ssr2 < ssr:
+                    z, ssr = z2, ssr2
+            if np.all(np.isfinite(z)) and ssr <= limit:
                 start["z"] = z  # continuation: the next point starts from this optimum
             return ssr
 

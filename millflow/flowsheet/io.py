@@ -488,36 +488,6 @@ def _kinetics(t: _Table) -> dict:
     return out
 
 
-class _FittedRate:
-    """S(x) [1/s] of a fitted breakage model at the flowsheet's process conditions (eq. 5/7 with eq. 10)."""
-
-    def __init__(self, fitted, process):
-        self.fitted, self.process = fitted, process
-
-    def __call__(self, x):
-        return self.fitted.rates(self.fitted.theta, np.asarray(x, float), self.process)
-
-    def __repr__(self):
-        return f"fitted rate ({self.fitted.source}, {self.fitted.spec['rate']} form, process {self.process})"
-
-
-class _FittedBreakage:
-    """b(x) of a fitted breakage model (eq. 6), evaluated exactly on the flowsheet's grid."""
-
-    def __init__(self, fitted):
-        self.fitted = fitted
-
-    def b(self, x):
-        return self.fitted.frac_b(self.fitted.theta, np.asarray(x, float))
-
-    def cumulative(self, x, y, top=None):
-        """Continuous B(x; y) of the fitted eq. 6 (for the class-averaged grid scheme)."""
-        return self.fitted.cumulative(self.fitted.theta, x, y)
-
-    def __repr__(self):
-        return f"fitted breakage ({self.fitted.source}, {self.fitted.spec['breakage']})"
-
-
 def _fitted_material(m: _Table, base: Path | None) -> dict:
     """A material's rate and breakage from a ``millflow fit --json`` result: the estimate (eqs. 5-7),
     A at the process values the flowsheet states (eq. 10, keys as the fit's process columns)."""
@@ -541,7 +511,8 @@ def _fitted_material(m: _Table, base: Path | None) -> dict:
         if isinstance(v, bool) or not isinstance(v, (int, float)):
             raise InputError(f"{m.where}.process.{k} = {v!r}: expected a number")
     proc = fitted.check_process(process, f"{m.where}.process")
-    return {"rate": _FittedRate(fitted, proc), "breakage": _FittedBreakage(fitted)}
+    # the fit's own translator decodes its vector (millflow.scaleup.fitted: FittedRate, FittedDistribution)
+    return {"rate": fitted.rate_model(process=proc), "breakage": fitted.distribution_model()}
 
 
 def _transport_table(tr: _Table, extra: tuple = ()) -> tuple[str, dict]:
@@ -677,7 +648,7 @@ def _mill(name: str, t: _Table, materials: dict, slurry=None, base: Path | None 
     design = None
     from millflow.scaleup.flowsheet import ScaledRate, design_from_table, is_design
     if is_design(t.data):  # a mill by dimensions and operation: hold-up, power (and rate) computed
-        design = design_from_table(f"units.{name}", t.data)
+        design = design_from_table(f"units.{name}", t.data, slurry)
         t.used.update(design["keys"])
         if design["rate_factor"] != 1.0:
             if getattr(rate, "basis", "time") == "energy":

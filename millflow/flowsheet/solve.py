@@ -46,7 +46,7 @@ from millflow.errors import InputError, SolverError
 from millflow.flowsheet.water import solve_water
 from millflow.threads import limit_blas_threads
 
-__all__ = ["solve", "FlowsheetSolution", "TEAR_METHODS", "assemble"]
+__all__ = ["solve", "solve_at", "FlowsheetSolution", "TEAR_METHODS", "assemble"]
 
 #: Smallest singular value of I - G_k below which size k counts as trapped in a loop.
 SINGULAR_TOL = 1e-10
@@ -413,6 +413,25 @@ def solve(fs, *, method="wegstein", tol: float = 1e-13, maxiter: int = 200,
     solver["tear"] = tear_report
     return FlowsheetSolution(flowsheet=fs, flows=flows, units=reports, solver=solver,
                              runtime_s=time.perf_counter() - t0, unit_blocks=blocks, water=water)
+
+
+def solve_at(fs, state: dict) -> tuple[np.ndarray, dict]:
+    """Flows (n_streams, N) [kg/s] and solver info with every torn unit held at ``state``.
+
+    ``state`` maps a torn unit to its torn values (``{"throughput": kg/s}``, and ``water``,
+    ``recovery`` where they apply), as the tear iterations of :func:`solve` pass them: the
+    flowsheet is then linear, one solve (class by class for mills of equal cells, else the
+    sparse LU), no iteration. A study that moves a torn value itself (a root in a mill's
+    throughput) calls this, reusing the flowsheet and its units (their forms on the grid are
+    kept on the units) across its steps.
+    """
+    from millflow.flowsheet.structured import structured_solve
+
+    fast = structured_solve(fs, state)
+    if fast is not None:
+        return fast[0], fast[1]
+    blocks, _ = _unit_blocks(fs, state)
+    return _linear_solve(fs, blocks)
 
 
 def _vector_err(gx, x):

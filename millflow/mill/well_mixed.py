@@ -18,7 +18,8 @@ from scipy.linalg.lapack import dtrtrs
 from millflow.errors import InputError
 from millflow.linalg import breakage_matrix
 
-__all__ = ["solve_well_mixed", "well_mixed_population", "well_mixed_population_geometric"]
+__all__ = ["solve_well_mixed", "well_mixed_population", "well_mixed_population_geometric",
+           "well_mixed_population_separable"]
 
 
 def solve_well_mixed(S, b, feed, tau: float, d=None) -> np.ndarray:
@@ -114,6 +115,7 @@ def well_mixed_population_geometric(S, feed, phi, gamma, beta, ratio: float, tau
     with q_j = s_j p_j: the same products as :func:`well_mixed_population` with the
     b of :func:`millflow.breakage.distributions.breakage_population`, to rounding
     (every term is non-negative, nothing cancels), at a cost of O(N) instead of O(N^2).
+    It is :func:`well_mixed_population_separable` with the weights phi S and (1 - phi) S.
 
     Parameters
     ----------
@@ -122,46 +124,79 @@ def well_mixed_population_geometric(S, feed, phi, gamma, beta, ratio: float, tau
         ratio x_k/x_{k+1} (> 1); tau, d : as :func:`well_mixed_population`.
     """
     S = np.asarray(S, dtype=float)
-    tau = np.asarray(tau, dtype=float)
-    s = S * tau[..., np.newaxis] if tau.ndim else S * float(tau)
-    if d is not None:
-        s = s / np.asarray(d, dtype=float)
-    n = s.shape[-1]
-    f = np.asarray(feed, dtype=float)
     phi, gamma, beta = (np.asarray(v, dtype=float) for v in (phi, gamma, beta))
-    shape = np.broadcast_shapes(s.shape[:-1], f.shape[:-1], phi.shape, gamma.shape, beta.shape)
-    lead = shape or (1,)  # one member: a length-1 axis, so that every slice is an array
-    s = np.broadcast_to(s, lead + (n,))
-    f = np.broadcast_to(f, lead + (n,))
     log_r = -np.log(float(ratio))
     with np.errstate(over="ignore", invalid="ignore"):
-        c1 = np.broadcast_to(np.exp(gamma * log_r), lead)
-        c2 = np.broadcast_to(np.exp(beta * log_r), lead)
-        phi = np.broadcast_to(phi, lead)
-        w1, w2 = phi * (1.0 - c1), (1.0 - phi) * (1.0 - c2)
-        ok = (phi >= 0) & (phi <= 1) & (gamma >= 0) & (beta >= 0)
-        single = bool((phi == 1).all())  # B = r^gamma: one recurrence
-        # classes first: every step reads and writes contiguous (*L) slices, in place
-        sT = np.ascontiguousarray(np.moveaxis(s, -1, 0))
-        fT = np.ascontiguousarray(np.moveaxis(f, -1, 0))
+        c1, c2 = np.exp(gamma * log_r), np.exp(beta * log_r)
+        # the upper-edge transfer S_j B_ij = S_j [phi c1^(i-1-j) + (1 - phi) c2^(i-1-j)]: weights phi S, (1 - phi) S
+        w1, w2 = phi[..., np.newaxis] * S, (1.0 - phi)[..., np.newaxis] * S
+    p = well_mixed_population_separable(S, feed, w1, c1, w2, c2, tau, d)
+    ok = np.broadcast_to((phi >= 0) & (phi <= 1) & (gamma >= 0) & (beta >= 0), p.shape[:-1])
+    if not ok.all():
+        p = np.where(ok[..., np.newaxis], p, np.nan)  # outside eq. 6's domain, as breakage_population
+    return p
+
+
+def well_mixed_population_separable(S, feed, w1, c1, w2, c2, tau=1.0, d=None) -> np.ndarray:
+    """Eq. 3 in O(N) per member for breakage whose transfer separates on a geometric grid: (*L, N).
+
+    For class-averaged eqs. 6/8 on a grid of fixed ratio (:func:`millflow.breakage.averaged.
+    averaged_power_terms`) the broken flow out of class j that is finer than edge x_i is
+    T_ij = c1^(i-j) a1_j + c2^(i-j) a2_j per unit of u_j = tau p_j / d_j*, so that
+    sum_{j<i} b_ij s_j p_j = sum_{j<i} (T_ij - T_{i+1,j}) u_j follows two first-order
+    recurrences,
+
+        H_i = c H_{i-1} + w_{i-1} u_{i-1} (H_0 = 0, w_j = c a_j),
+        sum_{j<i} b_ij s_j p_j = (1 - c1) H1_i + (1 - c2) H2_i  (i < N),  H1_N + H2_N (sink),
+
+    and p_i = (f_i + that sum) / (1 + s_i), s_i = tau S_i / d_i*. With w1 = phi S,
+    w2 = (1 - phi) S it is :func:`well_mixed_population_geometric` (Austin's upper edges).
+    Every term is non-negative: nothing cancels.
+
+    Parameters
+    ----------
+    S : (*L, N) leaving rates [1/s]; feed : (*Lf, N) feed flows;
+    w1, w2 : (*L, N) weights [1/s] (last entry unused); c1, c2 : ratios R^-gamma, R^-beta
+        broadcasting to L (in [0, 1]); tau, d : as :func:`well_mixed_population`.
+    """
+    S = np.asarray(S, dtype=float)
+    tau = np.asarray(tau, dtype=float)
+    dd = 1.0 if d is None else np.asarray(d, dtype=float)
+    t_d = (tau[..., np.newaxis] if tau.ndim else float(tau)) / dd
+    s = S * t_d
+    n = s.shape[-1]
+    f = np.asarray(feed, dtype=float)
+    w1, w2 = np.asarray(w1, dtype=float), np.asarray(w2, dtype=float)
+    c1, c2 = np.asarray(c1, dtype=float), np.asarray(c2, dtype=float)
+    shape = np.broadcast_shapes(s.shape[:-1], f.shape[:-1], w1.shape[:-1], w2.shape[:-1], np.shape(t_d)[:-1],
+                                c1.shape, c2.shape)
+    lead = shape or (1,)
+
+    def classes_first(v):
+        return np.ascontiguousarray(np.moveaxis(np.broadcast_to(v, lead + (n,)), -1, 0))
+
+    with np.errstate(over="ignore", invalid="ignore"):
+        sT, fT, tT = classes_first(s), classes_first(f), classes_first(np.broadcast_to(t_d, s.shape))
+        w1T, w2T = classes_first(w1), classes_first(w2)
+        c1, c2 = np.broadcast_to(c1, lead), np.broadcast_to(c2, lead)
+        e1, e2 = 1.0 - c1, 1.0 - c2
         dT = 1.0 + sT
         pT = np.empty((n,) + lead)
-        h1, h2, acc, q = np.zeros(lead), np.zeros(lead), np.empty(lead), np.empty(lead)
+        h1, h2, acc, u = np.zeros(lead), np.zeros(lead), np.empty(lead), np.empty(lead)
         np.divide(fT[0], dT[0], out=pT[0])
-        np.multiply(sT[0], pT[0], out=q)
+        np.multiply(tT[0], pT[0], out=u)
         for i in range(1, n):
-            last = i == n - 1
             h1 *= c1
-            h1 += q
-            np.multiply(phi if last else w1, h1, out=acc)
-            if not single:
-                h2 *= c2
-                h2 += q
-                acc += (1.0 - phi if last else w2) * h2
+            h1 += w1T[i - 1] * u
+            h2 *= c2
+            h2 += w2T[i - 1] * u
+            if i == n - 1:
+                np.add(h1, h2, out=acc)
+            else:
+                np.multiply(e1, h1, out=acc)
+                acc += e2 * h2
             acc += fT[i]
             np.divide(acc, dT[i], out=pT[i])
-            np.multiply(sT[i], pT[i], out=q)
+            np.multiply(tT[i], pT[i], out=u)
         p = np.moveaxis(pT, 0, -1)
-    if not ok.all():
-        p[~ok] = np.nan  # outside eq. 6's domain, as breakage_population
     return p.reshape(shape + (n,))

@@ -7,6 +7,7 @@ throughput that meets it and the specific energy there.
 """
 from __future__ import annotations
 
+import math
 import time
 import warnings
 from dataclasses import dataclass
@@ -32,7 +33,9 @@ class ScaleupResult:
 
 
 def _quantities(su, target):
-    """g(theta_varying) -> [P(x_1..x_N), p80, (feed_tph, E)] and the names of the scalars."""
+    """g(theta_varying) -> [P(x_1..x_N), p80, (feed_tph, E)], the same for many vectors at
+    once (g_pop: (M, V) -> (M, Q), NaN rows where a member's solve fails) and the names of
+    the scalars."""
     names = ["p80_um"] + (["throughput_tph", "specific_energy_kWh_t"] if target is not None else [])
 
     def g(v):
@@ -44,13 +47,38 @@ def _quantities(su, target):
             t = su.throughput_for_p80(theta, target)
             out.append([t["feed_tph"], t["specific_energy_kWh_t"]])
         return np.concatenate(out)
-    return g, names
+
+    def g_pop(V):
+        thetas = su.fit.full(np.atleast_2d(V))
+        r = su.operate_population(thetas)
+        P = np.cumsum(r["product"][:, ::-1], axis=1)[:, ::-1]
+        cols = [P, (r["p80_m"] * 1e6)[:, None]]
+        if target is not None:
+            t = su.throughput_population(thetas, target)
+            cols.append(np.column_stack([t["feed_tph"], t["specific_energy_kWh_t"]]))
+        return np.concatenate(cols, axis=1)
+    return g, g_pop, names
 
 
-def calibrated_range_notes(fit, su, p80_m: float, target_p80_m=None) -> list[str]:
+def lab_energy_range(fit, su) -> list:
+    """[lowest, highest] specific energy [kWh/t] of the fitted lab tests: P_lab t / H_lab over
+    the fit's grinding times t (batch times or mean residence times, ``grinding_time_range_s``
+    of the fit JSON) with the lab mill's net power and hold-up; [] when the fit does not
+    record its times."""
+    t = fit.spec.get("grinding_time_range_s") or []
+    if len(t) != 2:
+        return []
+    f = su.factors()
+    per_s = f["lab_power_kW"] / (f["lab_holdup_kg"] / 1000.0) / 3600.0  # kWh/t per second of grinding
+    return [per_s * float(t[0]), per_s * float(t[1])]
+
+
+def calibrated_range_notes(fit, su, p80_m: float, target_p80_m=None, energies=None) -> list[str]:
     """Where the prediction leaves what the lab data calibrated: a P80 (predicted or
     target) outside the measured sieve range, an eq. 10 process value outside the range of
-    the fitted conditions."""
+    the fitted conditions, a plant specific energy per pass through the mill, P / F_mill
+    (``energies``: what -> kWh/t; P tau / H, what a batch test's P t / H calibrates), outside
+    the lab tests' range (:func:`lab_energy_range`)."""
     notes = []
     lo_hi = fit.spec.get("measured_size_range_m") or []
     if len(lo_hi) == 2:
@@ -67,6 +95,13 @@ def calibrated_range_notes(fit, su, p80_m: float, target_p80_m=None) -> list[str
         if seen and v is not None and not min(seen) <= float(v) <= max(seen):
             notes.append(f"process value {c} = {float(v):.4g} is outside the fitted conditions' range "
                          f"{min(seen):.4g}..{max(seen):.4g}: eq. 10 is extrapolated")
+    rng = lab_energy_range(fit, su)
+    for what, e in (energies or {}).items():
+        if rng and e is not None and math.isfinite(e) and not rng[0] <= e <= rng[1]:
+            side = "below" if e < rng[0] else "above"
+            notes.append(f"specific energy per pass through the mill {e:.4g} kWh/t (P / mill flow) {what} is {side} "
+                         f"the lab tests' range {rng[0]:.4g}..{rng[1]:.4g} kWh/t (lab net power x grinding time / "
+                         "hold-up): the breakage model is extrapolated in energy")
     return notes
 
 
@@ -76,16 +111,16 @@ def predict_plant(su, target_p80_m=None, methods=("delta", "mc"), n_draws: int =
     t0 = time.perf_counter()
     fit = su.fit
     v0 = fit.theta[fit.index]
-    g, names = _quantities(su, target_p80_m)
+    g, g_pop, names = _quantities(su, target_p80_m)
     point = su.operate(fit.theta)
     res, timing = {}, {}
     for m in methods:
         t = time.perf_counter()
         if m == "delta":
-            res[m] = delta_method(g, v0, fit.cov, rel_step)
+            res[m] = delta_method(g, v0, fit.cov, rel_step, g_pop=g_pop)
         elif m == "mc":
             res[m] = monte_carlo(g, v0, fit.cov, n_draws, seed, physical=lambda z: fit.physical(fit.full(z)),
-                                 skip_errors=(MillflowError,))
+                                 skip_errors=(MillflowError,), g_pop=g_pop)
         else:
             raise ValueError(f"method {m!r}: expected 'delta' or 'mc'")
         timing[m] = time.perf_counter() - t
@@ -136,7 +171,14 @@ def predict_plant(su, target_p80_m=None, methods=("delta", "mc"), n_draws: int =
         summary["mc"] = {"n": res["mc"]["n"], "rejected": res["mc"]["rejected"], "failed": res["mc"]["failed"]}
     if "delta" in res:
         summary["delta_step"] = {n: float(h) for n, h in zip(fit.varying, res["delta"]["step"])}
-    summary["extrapolation"] = calibrated_range_notes(fit, su, point["p80_m"], target_p80_m)
+    # a particle's exposure per pass through the mill, P tau / H = P / F_mill, is what a batch
+    # test's P t / H calibrates (in a closed circuit below the energy per tonne of fresh feed)
+    per_pass = {f"at {su.feed_tph:.4g} t/h": su.power_kW / (point["mill_flow_kg_s"] * 3.6)}
+    if target_p80_m is not None:
+        per_pass[f"at the target P80 {target_p80_m * 1e6:.4g} um"] = su.power_kW / (tr["mill_flow_kg_s"] * 3.6)
+    summary["specific_energy_per_pass_kWh_t"] = dict(per_pass)
+    summary["lab_specific_energy_kWh_t"] = lab_energy_range(fit, su)
+    summary["extrapolation"] = calibrated_range_notes(fit, su, point["p80_m"], target_p80_m, per_pass)
     for note in summary["extrapolation"]:
         warnings.warn(note, UserWarning, stacklevel=2)
     summary["runtime_s"] = time.perf_counter() - t0

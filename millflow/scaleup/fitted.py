@@ -3,7 +3,10 @@
 :class:`FittedBreakage` holds the estimate, its eq. 9 covariance and the model
 description written by the fit, and evaluates S (eqs. 5, 7, 10) and b (eq. 6) for any
 parameter vector at given process conditions, on the fit's grid or on another grid
-(exact: the functional forms are evaluated at the new sizes, not interpolated).
+(exact: the continuous forms are put on the new grid, not interpolated). The parameter
+vector is decoded by the fit's own translator (:class:`millflow.fitting.translate.Translator`),
+the one home of eq. 10 and of the forms' parameterisation; :meth:`FittedBreakage.rate_model`
+and :meth:`FittedBreakage.distribution_model` hand the forms to a flowsheet mill.
 
 Only what is a property of the material and the breakage mechanism can be carried to
 another mill: fits with classification inside the lab mill (``screen``) or with A in
@@ -17,12 +20,10 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from millflow.breakage.distributions import breakage_population
-from millflow.breakage.rates import austin_rates_population, ln_process_power_law, power_law_rates_population
 from millflow.errors import InputError
 from millflow.inputs import read_text
 
-__all__ = ["FittedBreakage", "load_fit", "fit_from_dict"]
+__all__ = ["FittedBreakage", "FittedRate", "FittedDistribution", "load_fit", "fit_from_dict"]
 
 _RATES = ("power", "austin")
 _BREAKAGES = ("normalized", "single")
@@ -69,6 +70,9 @@ class FittedBreakage:
         if C.shape != (len(self.varying),) * 2 or not np.all(np.isfinite(C)):
             raise InputError(f"{src}: covariance has shape {C.shape} or non-finite entries; expected a finite "
                              f"({len(self.varying)}, {len(self.varying)}) matrix")
+        from millflow.scaleup.uncertainty import check_covariance
+
+        check_covariance(C, list(self.varying), f"{src}: covariance")
         object.__setattr__(self, "cov", C)
         object.__setattr__(self, "theta", np.asarray(self.theta, float))
 
@@ -94,16 +98,20 @@ class FittedBreakage:
         out[..., self.index] = v
         return out
 
+    @property
+    def translator(self):
+        """The fit's decoder of parameter vectors (:class:`millflow.fitting.translate.Translator`)."""
+        t = self.__dict__.get("_translator")
+        if t is None:
+            from millflow.fitting.translate import Translator
+
+            t = Translator.from_description(self.spec)
+            object.__setattr__(self, "_translator", t)
+        return t
+
     def physical(self, theta) -> np.ndarray:
         """Mask of parameter vectors (..., P) inside the physical domain of eqs. 6/7."""
-        t = np.atleast_2d(theta)
-        p = {n: t[:, k] for k, n in enumerate(self.names)}
-        ok = p["gamma"] > 0
-        if self.spec["breakage"] == "normalized":
-            ok &= (p["phi"] >= 0) & (p["phi"] <= 1) & (p["beta"] > 0)
-        if self.spec["rate"] == "austin":
-            ok &= p["Lambda"] > 0
-        return ok
+        return self.translator.physical(theta)
 
     # ---------------------------------------------------------------- evaluation
     def check_process(self, process: dict, where: str) -> dict:
@@ -119,47 +127,88 @@ class FittedBreakage:
             out[c] = v
         return out
 
+    def _process(self, process: dict) -> dict:
+        return {c: float(process[c]) for c in self.spec.get("rate_process", [])}
+
     def rates(self, theta, x, process: dict, A_factor: float = 1.0, mu_factor: float = 1.0) -> np.ndarray:
         """S [1/s] at sizes x [m] (last class the sink, S = 0) for parameter vector(s)
         theta (..., P): eq. 5 or eq. 7 (Lambda, mu) with A by eq. 10 at ``process``, A
         and mu multiplied by the given scale-up factors."""
-        t = np.atleast_2d(np.asarray(theta, float))
-        p = {n: t[:, k] for k, n in enumerate(self.names)}
-        cols = self.spec.get("rate_process", [])  # eq. 10 at the plant's process values
-        lnA = ln_process_power_law(p["ln_A0"] + math.log(A_factor), {c: float(process[c]) for c in cols},
-                                   {c: p[f"a_{c}"] for c in cols},
-                                   {c: float(self.spec["process_ref"][c]) for c in cols})
-        x0 = float(self.spec["x0_m"])
-        A = np.exp(np.minimum(lnA, 600.0))
-        if self.spec["rate"] == "austin":  # eq. 7 (mu scaled by the scale-up factor)
-            mu0 = np.exp(p["ln_mu"]) * x0 * mu_factor
-            S = austin_rates_population(x, A, p["alpha"], mu0, p["Lambda"], x0=x0)
-        else:  # eq. 5
-            S = power_law_rates_population(x, A, p["alpha"], x0)
+        tr = self.translator
+        p = tr.unpack(theta)
+        S = tr.rate_at(p, self._process(process), 1, np.asarray(x, float), A_factor, mu_factor)[:, 0]
+        S[..., -1] = 0.0  # the sink does not break
         return S if np.ndim(theta) > 1 else S[0]
 
     def frac_b(self, theta, x) -> np.ndarray:
-        """Fractional b (..., N, N) of eq. 6 at sizes x [m] (normalised: B_ij depends on
-        x_{i-1}/x_j only, carried unchanged between mills), from
-        :func:`millflow.breakage.distributions.breakage_population`."""
-        t = np.atleast_2d(np.asarray(theta, float))
-        p = {n: t[:, k] for k, n in enumerate(self.names)}
-        x = np.asarray(x, float)
-        if self.spec["breakage"] == "single":
-            b = breakage_population(x, 1.0, p["gamma"], p["gamma"], kind="b")
-        else:
-            b = breakage_population(x, p["phi"], p["gamma"], p["beta"], kind="b")
+        """Fractional b (..., N, N) of eq. 6 at the upper edges x [m] (Austin's discrete form;
+        :meth:`on_grid` gives the class averages)."""
+        tr = self.translator
+        b = tr.edge_b(tr.unpack(theta), {}, 1, np.asarray(x, float))[:, 0]
         return b if np.ndim(theta) > 1 else b[0]
 
-    def cumulative(self, theta, x, y) -> np.ndarray:
+    def on_grid(self, theta, grid, process: dict, A_factor: float = 1.0, mu_factor: float = 1.0):
+        """(S (..., N) [1/s], b (..., N, N)) on ``grid`` (class averages on the default scheme)
+        for parameter vector(s) theta, at ``process`` with the scale-up factors."""
+        tr = self.translator
+        p = tr.unpack(theta)
+        S, b = tr.breakage_on_grid(p, self._process(process), 1, grid, A_factor, mu_factor)
+        S, b = S[:, 0], b[:, 0]
+        return (S, b) if np.ndim(theta) > 1 else (S[0], b[0])
+
+    def cumulative(self, theta, x, y, top=None) -> np.ndarray:
         """Continuous B(x; y) [-] of eq. 6 at sizes x, y [m] (broadcasting) for one parameter
         vector theta (:func:`millflow.breakage.distributions.continuous_B`)."""
-        from millflow.breakage.distributions import continuous_B
+        return self.translator.cumulative(theta, x, y, top)
 
-        p = dict(zip(self.names, np.asarray(theta, float)))
-        if self.spec["breakage"] == "single":
-            return continuous_B(x, y, 1.0, p["gamma"], p["gamma"])
-        return continuous_B(x, y, p["phi"], p["gamma"], p["beta"])
+    def rate_model(self, theta=None, process: dict | None = None, A_factor: float = 1.0,
+                   mu_factor: float = 1.0) -> "FittedRate":
+        """The fitted rate at ``process`` as a rate model of size (for a flowsheet mill)."""
+        theta = self.theta if theta is None else np.asarray(theta, float)
+        return FittedRate(self, theta, self._process(process or {}), float(A_factor), float(mu_factor))
+
+    def distribution_model(self, theta=None) -> "FittedDistribution":
+        """The fitted breakage distribution as a distribution model (for a flowsheet mill)."""
+        return FittedDistribution(self, self.theta if theta is None else np.asarray(theta, float))
+
+
+@dataclass(frozen=True, eq=False)
+class FittedRate:
+    """S(x) [1/s] of a fitted breakage model at given process values, times scale-up factors
+    on A and mu: a continuous rate model (callable of the sizes [m])."""
+
+    fitted: FittedBreakage
+    theta: np.ndarray
+    process: dict
+    A_factor: float = 1.0
+    mu_factor: float = 1.0
+
+    def __call__(self, x):
+        return self.fitted.rates(self.theta, np.asarray(x, float), self.process, self.A_factor, self.mu_factor)
+
+    def __repr__(self):
+        return (f"FittedRate({self.fitted.source}, {self.fitted.spec['rate']} form, process {self.process}, "
+                f"A x {self.A_factor:.4g}, mu x {self.mu_factor:.4g})")
+
+
+@dataclass(frozen=True, eq=False)
+class FittedDistribution:
+    """B(x; y) of a fitted breakage model (eq. 6): ``cumulative`` for class averages, ``b``
+    for Austin's upper edges."""
+
+    fitted: FittedBreakage
+    theta: np.ndarray
+
+    def b(self, x):
+        return self.fitted.frac_b(self.theta, np.asarray(x, float))
+
+    __call__ = b
+
+    def cumulative(self, x, y, top=None):
+        return self.fitted.cumulative(self.theta, x, y, top)
+
+    def __repr__(self):
+        return f"FittedDistribution({self.fitted.source}, {self.fitted.spec['breakage']})"
 
 
 def load_fit(path) -> FittedBreakage:

@@ -1,9 +1,10 @@
 """A mill given by dimensions and operation, and the circuit it works in.
 
 :class:`MillDesign` turns dimensions and operation into net power (a model of
-:mod:`millflow.scaleup.power`, or a given power) and hold-up; :class:`Circuit` is the
-mill with its transport (any rtd model, tau = H / F set by the mill's flow) and an
-optional closing classifier whose coarse stream returns to the mill feed.
+:mod:`millflow.scaleup.power`, or a given power) and hold-up; :class:`Circuit` describes
+the mill with its transport (any rtd model, tau = H / F set by the mill's flow) and an
+optional closing classifier whose coarse stream returns to the mill feed. The circuit is
+solved as a flowsheet (:mod:`millflow.scaleup.study`); scale-up holds no solver of its own.
 
 Hold-up (powder or dry solids): H = rho_s (1 - eps) U eps J V  [kg],
 V = pi D^2 L / 4 inside liners, J the ball-bed fraction of V, eps = 0.4 the porosity of
@@ -11,12 +12,9 @@ the ball bed and of the powder bed, U the fraction of the ball-bed voids filled 
 powder (Austin, Klimpel & Luckie 1984, ch. 10 definitions). Wet mills hold slurry
 whose volume depends on discharge design: give ``holdup_kg`` directly there.
 
-Closed circuit, steady state (all linear in the flows for a fixed mill flow F_m):
-mill feed m = f + C T(tau) m, tau = H / F_m, product = (I - C) T m, with C = diag(c_i)
-the classifier's fraction to the coarse (recycle) stream and T the mill's transfer
-matrix (:func:`millflow.transfer_matrix`). Per unit fresh feed m_hat = (I - C T)^-1 f_hat,
-and the fresh feed rate that a mill flow F_m carries is F = F_m / sum(m_hat): one scalar
-equation in F_m, solved by Brent's method on ln F_m.
+Closed circuit, steady state: linear in the flows for a fixed mill flow F_m (tau = H / F_m),
+so the fresh feed rate that a mill flow carries is F = F_m / sum(m_hat), m_hat the mill
+feed per unit fresh feed: one scalar equation in F_m (:mod:`millflow.scaleup.study`).
 """
 from __future__ import annotations
 
@@ -25,7 +23,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from millflow.errors import InputError, SolverError
+from millflow.errors import InputError
 from millflow.scaleup import power as _power
 from rtd import names as _rtd_names
 from rtd.base import RTDError
@@ -151,84 +149,39 @@ class Circuit:
         params = {k: v for k, v in self.classifier.items() if k != "curve"}
         return efficiency(self.classifier["curve"], x, **params)
 
-    # --------------------------------------------------------------------- solves
-    def _mill_matrix(self, S, b, F_m):
-        tau = self.mill.holdup() / F_m
-        n = {"perfect_mixing": 1.0,
-             "tanks_in_series": float(dict(self.transport_params).get("n", 0))}.get(self.transport, 0.0)
-        if n >= 1 and n == int(n) and n <= 20:
-            # equal well-mixed tanks: T = (I + tau/n A)^-n, A = (I - b) diag(S) lower
-            # triangular, so one triangular solve and n-1 products (what
-            # millflow.transfer_matrix does, without its per-call validation, which
-            # dominates inside root and Monte Carlo loops)
-            from scipy.linalg import solve_triangular
-            M = (np.eye(S.size) - b) * (tau / n * S)[None, :]
-            M[np.diag_indices_from(M)] += 1.0
-            Ti = solve_triangular(M, np.eye(S.size), lower=True, check_finite=False)
-            T = Ti
-            for _ in range(int(n) - 1):
-                T = Ti @ T
-            return T, tau
-        if self.transport == "plug_flow":
-            from scipy.linalg import expm
-            return expm(-tau * (np.eye(S.size) - b) * S[None, :]), tau
-        from millflow.mill import transfer_matrix
-        return transfer_matrix(S, b, make_transport(self.transport, tau, dict(self.transport_params))), tau
+    # ------------------------------------------------- deprecated solves
+    def _study(self, S, b, feed, c):
+        """A one-off plant flowsheet of this circuit with S, b and the partition c as given
+        (discrete: no grid of sizes needed), for the deprecated solve methods."""
+        import warnings
+
+        from millflow.breakage import TabulatedBreakage, TabulatedRate
+        from millflow.grid import SizeGrid
+        from millflow.scaleup.study import PlantStudy
+
+        warnings.warn("Circuit.at_mill_flow and Circuit.at_throughput are deprecated: a plant study is a flowsheet "
+                      "(millflow.scaleup.study.PlantStudy, through ScaleUp)", DeprecationWarning, stacklevel=3)
+        S = np.asarray(S, float)
+        grid = SizeGrid.geometric(1.0, 2.0, S.size).with_scheme("upper_edge")  # labels only: S, b, c as given
+        clf = None
+        if c is not None:
+            part = np.asarray(c, float)
+            clf = {"curve": lambda x, part=part: part}
+        import dataclasses
+
+        circ = dataclasses.replace(self, classifier=clf)
+        study = PlantStudy(grid, np.asarray(feed, float), circ, self.mill.holdup(), 1.0)
+        fs = study.flowsheet(TabulatedRate(np.asarray(S, float)), TabulatedBreakage(b=np.asarray(b, float)))
+        return study, fs
 
     def at_mill_flow(self, S, b, feed, F_m, c=None):
-        """Circuit at mill flow F_m [kg/s]: dict product (fractions), fresh_kg_s, tau_s,
-        circulating_load (recycle / fresh), mass_balance (|1 - sum(product)|)."""
-        T, tau = self._mill_matrix(S, b, F_m)
-        if c is None:
-            p = T @ feed
-            return {"product": p, "fresh_kg_s": F_m, "tau_s": tau, "circulating_load": 0.0,
-                    "mass_balance": abs(1.0 - p.sum())}
-        A = np.eye(feed.size) - c[:, None] * T
-        try:
-            with np.errstate(all="ignore"):
-                m = np.linalg.solve(A, feed)
-        except np.linalg.LinAlgError:
-            m = np.full(feed.size, np.nan)
-        if not np.all(np.isfinite(m)) or m.min() < -1e-9 * max(float(np.abs(m).max()), 1.0):
-            # I - C T singular: a size the classifier returns (c = 1) that the mill does not
-            # break at this residence time can never leave the circuit
-            stuck = int(np.argmax(c * np.diag(T)))
-            raise SolverError(f"circuit has no steady state at a mill flow of {F_m * 3.6:.4g} t/h (tau "
-                              f"{tau:.3g} s): size class {stuck + 1} is returned by the classifier (c = "
-                              f"{c[stuck]:.6g}) and passes the mill unbroken ({float(T[stuck, stuck]):.6g}); "
-                              "check the classifier's d50 and the mill's size and hold-up")
-        s = m.sum()
-        p = (1 - c) * (T @ m)
-        return {"product": p, "fresh_kg_s": F_m / s, "tau_s": tau, "circulating_load": s - 1.0,
-                "mass_balance": abs(1.0 - p.sum())}
+        """Deprecated: the circuit at mill flow F_m [kg/s] (:meth:`millflow.scaleup.study.
+        PlantStudy.at_mill_flow` on the plant flowsheet)."""
+        study, fs = self._study(S, b, feed, c)
+        return study.at_mill_flow(fs, F_m)
 
     def at_throughput(self, S, b, feed, F, c=None, guess_load=None):
-        """Circuit at fresh feed F [kg/s]; closed circuits solve F_m / sum(m_hat(F_m)) = F
-        by Brent's method on u = ln F_m. ``guess_load``: a circulating load near the answer
-        (e.g. of the point estimate) to start a narrow bracket from."""
-        if c is None:
-            return self.at_mill_flow(S, b, feed, F)
-        from scipy.optimize import brentq
-
-        def g(u):
-            return math.log(self.at_mill_flow(S, b, feed, math.exp(u), c)["fresh_kg_s"] / F)
-        lo = math.log(F)  # F_m >= F: g(lo) <= 0
-        if guess_load is not None:
-            u0 = lo + math.log1p(guess_load)
-            lo2, hi = u0 - 0.1, u0 + 0.1
-            if lo2 > lo and g(lo2) < 0:
-                lo = lo2
-            g_hi = g(hi)
-        else:
-            hi = lo + math.log(4.0)
-            g_hi = g(hi)
-        k = 0
-        while g_hi < 0:
-            lo, hi = hi, hi + math.log(4.0)
-            g_hi = g(hi)
-            k += 1
-            if k > 20:
-                raise SolverError(f"circuit cannot pass a fresh feed of {F * 3.6:.6g} t/h: the recycle grows "
-                                  "without bound (mill capacity exceeded)")
-        u = brentq(g, lo, hi, xtol=1e-13, rtol=4 * np.finfo(float).eps)
-        return self.at_mill_flow(S, b, feed, math.exp(u), c)
+        """Deprecated: the circuit at fresh feed F [kg/s] (:meth:`millflow.scaleup.study.
+        PlantStudy.at_throughput` on the plant flowsheet)."""
+        study, fs = self._study(S, b, feed, c)
+        return study.at_throughput(fs, F)

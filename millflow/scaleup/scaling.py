@@ -12,7 +12,7 @@
 - :func:`austin_factors`: multiplicative factors on A and mu of eq. 7 for mill diameter,
   ball diameter, ball filling J, powder filling U and fraction of critical speed phi_c,
   after Austin, Klimpel & Luckie (1984), Process Engineering of Size Reduction: Ball
-  Milling, ch. 10 (and L. G. Austin, P. T. Luckie, K. Shoji, Powder Technol. 14 (1976) 71
+  Milling, ch. 10 (and L. G. Austin, K. Shoji, P. T. Luckie, Powder Technol. 14 (1976) 71-79
   for the ball-size terms). Every exponent is an argument; the defaults are the values
   AKL quote as typical, to be replaced by tested values where they exist. The ball-size
   exponent of the size at maximum rate, mu ~ d^N2, is N2 = 2: Austin, Shoji and Luckie

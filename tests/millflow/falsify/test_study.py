@@ -55,7 +55,11 @@ def test_bias_grows_with_tanks_in_series():
     ds = res.dataset
     b = np.abs(ds.bias_pct.sel(parameter="ln_A0").values)
     assert np.all(np.diff(b) > 0), b
-    assert ds.coverage.sel(parameter="ln_A0").values[-1] == 0.0
+    # the bias measured in reported SEs grows too, to beyond 1.5 SE at n = 4 (measured ~2 SE on the
+    # class-averaged grid; with beta at its bound the SE of ln_A0 is wide, so a 95 % interval may
+    # still reach the truth: the bias in SE, not the coverage of 3 replicates, is the stable signal)
+    t = np.abs(ds.bias_se.sel(parameter="ln_A0").values)
+    assert t[-1] > 1.5 and t[-1] > t[0], t
     # the fits still look fine by R2 while the kinetics are wrong: the runs test sees it
     assert ds.r2.values[-1] > 0.98
     assert ds.runs_reject.values[-1] > ds.runs_reject.values[0]

@@ -12,7 +12,8 @@ import pytest
 
 from millflow.batch import batch_grind
 from millflow.synthetic import BOUNDS, TRUTH, make_batch_problem
-from millflow.breakage import b_from_B, normalized_B, power_law_rates
+from millflow.breakage import NormalizedBreakage, PowerLawRate, b_from_B, normalized_B, power_law_rates
+from millflow.breakage.averaged import averaged_breakage, class_average
 from millflow.errors import InputError
 from millflow.fitting.data import psd_data_from_frames, read_psd_table
 from millflow.fitting.estimate import compare_models, fit
@@ -69,8 +70,21 @@ def test_read_csv_and_process_table(tmp_path):
 
 # --------------------------------------------------------------------- forward model
 def test_batch_model_matches_core_solver():
-    """The vectorised batch path equals millflow.batch.batch_grind on the grid."""
+    """The vectorised batch path equals millflow.batch.batch_grind on the grid, with the core's
+    class-averaged S and b (millflow.breakage.averaged, an independent O(N^2) quadrature)."""
     model, params, truth = make_batch_problem(n_times=3, n_sieves=10, n_grid=25, noise=0.0)
+    theta = np.array([truth[n] for n in model.param_names])
+    M = model.predict_grid(theta[None])[0]
+    S, b = averaged_breakage(PowerLawRate(math.exp(truth["ln_A0"]), truth["alpha"], 1e-3),
+                             NormalizedBreakage(truth["phi"], truth["gamma"], truth["beta"]), model.grid)
+    ref = batch_grind(S, b, model._feeds[0], model.times)
+    np.testing.assert_allclose(M, ref, atol=1e-12)  # both exact: rounding only
+
+
+def test_batch_model_on_an_upper_edge_grid_matches_austins_discrete_model():
+    """scheme = "upper_edge": S and b at the upper class edges (eqs. 5 and 6 as Austin writes them)."""
+    model, params, truth = make_batch_problem(n_times=3, n_sieves=10, n_grid=25, noise=0.0)
+    model = model.with_grid(model.grid.with_scheme("upper_edge"))
     theta = np.array([truth[n] for n in model.param_names])
     M = model.predict_grid(theta[None])[0]
     x = model.grid.x
@@ -90,9 +104,8 @@ def test_well_mixed_model_matches_core_solver_and_holdup():
     m = ForwardModel(spec, d, SizeGrid(x))
     theta = np.array([0.5, 1.0, 0.4, 0.8, 3.0, 0.0, 1.5])  # ln_A0 alpha phi gamma beta ln_c50 ln_sharp
     M = m.predict_grid(theta[None])[0]
-    S = power_law_rates(x, math.exp(0.5), 1.0, 1e-3)
-    b = b_from_B(normalized_B(x, 0.4, 0.8, 3.0))
-    dstar = 1 / (1 + (x / 1e-3) ** math.exp(1.5))
+    S, b = averaged_breakage(PowerLawRate(math.exp(0.5), 1.0, 1e-3), NormalizedBreakage(0.4, 0.8, 3.0), m.grid)
+    dstar = class_average(lambda y: 1 / (1 + (y / 1e-3) ** math.exp(1.5)), m.grid)
     prod = solve_well_mixed(S, b, m._feeds[0], 1.0, dstar)
     g = {loc: k for k, (_, loc, _) in enumerate(m.groups)}
     np.testing.assert_allclose(M[g["product"]], prod, atol=1e-13)

@@ -1,4 +1,4 @@
-"""Issue 15 §3: transport, classification and breakage fitted together from a tracer
+"""Transport, classification and breakage fitted together from a tracer
 curve and PSD samples at several locations (the worked example, synthetic data)."""
 from __future__ import annotations
 
@@ -29,19 +29,50 @@ def fits(example):
 
 def test_joint_fit_recovers_transport_and_breakage_within_their_intervals(example, fits):
     """Every parameter (tau and r of the transport, d50 and sharpness of the screen, the
-    rate and breakage parameters) has its truth inside the fit's 95 % interval
-    (estimate +- 1.96 SE, eq. 9) for the example's seeded data set. One data set, so
-    this is a check of this realisation, not a coverage study."""
+    rate and breakage parameters) has its truth within 3 SE of the estimate (eq. 9), and the
+    truth lies inside the joint 95 % confidence region of the fit, SSR(truth) <= SSR_best
+    (1 + p/(n - p) F_{p,n-p,0.95}). One seeded data set, so a check of this realisation:
+    nine 95 % intervals all cover with probability ~0.6 only, so each is held at 3 SE
+    (Bonferroni over 9 parameters at a family-wise 95 % is 2.77 SE), and the joint region
+    is the statement eq. 9 makes about all of them at once."""
+    from scipy import stats
+
     for name, p in fits["multi"]["params"].items():
-        assert abs(p["estimate"] - p["truth"]) <= 1.96 * p["se"], (name, p)
+        assert abs(p["estimate"] - p["truth"]) <= 3.0 * p["se"], (name, p)
     assert {"ln_tau", "r", "ln_c50", "ln_A0"} <= set(fits["multi"]["params"])
+    model, _ = example.make_problem(example.MULTI_LOCATION)
+    theta = np.array([example.TRUTH[n] for n in model.param_names])
+    # the residuals in the fit's own weights: tracer rows re-weighted by their variance component
+    rows = np.where(np.asarray(model.data_kind, dtype=object) == "tracer", fits["multi"]["tracer_weight"], 1.0)
+    r = (model.predict(theta) - model.y) * np.sqrt(model.weights * rows)
+    n, p = model.n_data, len(theta)
+    limit = fits["multi"]["ssr"] * (1 + p / (n - p) * stats.f.ppf(0.95, p, n - p))
+    assert float(r @ r) <= limit
 
 
-def test_samples_inside_the_mill_separate_breakage_from_classification(fits):
-    """Product data alone: ln_A0 and ln_c50 correlated near 1; with hold-up and cell
-    samples the correlation drops and the SEs shrink (worked example, docs/fitting.md)."""
+def _correlation_at_truth(example, locations, a="ln_A0", b="ln_c50"):
+    """corr(a, b) of eq. 9 at the truth: what the design (the locations sampled) implies,
+    independent of where one noisy fit lands in a flat valley."""
+    model, _ = example.make_problem(locations)
+    theta = np.array([example.TRUTH[n] for n in model.param_names])
+    J = []
+    for k in range(theta.size):  # central differences; the model is smooth and exact to rounding
+        e = np.zeros_like(theta)
+        e[k] = 1e-6
+        J.append((model.predict(theta + e) - model.predict(theta - e)) / 2e-6)
+    J = np.array(J).T * np.sqrt(model.weights)[:, None]
+    C = np.linalg.inv(J.T @ J)
+    i, j = model.param_names.index(a), model.param_names.index(b)
+    return C[i, j] / np.sqrt(C[i, i] * C[j, j])
+
+
+def test_samples_inside_the_mill_separate_breakage_from_classification(example, fits):
+    """Product data alone: ln_A0 and ln_c50 correlated near 1 (at the truth: the design);
+    with hold-up and cell samples the correlation drops and the SEs shrink (worked example,
+    docs/fitting.md)."""
     a, b = fits["product"], fits["multi"]
-    assert abs(a["corr_lnA0_lnc50"]) > 0.9
+    assert abs(_correlation_at_truth(example, example.PRODUCT_ONLY)) > 0.9
+    assert abs(_correlation_at_truth(example, example.MULTI_LOCATION)) < 0.5
     assert abs(b["corr_lnA0_lnc50"]) < 0.5
     for name in ("ln_A0", "alpha", "ln_c50", "ln_sharp"):
         assert b["params"][name]["se"] < 0.5 * a["params"][name]["se"], name

@@ -6,6 +6,7 @@ import pandas as pd
 import pytest
 
 from millflow.breakage import b_from_B, normalized_B
+from millflow.breakage.averaged import breakage_on_grid
 from millflow.errors import InputError
 from millflow.fitting.config import load_config
 from millflow.fitting.data import psd_data_from_frames
@@ -85,10 +86,9 @@ def test_mill_mode_axial_samples_match_steady_mill():
     theta = np.array([-3.5, 1.0, 0.4, 0.8, 3.0])
     M = m.predict_grid(theta)[0]
     g = {loc: k for k, (_, loc, _) in enumerate(m.groups)}
-    x = m.grid.x
     tau = float(m._proc["tau_s"][0])
-    ds = steady_mill(PowerLawRate(np.exp(-3.5), 1.0)(x), NormalizedBreakage(0.4, 0.8, 3.0)(x), m._feeds[0],
-                     rtd.PlugFlow(tau), positions=[0.5], locations=["z:0.5"])
+    S, b, _ = breakage_on_grid(PowerLawRate(np.exp(-3.5), 1.0), NormalizedBreakage(0.4, 0.8, 3.0), m.grid)
+    ds = steady_mill(S, b, m._feeds[0], rtd.PlugFlow(tau), positions=[0.5], locations=["z:0.5"])
     np.testing.assert_allclose(M[g["z:0.5"]], ds["sample"].values[0], rtol=0, atol=1e-12)  # same solver
     assert M[g["z:0.5"]][0] > M[g["product"]][0]  # coarser halfway along
 
@@ -154,9 +154,11 @@ starts = 1
 def test_b_matrix_csv_config_round_trip(tmp_path):
     truth = {"ln_A0": -4.0, "alpha": 1.2, "phi": 0.4, "gamma": 0.8, "beta": 3.0}
     B = normalized_B(X, truth["phi"], truth["gamma"], truth["beta"])
+    # the data come from the discrete model the config describes: this b matrix as given
     gen = ForwardModel(ModelSpec(mode="mill", transport="tanks_in_series", transport_params={"n": 2},
-                                 tau_column="tau_s"), _data(["c1", "c2"], ["product"], PROC), GRID)
-    vals = _synthetic(gen, np.array([truth[n] for n in gen.param_names]))
+                                 tau_column="tau_s", breakage="fixed", b_matrix=b_from_B(B)),
+                       _data(["c1", "c2"], ["product"], PROC), GRID)
+    vals = _synthetic(gen, np.array([truth[n] for n in gen.param_names if n in ("ln_A0", "alpha")]))
     rows = [pd.DataFrame({"condition": "*", "location": "feed", "size_m": X[:2], "passing": [1.0, 0.0]})]
     rows += [pd.DataFrame({"condition": c, "location": loc, "size_m": X, "passing": v}) for (c, loc), v in vals.items()]
     pd.concat(rows).to_csv(tmp_path / "psd.csv", index=False)
@@ -245,8 +247,8 @@ def test_mill_mode_fits_peclet_number_and_reads_axial_samples():
     theta = np.array([-5.0, 1.0, 0.4, 0.8, 3.0, np.log(300.0), np.log(6.0)])
     M = m.predict_grid(theta)[0]
     g = {loc: k for k, (_, loc, _) in enumerate(m.groups)}
-    ds = steady_mill(PowerLawRate(np.exp(-5.0), 1.0)(X), NormalizedBreakage(0.4, 0.8, 3.0)(X), m._feeds[0],
-                     rtd.AxialDispersion(300.0, 6.0), positions=[0.5], locations=["z:0.5"])
+    S, b, _ = breakage_on_grid(PowerLawRate(np.exp(-5.0), 1.0), NormalizedBreakage(0.4, 0.8, 3.0), m.grid)
+    ds = steady_mill(S, b, m._feeds[0], rtd.AxialDispersion(300.0, 6.0), positions=[0.5], locations=["z:0.5"])
     np.testing.assert_allclose(M[g["z:0.5"]], ds["sample"].values[0], rtol=0, atol=1e-12)
     np.testing.assert_allclose(M[g["product"]], ds["product"].values, rtol=0, atol=1e-12)  # the same solve
 

@@ -4,7 +4,9 @@ Issue 11 §1: the fit used to carry its own copies of eqs. 3-8 and of the screen
 Here, on random parameter sets (hypothesis), the fit's predictions on the grid are
 compared with what a user gets from the public core: ``batch_grind`` (eq. 4),
 ``steady_mill`` with ``rtd.PerfectMixing`` (eq. 3), ``AustinRate`` / ``PowerLawRate``
-(eqs. 5, 7), ``NormalizedBreakage`` (eq. 6) and the classifier curves.
+(eqs. 5, 7), ``NormalizedBreakage`` (eq. 6) and the classifier curves, put on the grid
+by ``breakage_on_grid`` and ``curve_on_grid`` (class averages on the default grid: the
+core's O(N^2) quadrature, against the fit's separable O(N) form of the same integrals).
 
 Tolerance: both sides are exact methods evaluated in double precision; they differ
 only in the order of floating-point operations (vectorised over the population vs one
@@ -28,6 +30,7 @@ from millflow import classifiers
 from millflow.batch import batch_grind, batch_grind_population
 from millflow.synthetic import make_batch_problem
 from millflow.breakage import AustinRate, NormalizedBreakage, PowerLawRate
+from millflow.breakage.averaged import breakage_on_grid, curve_on_grid
 from millflow.fitting.data import psd_data_from_frames
 from millflow.fitting.models import ForwardModel, ModelSpec
 from millflow.grid import SizeGrid
@@ -46,9 +49,9 @@ def test_batch_forward_model_is_batch_grind(ln_A0, alpha, phi, gamma, beta):
     model, _, _ = make_batch_problem(n_times=3, n_sieves=8, n_grid=20, noise=0.0)
     theta = np.array([ln_A0, alpha, phi, gamma, beta])
     got = model.predict_grid(theta[None])[0]
-    x = model.grid.x
-    S = PowerLawRate(math.exp(ln_A0), alpha, x0=1e-3)(x)
-    b = NormalizedBreakage(phi, gamma, beta)(x)
+    S, b, how = breakage_on_grid(PowerLawRate(math.exp(ln_A0), alpha, x0=1e-3), NormalizedBreakage(phi, gamma, beta),
+                                 model.grid)
+    assert how == "class average"
     ref = batch_grind(S, b, model._feeds[0], model.times)
     np.testing.assert_allclose(got, ref, rtol=0, atol=ROUNDING)
 
@@ -62,10 +65,10 @@ def test_nearly_equal_rates_are_solved_exactly():
                       # this member made the old code raise LinAlgError ("Singular matrix")
                       + [[-2.67994691e-01, -4.53128896e-09, 9.31520644e-01, 5.13791569e-01, 5.95892768e+00]])
     got = model.predict_grid(thetas)
-    x = model.grid.x
     for k, th in enumerate(thetas):
-        S = PowerLawRate(math.exp(th[0]), th[1], x0=1e-3)(x)
-        ref = batch_grind(S, NormalizedBreakage(*th[2:])(x), model._feeds[0], model.times)
+        S, b, _ = breakage_on_grid(PowerLawRate(math.exp(th[0]), th[1], x0=1e-3), NormalizedBreakage(*th[2:]),
+                                   model.grid)
+        ref = batch_grind(S, b, model._feeds[0], model.times)
         np.testing.assert_allclose(got[k], ref, rtol=0, atol=ROUNDING)
         # mass is conserved to rounding (feed total 1) even where Reid's form divides by ~0
         assert np.abs(got[k].sum(axis=1) - 1.0).max() < 1e-12
@@ -113,11 +116,12 @@ def test_well_mixed_forward_model_is_steady_mill(ln_A0, alpha, ln_mu, Lam, phi, 
     m = ForwardModel(spec, data, SizeGrid(x))
     theta = np.array([ln_A0, alpha, ln_mu, Lam, phi, gamma, beta, ln_c50, ln_sharp])
     got = m.predict_grid(theta[None])[0]
-    S = AustinRate(math.exp(ln_A0), alpha, math.exp(ln_mu) * 1e-3, Lam, x0=1e-3)(x)
-    b = NormalizedBreakage(phi, gamma, beta)(x)
+    S, b, _ = breakage_on_grid(AustinRate(math.exp(ln_A0), alpha, math.exp(ln_mu) * 1e-3, Lam, x0=1e-3),
+                               NormalizedBreakage(phi, gamma, beta), m.grid)
     for g, (c, loc, _) in enumerate(m.groups):
         screen = m._proc["screen_mm"][c] * 1e-3
-        d = classifiers.screen_discharge(x, math.exp(ln_c50) * screen, math.exp(ln_sharp))
+        d = curve_on_grid(lambda y: classifiers.screen_discharge(y, math.exp(ln_c50) * screen, math.exp(ln_sharp)),
+                          m.grid)
         np.testing.assert_allclose(m.discharge(m._unpack(theta[None]), 1)[0, c], d, rtol=0, atol=ROUNDING)
         ds = steady_mill(S, b, m._feeds[c], rtd.PerfectMixing(m._proc["tau_s"][c]), d)
         ref = ds["product"].values if loc == "product" else ds["holdup_fraction"].values
@@ -165,10 +169,11 @@ def test_ball_terms_and_non_normalized_b_are_the_core(xi, eta, theta, phi):
     theta_v = np.array([-3.0, 1.0, 0.5, 3.0, xi, eta, phi, 0.8, 3.5, theta])
     got = m.predict_grid(theta_v[None])[0]
     ref_ball = math.exp(np.log([20.0, 40.0, 30.0]).mean()) * 1e-3
-    b = NonNormalizedBreakage(phi, 0.8, 3.5, theta)(x)
     for g, (c, loc, _) in enumerate(m.groups):
         ball = [20e-3, 40e-3, 30e-3][c]
-        S = AustinRate(math.exp(-3.0), 1.0, math.exp(0.5) * 1e-3, 3.0, xi=xi, x_b=ball, x_b0=ref_ball, eta=eta)(x)
+        S, b, _ = breakage_on_grid(AustinRate(math.exp(-3.0), 1.0, math.exp(0.5) * 1e-3, 3.0, xi=xi, x_b=ball,
+                                              x_b0=ref_ball, eta=eta), NonNormalizedBreakage(phi, 0.8, 3.5, theta),
+                                   m.grid)
         ds = steady_mill(S, b, m._feeds[c], rtd.PerfectMixing(m._proc["tau_s"][c]))
         ref = ds["product"].values if loc == "product" else ds["holdup_fraction"].values
         np.testing.assert_allclose(got[g], ref, rtol=0, atol=ROUNDING)
@@ -219,4 +224,37 @@ def test_geometric_grid_recurrence_is_the_matrix_substitution(phi, gamma, beta, 
     d = classifiers.screen_discharge(x, 2e-3, 3.0)
     ref = well_mixed_population(S, breakage_population(x, phi, gamma, beta, kind="b"), feed, 30.0, d)
     got = well_mixed_population_geometric(S, feed, phi, gamma, beta, x[0] / x[1], 30.0, d)
+    np.testing.assert_allclose(got, ref, rtol=0, atol=ROUNDING)
+
+
+@settings(max_examples=25, deadline=None)
+@given(phi=st.floats(0.0, 1.0, **finite), gamma=st.floats(0.05, 4.0, **finite), beta=st.floats(0.05, 10.0, **finite),
+       theta=st.floats(-0.3, 0.0, **finite), ln_A=st.floats(-8.0, 3.0, **finite), alpha=st.floats(-2.0, 4.0, **finite),
+       n=st.integers(2, 60), log2_ratio=st.sampled_from([1 / 16, 1 / 4, 1 / 2, 1.0]))
+def test_class_averaged_recurrence_is_the_matrix_substitution(phi, gamma, beta, theta, ln_A, alpha, n, log2_ratio):
+    """Eq. 3 with class-averaged eqs. 6/8 on a geometric grid by the O(N) recurrences of
+    well_mixed_population_separable equals the forward substitution with the class-averaged
+    b of the core (averaged_breakage). Non-negative terms summed in another order, and the
+    quadrature's weights combined in another order: rounding only (1e-12, feeds sum to 1)."""
+    from millflow.breakage import NonNormalizedBreakage
+    from millflow.breakage.averaged import averaged_breakage, averaged_power_terms, node_sizes
+    from millflow.breakage.rates import power_law_rates_population
+    from millflow.mill.well_mixed import well_mixed_population, well_mixed_population_separable
+    x = SizeGrid.geometric(1e-2, 2 ** log2_ratio, n).x
+    rate = PowerLawRate(math.exp(ln_A), alpha, 1e-3)
+    brk = NonNormalizedBreakage(phi, gamma, beta, theta) if phi * (x[0] / x[-1]) ** -theta <= 1 else \
+        NormalizedBreakage(phi, gamma, beta)
+    S, b = averaged_breakage(rate, brk, x)
+    feed = np.linspace(1.0, 0.0, n) ** 2
+    feed /= feed.sum()
+    d = curve_on_grid(lambda y: classifiers.screen_discharge(y, 2e-3, 3.0), x)
+    ref = well_mixed_population(S, b, feed, 30.0, d)
+    yy = node_sizes(x)
+    S_nodes = power_law_rates_population(np.append(yy, yy[-1] / 2), math.exp(ln_A), alpha, 1e-3)[:-1]
+    th = getattr(brk, "theta", 0.0)
+    S2, a1, a2 = averaged_power_terms(x, S_nodes, phi, gamma, beta, th)
+    R = x[0] / x[1] if n > 1 else 2.0
+    c1, c2 = R ** -gamma, R ** -beta
+    got = well_mixed_population_separable(S2, feed, c1 * a1, c1, c2 * a2, c2, 30.0, d)
+    np.testing.assert_allclose(S2, S, rtol=1e-12, atol=0)
     np.testing.assert_allclose(got, ref, rtol=0, atol=ROUNDING)

@@ -1,7 +1,7 @@
 """Fitting non-linear kinetics in classified mills of recirculating cells: synthetic data
 from a stated non-linear truth (breakage + aggregation, a discharge screen, three
 recirculating cells), computed by the library's non-linear cell solver
-(millflow.mill.nonlinear.cells) with the classifier curve evaluated here, are reproduced
+(millflow.mill.nonlinear.cells) with the classifier curve class-averaged here, are reproduced
 by the fit's forward model and recovered by ``millflow fit`` within its 95 % intervals."""
 import json
 import math
@@ -10,6 +10,7 @@ import numpy as np
 import pytest
 
 import rtd
+from millflow.breakage.averaged import curve_on_grid
 from millflow.classifiers import screen_discharge
 from millflow.cli import main
 from millflow.falsify.design import continuous_design
@@ -28,12 +29,12 @@ def _truth(where="discharge", n_cells=N_CELLS):
     """(design, (C, N) product mass fractions) of the stated truth."""
     design = continuous_design(TAUS, extra_process={"screen_mm": SCREENS})
     S, b, feed = SlowingDownTruth(0.0).linear_parts(design)
-    x = design.grid.x
     kin = kinetics(S[0], b, aggregation=Aggregation(constant_kernel(TRUTH["beta0"]), float(design.sieves_m[-1])),
                    grid=design.grid)
     rows = []
     for tau, screen in zip(TAUS, SCREENS):
-        d = screen_discharge(x, 0.5 * screen * 1e-3, 4.0)
+        # the screen curve class-averaged on the grid, as the fit's forward model puts it there
+        d = curve_on_grid(lambda y, screen=screen: screen_discharge(y, 0.5 * screen * 1e-3, 4.0), design.grid)
         r = nl.cells(kin, feed, rtd.RecirculatingCells(tau, n_cells, R), d, where)
         assert r.error_estimate < 1e-10
         p = r.product.copy()

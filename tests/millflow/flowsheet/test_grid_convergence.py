@@ -84,7 +84,7 @@ def test_closed_circuit_is_converged_and_its_grid_error_bounds_the_actual():
 
 #: refinement factor per shipped flowsheet: from its default grid to 2^(1/64) (2^(1/32) for the
 #: aggregating mill, 2^(1/80) for the wet cyclones)
-DEEP = {"closed_circuit_ball_mill": 4, "cement_two_compartment_mill": 8, "open_circuit_ball_mill": 8,
+DEEP = {"closed_circuit_ball_mill": 4, "cement_two_compartment_mill": 4, "open_circuit_ball_mill": 8,
         "hammer_mill_screen": 8, "stirred_mill_recirculation": 16, "closed_circuit_aggregating_mill": 8,
         "closed_circuit_wet_cyclones": 4}
 

@@ -75,9 +75,13 @@ def test_example_end_to_end_json_and_files(tmp_path, fit_json, capsys):
     (("critical_speed_fraction = 0.75", "critical_speed_fraction = 0.0"), "mill.critical_speed_fraction = 0.0"),
     (("ball_filling = 0.35\ncritical_speed_fraction = 0.75", "ball_filling = 0.7\ncritical_speed_fraction = 0.75"),
      "mill.ball_filling = 0.7"),
-    (("diameter_m = 4.0", "diameter = 4.0"), "mill.diameter: units missing from the key; expected 'diameter_m'"),
-    (("d50c_um = 200", "d50c = 200"), "classifier.d50c: units missing from the key; expected 'd50c_um'"),
-    (("feed_tph = 100", "feed = 100"), "feed.feed: units missing|feed.feed: unknown key"),
+    (("diameter_m = 4.0", "diameter = 4.0"), "mill.diameter: units of measure missing; write diameter_<unit>"),
+    (("diameter_m = 4.0", "diameter_furlong = 4.0"), "mill.diameter_furlong: unknown unit 'furlong'"),
+    (("d50c_um = 200", "d50c = 200"), "classifier.d50c: units of measure missing; write d50c_<unit>"),
+    (("d50c_um = 200", "d50c_um = 200\nd50c_mm = 0.2"), "d50c_um, d50c_mm give 'd50c' twice"),
+    (("feed_tph = 100", "feed = 100"), "feed.feed: units of measure missing; write feed_<unit>"),
+    (("top_um = 4000", "top = 4000"), "grid.top: units of measure missing"),
+    (("ball_size_mm = 50", "ball_size_mm = 50\nball_sise_mm = 50"), "mill.ball_sise_mm: unknown key"),
     (("speed = 0.80", "sped = 0.80"), r"lab.process: missing process values \['speed'\]"),
     (("top_um = 4000", "top_um = 2000"), "feed:.*give a \\[grid\\] with top_um"),
 ])
@@ -166,3 +170,74 @@ def test_aspect_ratio_correlation_needs_its_source(fit_json, tmp_path, capsys):
     plant = _plant(tmp_path, ('model = "tanks_in_series"\nn = 3', corr))
     assert main(["scaleup", str(fit_json), "--to", str(plant), "--out", str(tmp_path / "o")]) == 2
     assert "source" in capsys.readouterr().err
+
+
+@pytest.mark.parametrize("edit", [
+    ("diameter_m = 4.0", "diameter_mm = 4000"),
+    ("diameter_m = 4.0", f"diameter_ft = {4.0 / 0.3048!r}"),
+    ("ball_size_mm = 50", f"ball_size_in = {50 / 25.4!r}"),
+    ("d50c_um = 200", "d50c_mm = 0.2"),
+    ("feed_tph = 100", f"feed_kg_s = {100 / 3.6!r}"),
+    ("top_um = 4000", "top_mm = 4.0"),
+    ("solids_density_kg_m3 = 2700\npower_model", "solids_density_t_m3 = 2.7\npower_model"),
+    ("solids_density_kg_m3 = 2700\npower_model", "solid_density_kg_m3 = 2700\npower_model"),  # earlier spelling
+])
+def test_plant_file_reads_any_known_unit(tmp_path, fit_json, edit):
+    """Every dimensional key of the plant file is read through millflow.inputs: another unit of
+    the same dimension gives the same plant (SI inside), so the same prediction to rounding
+    (the unit conversions are exact to a few eps; the roots converge to 1e-13)."""
+    from millflow.scaleup.fitted import load_fit
+    from millflow.scaleup.plantfile import load_plant
+
+    fit = load_fit(fit_json)
+    base, _ = load_plant(_plant(tmp_path), fit)
+    (tmp_path / "b").mkdir()
+    other, _ = load_plant(_plant(tmp_path / "b", edit), fit)
+    assert other.circuit.mill.diameter_m == pytest.approx(base.circuit.mill.diameter_m, rel=1e-14)
+    assert other.circuit.mill.ball_size_mm == pytest.approx(base.circuit.mill.ball_size_mm, rel=1e-14)
+    assert other.circuit.classifier["d50c"] == pytest.approx(base.circuit.classifier["d50c"], rel=1e-14)
+    assert other.feed_tph == pytest.approx(base.feed_tph, rel=1e-14)
+    a = base.throughput_for_p80(fit.theta, 150e-6)["feed_tph"]
+    b = other.throughput_for_p80(fit.theta, 150e-6)["feed_tph"]
+    assert b == pytest.approx(a, rel=1e-10)
+
+
+@pytest.mark.parametrize("content, match", [
+    ({"model": "tanks_in_series", "params": {"n": 3, "tau": 100}}, "params.n = 3: expected a table with 'value'"),
+    ({"model": "tanks_in_series", "params": [3, 100]}, "not a 'millflow fit-rtd --json' result"),
+    ([1, 2], "not a 'millflow fit-rtd --json' result"),
+    ({"model": "tanks_in_series", "params": {"n": {"value": "3"}}}, "params.n.value = '3': expected a finite number"),
+    ({"model": "tanks_in_series", "params": {"tau": {"value": 3.0}}}, r"params \['n'\] missing"),
+    ({"model": "nonsense", "params": {}}, "model"),
+])
+def test_malformed_rtd_fit_is_one_line_exit_2(tmp_path, fit_json, capsys, content, match):
+    (tmp_path / "tracer.json").write_text(json.dumps(content))
+    plant = _plant(tmp_path, ('model = "tanks_in_series"\nn = 3', 'rtd_fit = "tracer.json"'))
+    assert main(["scaleup", str(fit_json), "--to", str(plant), "--band-method", "delta"]) == 2
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and "Traceback" not in err and "internal error" not in err
+    import re
+    assert re.search(match, err), err
+
+
+def test_negative_variance_is_refused_naming_the_parameter(tmp_path, fit_json, capsys):
+    d = json.loads(fit_json.read_text())
+    names = d["covariance"]["names"]
+    d["covariance"]["matrix"][1][1] = -abs(d["covariance"]["matrix"][1][1])
+    (tmp_path / "bad.json").write_text(json.dumps(d))
+    assert main(["scaleup", str(tmp_path / "bad.json"), "--to", str(_plant(tmp_path))]) == 2
+    err = capsys.readouterr().err
+    assert f"the variance of {names[1]} is -" in err and err.count("\n") == 1
+
+
+def test_plant_energy_outside_the_lab_range_is_said(tmp_path, fit_json, capsys):
+    """The lab tests cover P_lab t / H_lab over their grinding times; a plant specific energy
+    outside that range is an extrapolation of the breakage model in energy: said in the
+    summary (and as a warning), with the range."""
+    plant = _plant(tmp_path)
+    assert main(["scaleup", str(fit_json), "--to", str(plant), "--target-p80-um", "50", "--json",
+                 "--band-method", "delta", "--out", str(tmp_path / "o"), "--no-plots"]) == 0
+    s = json.loads(capsys.readouterr().out)
+    lo, hi = s["lab_specific_energy_kWh_t"]
+    assert 0 < lo < hi < s["specific_energy_at_target_kWh_per_t"]
+    assert any("at the target P80 50 um is above the lab tests' range" in n for n in s["extrapolation"])

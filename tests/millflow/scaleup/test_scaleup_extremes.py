@@ -52,7 +52,7 @@ def test_malformed_fit_results_are_named(fit_dict, path, value, match):
 ])
 def test_circuits_without_a_steady_state_are_solver_errors(plant, clf):
     su = ScaleUp(make_fit(), LAB, {}, Circuit(plant, "tis", {"n": 3}, clf), FEED, 100.0)
-    with pytest.raises(SolverError, match="no steady state.*returned by the classifier"):
+    with pytest.raises(SolverError, match="can never leave the loop .*classifier"):
         su.operate(su.fit.theta)
 
 

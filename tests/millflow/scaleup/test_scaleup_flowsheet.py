@@ -40,11 +40,39 @@ def test_lab_table_scales_the_rate_by_specific_power():
 
 
 @pytest.mark.parametrize("old,new,match", [
-    ("diameter_m = 4.0", "diameter = 4.0", "units.ball_mill.diameter: units of measure missing; write diameter_m"),
+    ("diameter_m = 4.0", "diameter = 4.0", "units.ball_mill.diameter: units of measure missing; write diameter_<unit>"),
+    ("diameter_m = 4.0", "diameter_fathom = 4.0", "units.ball_mill.diameter_fathom: unknown unit 'fathom'"),
     ("critical_speed_fraction = 0.75", "critical_speed_fraction = 1.2", "critical_speed_fraction = 1.2"),
     ("ball_filling = 0.35", "ball_filling = 0.0", "ball_filling = 0.0"),
-    ("length_m = 6.0\n", "", r"needs \['length_m'\]"),
+    ("length_m = 6.0\n", "", "needs length_<unit>"),
+    ("solid_density_kg_m3 = 2700", "solid_density_kg_m3 = 2700\nsolids_density_t_m3 = 2.7",
+     "solid_density_kg_m3 and solids_density_<unit> both given"),
 ])
 def test_bad_dimensions_are_named(old, new, match):
     with pytest.raises(InputError, match=match):
         loads(CLOSED.replace(OLD, DIMS.replace(old, new)))
+
+
+@pytest.mark.parametrize("old,new", [
+    ("diameter_m = 4.0", "diameter_mm = 4000"),
+    ("diameter_m = 4.0", f"diameter_ft = {4.0 / 0.3048!r}"),
+    ("ball_size_mm = 50", f"ball_size_in = {50 / 25.4!r}"),
+    ("solid_density_kg_m3 = 2700", "solids_density_t_m3 = 2.7"),
+])
+def test_mill_by_dimensions_reads_any_known_unit(old, new):
+    """Dimensions are read through millflow.inputs: any unit of the dimension, converted at the
+    edge (the conversions are exact to a few eps)."""
+    ref = loads(CLOSED.replace(OLD, DIMS)).units["ball_mill"]
+    got = loads(CLOSED.replace(OLD, DIMS.replace(old, new))).units["ball_mill"]
+    assert got.holdup == pytest.approx(ref.holdup, rel=1e-13) and got.power == pytest.approx(ref.power, rel=1e-13)
+
+
+def test_mill_without_its_own_density_takes_the_slurry_density():
+    """One name for one quantity: a mill by dimensions in a wet flowsheet takes [slurry]
+    solids_density_<unit> when it gives none of its own."""
+    text = CLOSED.replace(OLD, DIMS.replace("solid_density_kg_m3 = 2700\n", ""))
+    assert "[slurry]" not in text
+    wet = text + "\n[slurry]\nsolids_density_t_m3 = 3.1\n"
+    mill = loads(wet).units["ball_mill"]
+    d = MillDesign(4.0, 6.0, 0.35, 0.75, 50.0, solid_density_kg_m3=3100)
+    assert mill.holdup == pytest.approx(d.holdup(), rel=1e-13)
