@@ -264,7 +264,8 @@ def well_mixed(kin: Kinetics, feed, tau: float, d=None, *, tol: float = NEWTON_R
     p_i = d_i* y_i and H R(M) for the breakage and aggregation terms gives the steady
     residual y_in - d* y + tau R(y); R acts on the hold-up, whose total exceeds the
     feed's where coarse classes are retained (d* < 1). ``info["holdup"]`` is m.
-    Error estimate: max(d*) times the Newton estimate of y (:mod:`millflow.mill.newton`).
+    Error estimate: the product's change under the next (chord) step, d* dy / (1 - rho)
+    (:mod:`millflow.mill.newton`).
     ``max_iter`` Newton iterations per Newton phase, ``ptc_iter`` pseudo-transient steps."""
     feed, tau = _check(kin, feed, tau)
     _no_age(kin, unit)
@@ -282,7 +283,7 @@ def well_mixed(kin: Kinetics, feed, tau: float, d=None, *, tol: float = NEWTON_R
                         ptc_iter=ptc_iter, unit=unit, d=dx)
     y = r.y
     p = y if dx is None else dx * y
-    err = r.step * (1.0 if dx is None else float(dx.max()))
+    err = float(np.abs(r.correction if dx is None else dx * r.correction).max()) / (1.0 - r.rho)
     return NonlinearSteady(p[:-1], float(p[-1]), r.how, r.residual, err, float(abs(p.sum() - feed.sum())),
                            r.iterations, time.perf_counter() - start,
                            {"kinetics": kin.describe(), "holdup": tau * y[:-1], "holdup_overflow": float(tau * y[-1]),
@@ -435,6 +436,33 @@ def _classified(n: int, where) -> np.ndarray:
     return mask
 
 
+def network_operator(net, dx, where, n1: int):
+    """The cells' linear exchange on the stacked state c (cells x n1 components, c_k the
+    content of cell k per unit volume): (T sparse (n n1, n n1), inlet (n,) the share of the
+    feed entering each cell, (1 - beta) u_k, out (n1, n) the product per unit content, H_l o_l),
+    with the classification factors G (inter-cell flows), H (exit flows) of ``where``
+    (:mod:`millflow.mill.cells`): (T c)_k = sum_(l != k) G_l F[k, l] c_l - (G_k sum_(j != k) F[j, k] + H_k o_k) c_k."""
+    import scipy.sparse
+
+    from millflow.mill.cells import _factors
+
+    n = int(net.n)
+    Fl = np.asarray(net.flows, float)
+    o = np.asarray(net.outlet, float)
+    G, H = _factors(dx, n1, n, where)  # (n1, n)
+    rows, cols, vals = [], [], []
+    idx = np.arange(n1)
+    for k in range(n):
+        for l in range(n):
+            if k != l and Fl[k, l] != 0.0:
+                rows.append(k * n1 + idx); cols.append(l * n1 + idx); vals.append(G[:, l] * Fl[k, l])  # noqa: E702
+        rows.append(k * n1 + idx); cols.append(k * n1 + idx)  # noqa: E702
+        vals.append(-(G[:, k] * Fl[:, k].sum() - G[:, k] * Fl[k, k] + H[:, k] * o[k]))
+    T = scipy.sparse.csr_matrix((np.concatenate(vals), (np.concatenate(rows), np.concatenate(cols))),
+                                shape=(n * n1, n * n1))
+    return T, (1.0 - float(net.bypass)) * np.asarray(net.inlet, float), H * o[None, :]
+
+
 def cells(kin: Kinetics, feed, transport, d=None, where="discharge", *, tol: float = NEWTON_RTOL,
           max_iter: int = MAX_ITER, ptc_iter: int = PTC_ITER) -> NonlinearSteady:
     """Steady product of a network of well-mixed cells (``transport`` an rtd model with a
@@ -460,7 +488,7 @@ def cells(kin: Kinetics, feed, transport, d=None, where="discharge", *, tol: flo
     answer, divided by 1 - rho (:mod:`millflow.mill.newton`)."""
     import scipy.sparse
 
-    from millflow.mill.cells import _factors, network_of, solve_cells
+    from millflow.mill.cells import network_of, solve_cells
     feed, _ = _check(kin, feed, 1.0)
     _no_age(kin, "recirculating cells")
     net = network_of(transport)
@@ -473,28 +501,15 @@ def cells(kin: Kinetics, feed, transport, d=None, where="discharge", *, tol: flo
         _classified(n, where)  # checks the cell numbers
     where = "discharge" if where is None else where
     V = np.asarray(net.volumes, float)
-    Fl = np.asarray(net.flows, float)
-    o = np.asarray(net.outlet, float)
     beta = float(net.bypass)
-    G, H = _factors(dx, n1, n, where)  # (n1, n)
     lin = solve_cells(kin.S, kin.b, feed, net, None if dx is None else dx[:-1], where)
     if kin.is_linear:
         return NonlinearSteady(lin.product, 0.0, "exact linear (cells)", 0.0, float(np.finfo(float).eps * kin.n * n),
                                float(abs(lin.product.sum() - feed.sum())), 0, time.perf_counter() - start,
                                {"kinetics": "linear", "cell_holdup": lin.holdup, "cell_overflow": np.zeros(n)})
-    # constant transport operator on the stacked state c (n cells x n1 components)
-    rows, cols, vals = [], [], []
-    idx = np.arange(n1)
-    for k in range(n):
-        for l in range(n):
-            if k != l and Fl[k, l] != 0.0:
-                rows.append(k * n1 + idx); cols.append(l * n1 + idx); vals.append(G[:, l] * Fl[k, l])  # noqa: E702
-        rows.append(k * n1 + idx); cols.append(k * n1 + idx)  # noqa: E702
-        vals.append(-(G[:, k] * Fl[:, k].sum() - G[:, k] * Fl[k, k] + H[:, k] * o[k]))
-    T = scipy.sparse.csr_matrix((np.concatenate(vals), (np.concatenate(rows), np.concatenate(cols))),
-                                shape=(n * n1, n * n1))
+    T, inlet, out = network_operator(net, dx, where, n1)
     Tabs = abs(T)
-    src = ((1.0 - beta) * np.asarray(net.inlet, float)[:, None] * np.append(feed, 0.0)[None, :]).ravel()
+    src = np.outer(inlet, np.append(feed, 0.0)).ravel()
     feed_size = float(np.abs(feed).sum())
     mass = np.repeat(V, n1)
 
@@ -525,7 +540,6 @@ def cells(kin: Kinetics, feed, transport, d=None, where="discharge", *, tol: flo
         r = newton(F, factor, c0, scale, tol=tol, max_iter=max_iter, ptc_iter=ptc_iter,
                    unit=f"recirculating cells ({n} cells)", what=kin.describe(), dt0=0.1 * float(V.sum()))
     C = r.y.reshape(n, n1)
-    out = H * o[None, :]  # (n1, n): what leaves each cell per unit content
     p = beta * np.append(feed, 0.0) + (out * C.T).sum(axis=1)
     err = float((np.abs(out) * np.abs(r.correction.reshape(n, n1)).T).sum(axis=1).max()) / (1.0 - r.rho)
     return NonlinearSteady(p[:-1], float(p[-1]), f"cells, Newton on all cells ({r.how})", r.residual, err,

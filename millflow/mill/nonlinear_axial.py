@@ -67,6 +67,10 @@ class _Line:
     holdup_weights: np.ndarray
     v: np.ndarray
     h: np.ndarray
+    w: np.ndarray
+    pe: float
+    open: bool
+    flux: bool
 
 
 def _closed_line(pe, m, v, w) -> _Line:
@@ -77,22 +81,22 @@ def _closed_line(pe, m, v, w) -> _Line:
     D = w / pe
     P = v * h / D
     alpha, beta = D / h * _bernoulli(-P), D / h * _bernoulli(P)
-    return _from_faces(z, weights, np.tile(alpha, (m, 1)), np.tile(beta, (m, 1)), v, 0, m, weights)
+    return _from_faces(z, weights, np.tile(alpha, (m, 1)), np.tile(beta, (m, 1)), v, 0, m, weights, w, pe, False, False)
 
 
-def _from_faces(z, weights, alpha, beta, v, k0, k_out, hold):
+def _from_faces(z, weights, alpha, beta, v, k0, k_out, hold, w, pe, open_vessel, flux):
     """Node-balance coefficients from the face coefficients alpha, beta (faces, n1)."""
     m1 = z.size
     diag = np.zeros((m1, v.size))
     diag[:-1] -= alpha
     diag[1:] -= beta
     diag[-1] -= v  # outflow at the downstream end
-    return _Line(z, weights, alpha.copy(), diag, beta.copy(), k0, k_out, hold, v, np.diff(z))
+    return _Line(z, weights, alpha.copy(), diag, beta.copy(), k0, k_out, hold, v, np.diff(z), w, pe, open_vessel, flux)
 
 
-def _open_line(kin, tau, pe, m, v, w):
+def _open_line(kin, tau, pe, m, v, w, flux=False):
     g = open_grid(pe, m, v, w, tail_length(np.zeros(v.size), tau, pe, v, w))
-    return _from_faces(g.z, g.weights, g.alpha.T, g.beta.T, v, g.k0, g.k1, g.upstream)
+    return _from_faces(g.z, g.weights, g.alpha.T, g.beta.T, v, g.k0, g.k1, g.upstream, w, pe, True, flux)
 
 
 def _scale_terms(line):
@@ -146,39 +150,68 @@ def _newton_line(kin: Kinetics, line: _Line, tau, src, C0, *, tol, unit, fixed=N
     return r.y.reshape(m, n1), r
 
 
+def _linear_start(kin, line, tau, feed):
+    """The first-order solution on ``line`` (the linear mill's solvers on the same nodes), the
+    overflow zero: the start of Newton on the first grid."""
+    v, w = line.v[:-1], line.w[:-1]
+    if line.open:
+        m = line.out_node - line.feed_node
+        _, c, _, _ = solve_axial_open_grid(kin.S, kin.b, feed, tau, line.pe, m, v, w,
+                                           "flux" if line.flux else "sampled", tail=float(-line.z[0]))
+    else:
+        _, c, _ = solve_axial_grid(kin.S, kin.b, feed, tau, line.pe, line.z.size - 1, v, w)
+    return np.concatenate([np.maximum(c, 0.0), np.zeros((c.shape[0], 1))], axis=1)
+
+
+def _solve_line_steady(kin, line, tau, feed, C0=None, unit=None):
+    """The steady node concentrations (m, n1) on ``line`` by Newton (from ``C0`` or the
+    first-order solution); returns C, or (C, NewtonResult) when ``unit`` is given."""
+    n1 = kin.n + 1
+    if C0 is None:
+        C0 = _linear_start(kin, line, tau, feed)
+    src = np.zeros((line.z.size, n1))
+    src[line.feed_node] = np.append(feed, 0.0)
+    C, r = _newton_line(kin, line, tau, src, C0, tol=NEWTON_RTOL,
+                        unit=unit or f"axial dispersion mill ({line.z.size - 1} volumes)")
+    return (C, r) if unit is not None else C
+
+
+def back_layer(kin, line, tau, C):
+    """tau int_(-inf)^1 c^ dz of the open vessel's sampled discharge: c^ solves the
+    source-free node balances upstream of z = 1 with c^(1) = c(1) (Newton), plus the half
+    volume at z = 1 (:mod:`millflow.mill.axial_open`); (n1,) [s]."""
+    k1 = line.out_node
+    n1 = C.shape[1]
+    if k1 == 0:
+        return tau * 0.5 * line.h[0] * C[k1]
+    sub = _Line(line.z[:k1 + 1], line.weights[:k1 + 1], line.lower[:k1], line.diag[:k1 + 1], line.upper[:k1], 0, k1,
+                line.weights[:k1 + 1], line.v, line.h[:k1], line.w, line.pe, line.open, line.flux)
+    Cb, _ = _newton_line(kin, sub, tau, np.zeros((k1 + 1, n1)), np.maximum(C[:k1 + 1], 0.0), tol=NEWTON_RTOL,
+                         unit="open axial dispersion mill, back-dispersion layer", fixed=C[k1])
+    return tau * (line.weights[:k1, None] * Cb).sum(axis=0) + tau * 0.5 * line.h[k1 - 1] * C[k1]
+
+
 def _grid_solver(kin: Kinetics, feed, tau, pe, v, w, open_vessel: bool, discharge: str, tol: float):
     """solve(M) -> (z, C, reported vector, extras) for :func:`refine_grids`; grids solved in
     increasing M start from the previous grid's solution (grid sequencing)."""
-    n = kin.n
-    n1 = n + 1
+    n1 = kin.n + 1
     last = {}
     y_feed = np.append(feed, 0.0)
-
-    def linear_start(M):
-        if open_vessel:
-            _, c, _, _ = solve_axial_open_grid(kin.S, kin.b, feed, tau, pe, M, v[:-1], w[:-1],
-                                               "flux" if discharge == "flux" else "sampled")
-        else:
-            _, c, _ = solve_axial_grid(kin.S, kin.b, feed, tau, pe, M, v[:-1], w[:-1])
-        return np.concatenate([np.maximum(c, 0.0), np.zeros((c.shape[0], 1))], axis=1)
+    flux = open_vessel and discharge == "flux"
 
     def solve(M):
-        line = _open_line(kin, tau, pe, M, v, w) if open_vessel else _closed_line(pe, M, v, w)
+        line = _open_line(kin, tau, pe, M, v, w, flux) if open_vessel else _closed_line(pe, M, v, w)
+        C0 = None
         if "z" in last:  # interpolate the previous grid's solution
             C0 = np.stack([np.interp(line.z, last["z"], last["C"][:, i]) for i in range(n1)], axis=1)
-        else:
-            C0 = linear_start(M)
-        src = np.zeros((line.z.size, n1))
-        src[line.feed_node] = y_feed
         unit = f"axial dispersion mill ({'open' if open_vessel else 'closed'} vessel, {M} volumes)"
-        C, r = _newton_line(kin, line, tau, src, C0, tol=NEWTON_RTOL, unit=unit)
+        C, r = _solve_line_steady(kin, line, tau, feed, C0, unit=unit)
         last.update(z=line.z, C=C)
         k1 = line.out_node
         dC = r.correction.reshape(C.shape)  # the next step: the Newton error of C, mapped to what is reported
-        if open_vessel and discharge == "flux":
+        if flux:
             hw = line.holdup_weights
-            R = kin.rate_many(C)
-            p = y_feed + tau * (hw[:, None] * R).sum(axis=0)
+            p = y_feed + tau * (hw[:, None] * kin.rate_many(C)).sum(axis=0)
             up = hw > 0
             dp = tau * np.einsum("k,kij,kj->i", hw[up], kin.jacobian_many(C[up]), dC[up])
         else:
@@ -187,21 +220,10 @@ def _grid_solver(kin: Kinetics, feed, tau, pe, v, w, open_vessel: bool, discharg
         hold = tau * (line.holdup_weights[:, None] * C).sum(axis=0)
         dh = (line.holdup_weights[:, None] * dC).sum(axis=0)
         newton_err = float(max(np.abs(dp).max(), np.abs(dh).max())) / (1.0 - r.rho)
-        iters = r.iterations
         if open_vessel and discharge == "sampled":  # the back-dispersion layer of c(1)
-            zero = np.zeros((line.z.size, n1))
-            back0 = np.maximum(C[:k1 + 1], 0.0) if k1 > 0 else C[:1]
-            if k1 > 0:
-                sub = _Line(line.z[:k1 + 1], line.weights[:k1 + 1], line.lower[:k1], line.diag[:k1 + 1],
-                            line.upper[:k1], 0, k1, line.weights[:k1 + 1], v, line.h[:k1])
-                Cb, rb = _newton_line(kin, sub, tau, zero[:k1 + 1], back0, tol=NEWTON_RTOL,
-                                      unit=unit + ", back-dispersion layer", fixed=C[k1])
-                iters += rb.iterations
-                hold = hold + tau * (line.weights[:k1, None] * Cb).sum(axis=0) + tau * 0.5 * line.h[k1 - 1] * C[k1]
-            else:
-                hold = hold + tau * 0.5 * line.h[0] * C[k1]
+            hold = hold + back_layer(kin, line, tau, C)
         reported = np.concatenate([p, hold / tau])
-        return line.z, C, reported, {"newton_error": newton_err, "iterations": iters, "residual": r.residual,
+        return line.z, C, reported, {"newton_error": newton_err, "iterations": r.iterations, "residual": r.residual,
                                      "volumes": M}
 
     return solve

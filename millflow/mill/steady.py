@@ -234,6 +234,16 @@ def transfer_matrix(S, b, transport, d=None, *, where=None, dispersion=None, dis
     >>> P.round(6).tolist()
     [[0.333333, 0.0], [0.666667, 1.0]]
     """
+    from millflow.mill.nonlinear_mill import is_kinetics
+
+    if is_kinetics(S) and not S.is_linear:
+        raise InputError("transfer_matrix: the kinetics are non-linear, so the product is not a matrix times the "
+                         "feed; expected first-order kinetics, or steady_mill / Mill.product for one feed")
+    if is_kinetics(S):
+        from millflow.mill.nonlinear_mill import check_no_b
+
+        check_no_b(S, b, "transfer_matrix")
+        S, b = S.S, S.b
     sc = _scene(S, b, transport, d, where, dispersion, method, discharge)
     solved = _solve(sc, np.eye(sc.S.size), tol=tol, holdup=False)
     P = solved["product"]
@@ -339,7 +349,9 @@ def steady_mill(S, b, feed, transport, d=None, *, where=None, dispersion=None, d
 
     Parameters
     ----------
-    S : (N,) specific breakage rates [1/s], coarse -> fine, S_N = 0 (sink).
+    S : (N,) specific breakage rates [1/s], coarse -> fine, S_N = 0 (sink); or a
+        :class:`millflow.nonlinear.Kinetics` (non-linear kinetics, with b = None), solved by
+        :mod:`millflow.mill.nonlinear` for every transport (:mod:`millflow.mill.nonlinear_mill`).
     b : (N, N) fractional breakage distribution b_ij (strictly lower triangular).
     feed : (N,) solids feed flows per class (any mass-rate unit, e.g. fractions of a
         unit feed rate); the product has the same unit.
@@ -384,6 +396,19 @@ def steady_mill(S, b, feed, transport, d=None, *, where=None, dispersion=None, d
     >>> ds.attrs["method"], round(float(ds["product"][0]), 6)
     ('well_mixed', 0.333333)
     """
+    from millflow.mill.nonlinear_mill import is_kinetics
+
+    if is_kinetics(S) and S.is_linear:  # first-order kinetics as a Kinetics object: the linear mill
+        from millflow.mill.nonlinear_mill import check_no_b
+
+        check_no_b(S, b, "steady_mill")
+        S, b = S.S, S.b
+    elif is_kinetics(S):  # non-linear kinetics (millflow.nonlinear.Kinetics, b = None): their own solvers
+        from millflow.mill.nonlinear_mill import steady_dataset
+
+        return steady_dataset(S, b, feed, transport, d, where=where, dispersion=dispersion, discharge=discharge,
+                              method=method, x=x, positions=positions, locations=locations, tol=tol,
+                              on_inaccuracy=on_inaccuracy)
     start = time.perf_counter()
     sc = _scene(S, b, transport, d, where, dispersion, method, discharge)
     feed = _check_feed(feed, sc.S.size)

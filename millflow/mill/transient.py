@@ -179,7 +179,9 @@ def transient_mill(S, b, transport, t, *, feed=None, initial_feed=None, pulse=No
 
     Parameters
     ----------
-    S, b, transport, d, where, dispersion, discharge, x : as :func:`millflow.mill.steady_mill`.
+    S, b, transport, d, where, dispersion, discharge, x : as :func:`millflow.mill.steady_mill`
+        (S a :class:`millflow.nonlinear.Kinetics` with b = None: non-linear kinetics,
+        :mod:`millflow.mill.nonlinear_transient`).
     t : (T,) output times [s], >= 0.
     feed : (N,) feed flows from t = 0 on (default zero).
     initial_feed : (N,) the mill starts at the steady state for this feed (a step
@@ -199,6 +201,19 @@ def transient_mill(S, b, transport, t, *, feed=None, initial_feed=None, pulse=No
     plus, on the axial grids, the spatial error from the same solve on half the volumes;
     ``runtime_s``, evaluation counts.
     """
+    from millflow.mill.nonlinear_mill import is_kinetics
+
+    if is_kinetics(S) and not S.is_linear:  # non-linear kinetics: the method of lines of their steady residual
+        from millflow.mill.nonlinear_transient import transient_nonlinear
+
+        return transient_nonlinear(S, b, transport, t, feed=feed, initial_feed=initial_feed, pulse=pulse, d=d,
+                                   where=where, dispersion=dispersion, discharge=discharge, x=x, method=method,
+                                   rtol=rtol, atol=atol, m_cells=m_cells)
+    if is_kinetics(S):
+        from millflow.mill.nonlinear_mill import check_no_b
+
+        check_no_b(S, b, "transient_mill")
+        S, b = S.S, S.b
     start = time.perf_counter()
     sc = _scene(S, b, transport, d, where, dispersion, discharge=discharge)
     n_cls = sc.S.size
