@@ -128,10 +128,10 @@ _DEFAULTS = {  # value, min, max
     # non-linear kinetics (millflow.fitting.kinetics): 0 is the linear model
     "s_slow": (0.0, 0.0, 10.0), "lam_pop": (0.0, -5.0, 5.0), "beta0": (0.0, 0.0, 0.1),
 }
-#: Transports of mode "mill" with a non-linear steady solve (millflow.mill.nonlinear).
-_NONLINEAR_TRANSPORTS = ("perfect_mixing", "tanks_in_series", "recirculating_cells", "plug_flow", "axial_dispersion")
-#: Transports of mode "mill" where non-linear kinetics take classification (well-mixed cells).
-_NONLINEAR_CLASSIFIED = ("perfect_mixing", "tanks_in_series", "recirculating_cells")
+#: Transports of mode "mill" with a non-linear steady solve (millflow.mill.nonlinear): all of them.
+_NONLINEAR_TRANSPORTS = tuple(TRANSPORTS)
+#: Transports of mode "mill" where non-linear kinetics take classification: all (where the linear mill does).
+_NONLINEAR_CLASSIFIED = tuple(TRANSPORTS)
 
 
 @dataclass(frozen=True)
@@ -220,12 +220,6 @@ class ModelSpec:
         if forms and self.mode == "mill" and self.transport not in _NONLINEAR_TRANSPORTS:
             raise InputError(f"model.kinetics with transport {self.transport!r}: non-linear kinetics are fitted with "
                              f"transports {list(_NONLINEAR_TRANSPORTS)}")
-        if forms and self.classification is not None and self.mode == "mill" and (
-                self.transport not in _NONLINEAR_CLASSIFIED or self.where not in (None, "discharge", "cells")):
-            raise InputError(f"model.kinetics with classification {self.classification!r}, transport "
-                             f"{self.transport!r}, where {self.where!r}: non-linear kinetics take classification "
-                             f"at the discharge or at every cell outlet of transports {list(_NONLINEAR_CLASSIFIED)} "
-                             "(not along the axis of plug flow or axial dispersion)")
         if forms and self.mode == "mill" and self.transport == "tanks_in_series":
             n = dict(self.transport_params).get("n")
             if n is not None and float(n) != int(n):
@@ -820,7 +814,8 @@ class ForwardModel:
         # exit flows; where = "cells": every cell outlet), or in every tank (mode
         # "well_mixed", as the linear forward model places it)
         d_all = self.discharge(p, n_pop) if (spec.classification and mode != "batch") else None
-        where = (spec.where or "discharge") if mode == "mill" else "cells"
+        axis = spec.transport in _AXIAL_TRANSPORTS + ("axial_dispersion_open",)
+        where = (spec.where or ("axis" if axis else "discharge")) if mode == "mill" else "cells"
         for c in range(len(self.conditions)):
             gsel = [g for g, grp in enumerate(self.groups) if grp[0] == c]
             if mode == "batch":  # the whole population in one stacked solve
@@ -842,9 +837,9 @@ class ForwardModel:
                     if tr == "axial_dispersion":
                         kw["pe"] = float(np.exp(p["ln_pe"][k])) if "ln_pe" in p else float(tp["pe"])
                     tc = float(tau_pc[k, c])
-                    if tr == "recirculating_cells":
-                        try:
-                            kw["network"] = self._transport(tc, extra, k)
+                    if tr in ("recirculating_cells", "axial_dispersion_open"):
+                        try:  # the network of cells, or the open vessel (millflow.mill.nonlinear.solve_transport)
+                            kw["network" if tr == "recirculating_cells" else "model"] = self._transport(tc, extra, k)
                         except InputError:  # outside rtd's domain (e.g. r < 0): this member only
                             out[k, gsel] = np.nan
                             continue

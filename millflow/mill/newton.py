@@ -22,7 +22,10 @@ Error estimate (of the state, max norm): the next step at the answer with the ke
 factors, |dy| / (1 - rho), rho the observed contraction (at most 1/2: the factors are
 rebuilt above :data:`REFRESH_RATIO`), i.e. the distance to the root of the linearised
 problem bounded by the geometric series of the chord iteration. It costs one solve with
-factors already built (no Jacobian, no factorisation, no polishing step).
+factors already built (no Jacobian, no factorisation, no extra residual); the step is
+then applied, so the returned state is the corrected one (its error is below the
+estimate, which bounds the error before the step) and ``residual`` is max|F| at the last
+evaluated state, before it.
 """
 from __future__ import annotations
 
@@ -135,8 +138,8 @@ class ChainFactor:
 
 @dataclass
 class NewtonResult:
-    """The root ``y``, ``residual`` max|F(y)|, ``scale`` s of the criterion, ``step`` the
-    error estimate of y (max norm), ``iterations`` (Newton and pseudo-transient steps),
+    """The root ``y`` (the last evaluated state plus ``correction``), ``residual`` max|F| at the
+    last evaluated state, ``scale`` s of the criterion, ``step`` the error estimate of y (max norm), ``iterations`` (Newton and pseudo-transient steps),
     ``factorizations``, ``how`` (the phases that ran), ``factor`` (the factors kept at
     the end, for a warm start of the next solve), ``correction`` the next step at the
     answer and ``rho`` the contraction it is divided by (``step`` = max|correction| /
@@ -271,4 +274,7 @@ def newton(F, factor, y0, scale, *, tol: float, max_iter: int = MAX_ITER, ptc_it
         fac, rho = fresh_factor(y), 0.0
     corr = fac.solve(-f)
     rho = min(rho, 0.5)
-    return NewtonResult(y, res, s, float(np.abs(corr).max()) / (1.0 - rho), its, nfac, how, fac, corr, rho)
+    # the correction is applied (it costs nothing more): the state moves closer to the root
+    # (the chord contracts), and the mass balance closes to second order in the step (the
+    # columns of dR/dy sum to zero, so sum F(y + dy) = sum (F + J0 dy) + O(dy^2) = O(dy^2))
+    return NewtonResult(y + corr, res, s, float(np.abs(corr).max()) / (1.0 - rho), its, nfac, how, fac, corr, rho)

@@ -705,13 +705,15 @@ _NEEDS_STRUCTURE = ("non-linear kinetics depend on how the mill mixes, which a r
 
 
 def solve_transport(kin: Kinetics, feed, transport, d=None, *, where=None, dispersion=None, discharge=None,
-                    tol: float = 1e-8, holdup: bool = True, positions=None) -> NonlinearSteady:
+                    tol: float = 1e-8, holdup: bool = True, positions=None, m_cells: int | None = None
+                    ) -> NonlinearSteady:
     """Steady product of a mill with non-linear kinetics and any transport of the linear
     mill (``rtd`` model, tau in s), classification ``d`` placed by ``where`` as in
     :func:`millflow.mill.steady_mill` ("discharge"/"cells"/cell numbers for cells, "axis"
     for plug flow and axial dispersion), ``dispersion`` and ``discharge`` of the axial
     transports. ``tol``: the accuracy the discretised paths (axial grids, the plug-flow ODE)
-    refine to, relative to the feed. ``info["holdup"]`` (N,) is the hold-up per unit feed
+    refine to, relative to the feed; ``m_cells``: axial grids of that many volumes instead
+    (checked against half as many). ``info["holdup"]`` (N,) is the hold-up per unit feed
     rate [s] (with ``holdup``); cells add ``info["cell_holdup"]`` (cells, N).
 
     Series: each part grinds the previous part's product (the aggregation overflow of a
@@ -751,12 +753,12 @@ def solve_transport(kin: Kinetics, feed, transport, d=None, *, where=None, dispe
                       positions=positions)
     elif kind == "axial":
         r = axial_dispersion(kin, feed, tau, float(transport.pe), sc.d, dispersion=sc.dispersion, tol=tol,
-                             positions=positions)
+                             positions=positions, m_cells=m_cells)
     elif kind == "axial_open":
         r = axial_open(kin, feed, tau, float(transport.pe), sc.d, dispersion=sc.dispersion,
-                       discharge=sc.discharge or "sampled", tol=tol, positions=positions)
+                       discharge=sc.discharge or "sampled", tol=tol, positions=positions, m_cells=m_cells)
     elif kind in ("series", "parallel"):
-        r = _composed(kin, feed, transport, tol, holdup)
+        r = _composed(kin, feed, transport, tol, holdup, m_cells)
     elif isinstance(transport, _rtd().TanksInSeries):
         raise InputError(f"transport {transport!r}: non-linear kinetics solve tanks in series cell by cell; expected "
                          "an integer number of tanks")
@@ -765,14 +767,15 @@ def solve_transport(kin: Kinetics, feed, transport, d=None, *, where=None, dispe
     return r
 
 
-def _composed(kin: Kinetics, feed, transport, tol: float, holdup: bool) -> NonlinearSteady:
+def _composed(kin: Kinetics, feed, transport, tol: float, holdup: bool, m_cells=None) -> NonlinearSteady:
     start = time.perf_counter()
     parts = transport.parts
     weights = getattr(transport, "weights", None)
     stream, over = feed, 0.0
     product, over_p, hold, err, its, methods, res = 0.0, 0.0, 0.0, 0.0, 0, [], 0.0
     for k, part in enumerate(parts):
-        r = solve_transport(kin, stream if weights is None else feed, part, tol=tol / len(parts), holdup=holdup)
+        r = solve_transport(kin, stream if weights is None else feed, part, tol=tol / len(parts), holdup=holdup,
+                            m_cells=m_cells)
         methods.append(r.method)
         its += r.iterations
         res = max(res, r.residual)
