@@ -12,7 +12,11 @@ simplified Newton, method) and rebuilt when it does not:
 - if Newton with fresh factors stalls (no step reduces max|F|) it hands over to
   pseudo-transient continuation, (Mass/dt - J) dy = F with dt grown by the residual ratio,
   to residual 1e-6 s, with its own iteration budget (``ptc_iter``: far from the root it
-  takes hundreds of steps where Newton takes a few), then Newton again.
+  takes hundreds of steps where Newton takes a few), then Newton again;
+- if that fails too (continuation stalls where material accumulates slowly in a retained
+  class), the dynamics themselves, Mass dy/dt = F(y), are integrated by an
+  error-controlled implicit solver towards the steady state the mill's start-up reaches
+  (``dynamics``), then Newton again.
 
 Stated criterion: converged when max|F| <= tol * s, s the size of the terms F is made of
 (the caller's ``scale``: feed, transport flows x state, breakage flux), or, at the
@@ -43,7 +47,7 @@ __all__ = ["NewtonResult", "newton", "DenseFactor", "SparseFactor", "BlockTridia
 #: Chord contraction above which the factors are rebuilt at the current state.
 REFRESH_RATIO = 0.2
 #: Default budgets: Newton iterations per Newton phase, and pseudo-transient steps.
-MAX_ITER, PTC_ITER = 60, 2000
+MAX_ITER, PTC_ITER = 60, 500
 
 _getrf, _getrs = lapack.get_lapack_funcs(("getrf", "getrs"), dtype=np.float64)
 
@@ -139,7 +143,8 @@ class ChainFactor:
 @dataclass
 class NewtonResult:
     """The root ``y`` (the last evaluated state plus ``correction``), ``residual`` max|F| at the
-    last evaluated state, ``scale`` s of the criterion, ``step`` the error estimate of y (max norm), ``iterations`` (Newton and pseudo-transient steps),
+    last evaluated state, ``scale`` s of the criterion, ``step`` the error estimate of y (max
+    norm), ``iterations`` (Newton and pseudo-transient steps, right-hand sides of the dynamics),
     ``factorizations``, ``how`` (the phases that ran), ``factor`` (the factors kept at
     the end, for a warm start of the next solve), ``correction`` the next step at the
     answer and ``rho`` the contraction it is divided by (``step`` = max|correction| /
@@ -159,7 +164,7 @@ class NewtonResult:
 
 def newton(F, factor, y0, scale, *, tol: float, max_iter: int = MAX_ITER, ptc_iter: int = PTC_ITER,
            unit: str = "steady state", what: str = "", dt0: float = 1.0, warm=None,
-           phases=("newton", "pseudo-transient", "newton")) -> NewtonResult:
+           phases=("newton", "pseudo-transient", "newton", "transient", "newton"), dynamics=None) -> NewtonResult:
     """Solve F(y) = 0 (module docstring).
 
     Parameters
@@ -172,6 +177,10 @@ def newton(F, factor, y0, scale, *, tol: float, max_iter: int = MAX_ITER, ptc_it
     dt0 : first pseudo-time step (the time scale of the system, e.g. its residence time).
     warm : factors of a nearby problem to start the chord iteration with (or None).
     unit, what : named in the error message (the unit; the kinetics and grid).
+    dynamics : (mass (n,), jacobian y -> dF/dy) for the "transient" phase: the dynamics
+        Mass dy/dt = F(y) integrated by an error-controlled implicit solver (scipy BDF) over
+        horizons growing tenfold from ``dt0``, until max|F| < 1e-6 s (the steady state the
+        mill's own start-up reaches, where pseudo-transient steps stalled); None skips it.
     """
     y = np.array(y0, dtype=float)
     f = F(y)
@@ -189,6 +198,8 @@ def newton(F, factor, y0, scale, *, tol: float, max_iter: int = MAX_ITER, ptc_it
     fac, fresh = warm, False
     rho, last_step = 0.0, None
     floor, refresh = False, False
+
+    start = y
 
     def safe_F(v):
         try:
@@ -245,7 +256,7 @@ def newton(F, factor, y0, scale, *, tol: float, max_iter: int = MAX_ITER, ptc_it
                 refresh = lam < 1.0 or (not fresh and rho > REFRESH_RATIO)
                 rho = 1.0 if lam < 1.0 else rho
                 fresh = False
-        else:  # pseudo-transient continuation
+        elif phase == "pseudo-transient":
             dt = dt0
             budget = its + ptc_iter
             while its < budget:
@@ -257,15 +268,27 @@ def newton(F, factor, y0, scale, *, tol: float, max_iter: int = MAX_ITER, ptc_it
                     dt *= 0.25
                     continue
                 new = float(np.abs(trial).max())
-                dt *= min(10.0, max(0.5, res / max(new, 1e-300)))
+                # switched evolution relaxation: dt grows with the residual's fall (at most 10x); a
+                # residual that rises on the way (material accumulating in a slow class) keeps dt,
+                # only a blow-up (10x) halves it: implicit Euler is stable at any dt for the
+                # linearised system, and a shrinking dt stalls the continuation on slow transients
+                ratio = res / max(new, 1e-300)
+                dt *= min(10.0, max(1.0, ratio)) if ratio > 0.1 else 0.5
                 y, f, res = y - dy, trial, new
                 if res < 1e-6 * scale(y):
                     break
             fac, last_step, refresh = None, None, False
+        elif phase == "transient":
+            if dynamics is None:
+                continue
+            # from the start (a physical state: continuation may have wandered into one that is not)
+            y, f, res, n_ode = _integrate_to_steady(F, dynamics, start, scale, dt0, res)
+            its += n_ode
+            fac, last_step, refresh = None, None, False
         s = scale(y)
         if phase == "newton" and its >= budget and res > tol * s and not floor:
             break
-    how = " + ".join(ran) or "start already converged"
+    how = " + ".join(p for p in ran if p != "transient" or dynamics is not None) or "start already converged"
     s = scale(y)
     if not np.isfinite(res) or (res > tol * s and not floor):
         raise SolverError(f"{unit}: the steady state did not converge: residual max|F| = {res:.3g} > tol {tol:g} "
@@ -278,3 +301,37 @@ def newton(F, factor, y0, scale, *, tol: float, max_iter: int = MAX_ITER, ptc_it
     # (the chord contracts), and the mass balance closes to second order in the step (the
     # columns of dR/dy sum to zero, so sum F(y + dy) = sum (F + J0 dy) + O(dy^2) = O(dy^2))
     return NewtonResult(y + corr, res, s, float(np.abs(corr).max()) / (1.0 - rho), its, nfac, how, fac, corr, rho)
+
+
+def _integrate_to_steady(F, dynamics, y, scale, dt0, res, horizons: int = 14):
+    """Mass dy/dt = F(y) from y by BDF (rtol 1e-6) over horizons dt0 10^k until max|F| < 1e-6 s;
+    returns (y, F(y), max|F|, right-hand-side evaluations)."""
+    from scipy.integrate import solve_ivp
+
+    mass, jacobian = dynamics
+    inv = 1.0 / np.asarray(mass, float)
+    import scipy.sparse as sp
+
+    def rhs(_t, v):
+        return inv * F(v)
+
+    def jac(_t, v):
+        J = jacobian(v)
+        return (sp.diags(inv) @ J).tocsc() if sp.issparse(J) else inv[:, None] * J
+
+    f, nfev, T = F(y), 0, dt0
+    for _ in range(horizons):
+        try:
+            sol = solve_ivp(rhs, (0.0, T), y, method="BDF", jac=jac, rtol=1e-6, atol=1e-12 * max(np.abs(y).max(), 1.0))
+        except SolverError:
+            break
+        nfev += int(sol.nfev)
+        if not sol.success or not np.isfinite(sol.y[:, -1]).all():
+            break
+        y = sol.y[:, -1]
+        f = F(y)
+        res = float(np.abs(f).max())
+        if res < 1e-6 * scale(y):
+            break
+        T *= 10.0
+    return y, f, res, nfev

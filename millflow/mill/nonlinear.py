@@ -162,13 +162,19 @@ def _solve_cell(kin: Kinetics, y_in, tau, y0, *, tol, max_iter, ptc_iter, unit, 
     def F(y):
         return y_in - dd * y + tau * kin.rate(y)
 
-    def factor(y, shift):
+    def jacobian(y):
         A = tau * kin.jacobian(y)
-        A[diag, diag] -= dd + shift
+        A[diag, diag] -= dd
+        return A
+
+    def factor(y, shift):
+        A = jacobian(y)
+        A[diag, diag] -= shift
         return DenseFactor(A)
 
     return newton(F, factor, y0, lambda y: residual_scale(kin, y_in, y, tau, d), tol=tol, max_iter=max_iter,
-                  ptc_iter=ptc_iter, unit=unit, what=kin.describe(), dt0=0.1 * tau, warm=warm, phases=phases)
+                  ptc_iter=ptc_iter, unit=unit, what=kin.describe(), dt0=0.1 * tau, warm=warm, phases=phases,
+                  dynamics=(np.full(y_in.size, tau), jacobian))
 
 
 @limit_blas_threads  # small dense Newton systems: one BLAS thread (millflow.threads)
@@ -516,10 +522,13 @@ def cells(kin: Kinetics, feed, transport, d=None, where="discharge", *, tol: flo
     def F(c):
         return src + T @ c + (V[:, None] * kin.rate_many(c.reshape(n, n1))).ravel()
 
-    def factor(c, shift):
+    def jacobian(c):
         blocks = V[:, None, None] * kin.jacobian_many(c.reshape(n, n1))
         B = scipy.sparse.bsr_matrix((blocks, np.arange(n), np.arange(n + 1)), shape=(n * n1, n * n1))
-        A = (T + B).tocsc()
+        return (T + B).tocsc()
+
+    def factor(c, shift):
+        A = jacobian(c)
         if shift:
             A = A - scipy.sparse.diags(shift * mass, format="csc")
         try:
@@ -538,7 +547,8 @@ def cells(kin: Kinetics, feed, transport, d=None, where="discharge", *, tol: flo
     c0 = np.concatenate([np.maximum(lin.holdup / V[:, None], 0.0), np.zeros((n, 1))], axis=1).ravel()
     with _blas():
         r = newton(F, factor, c0, scale, tol=tol, max_iter=max_iter, ptc_iter=ptc_iter,
-                   unit=f"recirculating cells ({n} cells)", what=kin.describe(), dt0=0.1 * float(V.sum()))
+                   unit=f"recirculating cells ({n} cells)", what=kin.describe(), dt0=0.1 * float(V.sum()),
+                   dynamics=(mass, jacobian))
     C = r.y.reshape(n, n1)
     p = beta * np.append(feed, 0.0) + (out * C.T).sum(axis=1)
     err = float((np.abs(out) * np.abs(r.correction.reshape(n, n1)).T).sum(axis=1).max()) / (1.0 - r.rho)

@@ -145,8 +145,20 @@ def _newton_line(kin: Kinetics, line: _Line, tau, src, C0, *, tol, unit, fixed=N
             flux = 0.0
         return float(max(feed_size, float((terms * np.abs(C)).max()), flux, np.finfo(float).tiny))
 
+    def jacobian(y):
+        import scipy.sparse as sp
+
+        blocks = (tau * wts)[:, None, None] * kin.jacobian_many(y.reshape(m, n1))
+        blocks[:, diag_idx, diag_idx] += dg
+        B = sp.bsr_matrix((blocks, np.arange(m), np.arange(m + 1)), shape=(m * n1, m * n1))
+        k = np.arange(m - 1)[:, None] * n1 + diag_idx[None, :]
+        rows = np.concatenate([(k + n1).ravel(), k.ravel()])
+        cols = np.concatenate([k.ravel(), (k + n1).ravel()])
+        off = sp.csr_matrix((np.concatenate([lo.ravel(), up.ravel()]), (rows, cols)), shape=(m * n1, m * n1))
+        return (B + off).tocsc()
+
     r = newton(F, factor, np.asarray(C0, float)[:m].ravel(), scale, tol=tol, unit=unit, what=kin.describe(),
-               dt0=0.1, warm=warm)
+               dt0=0.1 * tau, warm=warm, dynamics=(np.repeat(tau * wts, n1), jacobian))
     return r.y.reshape(m, n1), r
 
 
