@@ -761,11 +761,11 @@ def solve_transport(kin: Kinetics, feed, transport, d=None, *, where=None, dispe
     elif kind == "plug":
         r = plug_flow(kin, feed, tau, sc.d, rtol=min(PLUG_RTOL, max(tol, 1e-12)), holdup=holdup,
                       positions=positions)
-    elif kind == "axial":
-        r = axial_dispersion(kin, feed, tau, float(transport.pe), sc.d, dispersion=sc.dispersion, tol=tol,
-                             positions=positions, m_cells=m_cells)
+    elif kind == "axial":  # tau = L / u (the open vessel's mean residence time is tau (1 + 2/Pe))
+        r = axial_dispersion(kin, feed, float(transport.tau), float(transport.pe), sc.d, dispersion=sc.dispersion,
+                             tol=tol, positions=positions, m_cells=m_cells)
     elif kind == "axial_open":
-        r = axial_open(kin, feed, tau, float(transport.pe), sc.d, dispersion=sc.dispersion,
+        r = axial_open(kin, feed, float(transport.tau), float(transport.pe), sc.d, dispersion=sc.dispersion,
                        discharge=sc.discharge or "sampled", tol=tol, positions=positions, m_cells=m_cells)
     elif kind in ("series", "parallel"):
         r = _composed(kin, feed, transport, tol, holdup, m_cells)

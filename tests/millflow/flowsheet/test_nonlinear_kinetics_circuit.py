@@ -56,7 +56,7 @@ def test_linear_physics_through_the_kinetic_path_equals_the_linear_circuit():
     (('aggregation = "constant"', 'aggregation = "brownian"'), "units.ball_mill.kinetics.aggregation = 'brownian'"),
     (("x_ref_um = 10\n", ""), r"units.ball_mill.kinetics: missing parameter x_ref_<unit>"),
     (("fines_um = 75", "fines_um = 75\ncolour = 2"), "units.ball_mill.kinetics.colour: unknown key"),
-    (("aggregation_beta0_E_t_per_kWh = 0.0045", "aggregation_beta0_E_t_per_kWh = 0.0045\naggregation_beta0_per_s = 1e-4"),
+    (("x_ref_um = 10", "x_ref_um = 10\naggregation_beta0_per_s = 1e-4"),
      "aggregation_beta0 given per time and per energy"),
 ])
 def test_bad_kinetics_tables(edit, match):
