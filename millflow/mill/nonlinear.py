@@ -214,20 +214,19 @@ class _FirstOrder:
     changes from one solve to the next (a guess for Newton; no full matrix built per solve)."""
 
     def __init__(self, b):
-        self.b = b
-        self.zero = None
-
-    def solve(self, S, f, tau, d=None):
         from scipy.linalg.lapack import dtrtrs
 
+        self.b, self.pos, self.trtrs = b, None, dtrtrs
+
+    def solve(self, S, f, tau, d=None):
         s = tau * (S if d is None else S / d)
-        zero = ~(s > 1e-12)
-        if self.zero is None or not np.array_equal(zero, self.zero):
-            self.W = np.ascontiguousarray(-self.b * np.where(zero, 0.0, 1.0)[None, :])
-            self.zero = zero
-        sp = np.where(zero, 1.0, s)
-        self.W[np.arange(s.size), np.arange(s.size)] = (1.0 + s) / sp
-        q, info = dtrtrs(self.W.T, f, lower=0, trans=1)  # W.T: LAPACK's column order, no copy
+        pos = s > 1e-12
+        if self.pos is None or (pos != self.pos).any():
+            self.W = np.ascontiguousarray(-self.b * pos[None, :])
+            self.pos = pos
+        sp = np.where(pos, s, 1.0)
+        self.W.flat[:: s.size + 1] = (1.0 + s) / sp
+        q, info = self.trtrs(self.W.T, f, lower=0, trans=1)  # W.T: LAPACK's column order, no copy
         x = q / sp
         return x if info == 0 and np.isfinite(x).all() else None
 
@@ -293,6 +292,7 @@ def well_mixed(kin: Kinetics, feed, tau: float, d=None, *, tol: float = NEWTON_R
     return NonlinearSteady(p[:-1], float(p[-1]), r.how, r.residual, err, float(abs(p.sum() - feed.sum())),
                            r.iterations, time.perf_counter() - start,
                            {"kinetics": kin.describe(), "holdup": tau * y[:-1], "holdup_overflow": float(tau * y[-1]),
+                            "holdup_error_estimate": tau * float(np.abs(r.correction).max()) / (1.0 - r.rho),
                             "factorizations": r.factorizations})
 
 
@@ -340,15 +340,18 @@ def tanks_in_series(kin: Kinetics, feed, tau: float, n: int, d=None, where="disc
             Y, r = _chain(kin, y_in, tau / n, Dm, tol=tol, max_iter=max_iter)
             its, nfac, res, how = r.iterations, r.factorizations, r.residual, "Newton on the chain of cells"
             err = float(np.abs(Dm[-1] * r.correction.reshape(n, -1)[-1]).max()) / (1.0 - r.rho)
+            herr = tau / n * float(np.abs(r.correction.reshape(n, -1)[:, :-1]).sum(axis=0).max()) / (1.0 - r.rho)
         except SolverError as exc:  # the robust path: cell by cell, each with its pseudo-transient fallback
             Y, its, nfac, res, err, how = _one_by_one(kin, y_in, tau / n, Dm, tol, max_iter, ptc_iter)
+            herr = tau * err / float(Dm.min())  # each cell's content error is at most its outflow's / d*
             how += f" (the chain did not converge: {exc})"
     out = Dm[-1] * Y[-1]
     cells = tau / n * Y  # (n, N + 1): hold-up per unit feed rate [s], the overflow last
     return NonlinearSteady(out[:-1], float(out[-1]), f"cells, {how}", res, err, float(abs(out.sum() - feed.sum())),
                            its, time.perf_counter() - start,
                            {"kinetics": kin.describe(), "cells": cells[:, :-1], "cells_overflow": cells[:, -1],
-                            "holdup": cells[:, :-1].sum(axis=0), "factorizations": nfac})
+                            "holdup": cells[:, :-1].sum(axis=0), "holdup_error_estimate": herr,
+                            "factorizations": nfac})
 
 
 def _chain_guess(kin: Kinetics, y_in, tau, Dm):
@@ -551,11 +554,14 @@ def cells(kin: Kinetics, feed, transport, d=None, where="discharge", *, tol: flo
                    dynamics=(mass, jacobian))
     C = r.y.reshape(n, n1)
     p = beta * np.append(feed, 0.0) + (out * C.T).sum(axis=1)
-    err = float((np.abs(out) * np.abs(r.correction.reshape(n, n1)).T).sum(axis=1).max()) / (1.0 - r.rho)
+    dC = np.abs(r.correction.reshape(n, n1))
+    err = float((np.abs(out) * dC.T).sum(axis=1).max()) / (1.0 - r.rho)
+    herr = float((V[:, None] * dC[:, :-1]).sum(axis=0).max()) / (1.0 - r.rho)
     return NonlinearSteady(p[:-1], float(p[-1]), f"cells, Newton on all cells ({r.how})", r.residual, err,
                            float(abs(p.sum() - feed.sum())), r.iterations, time.perf_counter() - start,
                            {"kinetics": kin.describe(), "cell_holdup": V[:, None] * C[:, :-1],
-                            "cell_overflow": V * C[:, -1], "factorizations": r.factorizations})
+                            "cell_overflow": V * C[:, -1], "holdup_error_estimate": herr,
+                            "factorizations": r.factorizations})
 
 
 # ----------------------------------------------------------------------- plug flow

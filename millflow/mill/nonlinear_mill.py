@@ -103,6 +103,7 @@ def steady_dataset(kin, b, feed, transport, d=None, *, where=None, dispersion=No
         overflow_mass=float(r.overflow_mass),
         holdup_overflow=float(r.info.get("holdup_overflow", 0.0)),
         residual=float(r.residual),
+        holdup_error_estimate=float(r.info.get("holdup_error_estimate", r.error_estimate * float(transport.mean))),
         iterations=int(r.iterations),
         transport=repr(transport),
         classification="none" if sc.d is None else f"d* at {sc.where}",

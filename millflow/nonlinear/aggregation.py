@@ -164,13 +164,20 @@ class AggregationOperator:
         Jm[:, np.arange(n), np.arange(n)] -= N @ self.beta.T
         return Jm
 
-    def jacobian(self, M) -> np.ndarray:
-        """d(rate)/dM, (N + 1, N) dense [1/s]."""
+    def jacobian(self, M, out=None, add=None) -> np.ndarray:
+        """d(rate)/dM, (N + 1, N) dense [1/s] (written into ``out`` if given, with ``add`` (N, N)
+        added to its first N rows: the caller's breakage Jacobian, in the same pass)."""
         n = self.n
         N = M / self.v
         G2, beta_v = self._scaled()
-        Jm = (G2 @ N).reshape(n + 1, n)
-        Jm[:n] -= M[:, None] * beta_v
+        H = (G2 @ N).reshape(n + 1, n)
+        Jm = H if out is None else out
+        sink = M[:, None] * beta_v
+        if add is not None:
+            sink -= add
+        np.subtract(H[:n], sink, out=Jm[:n])
+        if out is not None:
+            Jm[n] = H[n]
         Jm[np.arange(n), np.arange(n)] -= self.beta @ N
         return Jm
 

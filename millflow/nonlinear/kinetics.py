@@ -286,22 +286,26 @@ class Kinetics:
         self._no_age()
         n = self.n
         M = y[:n]
-        Jm = np.zeros((n + 1, n + 1))
-        if self.aggregation is not None:
-            Jm[:, :n] = self.aggregation.jacobian(M)
         if self.population is None and self.fines is None:
             S, terms, full = self.S, (), None
         else:
             S, terms, full = self._rate_terms(M[None, :])
             S = S[0]
-        Jm[:n, :n] += self.b * S[None, :]
-        Jm[np.arange(n), np.arange(n)] -= S
+        Jm = np.empty((n + 1, n + 1))
+        Jm[:, n] = 0.0
+        top = Jm[:n, :n]
+        if self.aggregation is not None:  # (b S) and aggregation in one pass over the block
+            self.aggregation.jacobian(M, out=Jm[:, :n], add=self.b * S[None, :])
+        else:
+            np.multiply(self.b, S[None, :], out=top)
+            Jm[n, :n] = 0.0
+        top[np.arange(n), np.arange(n)] -= S
         for c, r in terms:  # (b - I) diag(M) c r^T = ((b - I)(M c)) r^T
             mc = M * c[0]
-            Jm[:n, :n] += np.outer(self.b @ mc - mc, r)
+            top += np.multiply.outer(self.b @ mc - mc, r)
         if full is not None:
             X = M[:, None] * full[0]
-            Jm[:n, :n] += self.b @ X - X
+            top += self.b @ X - X
         return Jm
 
 

@@ -258,6 +258,10 @@ def test_newton_error_estimates_bound_the_distance_to_a_converged_root(which):
     # the tight root is converged to rounding; the loose one's estimate covers the distance
     assert np.abs(loose.product - tight.product).max() <= loose.error_estimate + tight.error_estimate
     assert tight.error_estimate < 1e-12
+    h_loose, h_tight = (r.info["holdup"] if "holdup" in r.info else r.info["cell_holdup"].sum(axis=0)
+                        for r in (loose, tight))
+    assert np.abs(h_loose - h_tight).max() <= (loose.info["holdup_error_estimate"]
+                                               + tight.info["holdup_error_estimate"])
 
 
 def test_micromixing_limits_keep_their_old_names():
