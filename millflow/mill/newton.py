@@ -61,12 +61,14 @@ class DenseFactor:
     the wrappers' checks cost as much as the work)."""
 
     def __init__(self, A):
-        self.lu, self.piv, info = _getrf(A, overwrite_a=True)
+        # the factors of A^T in place: a C-ordered A is LAPACK's (column-ordered) A^T, so no
+        # copy is made; A x = r is then solved as (A^T)^T x = r (getrs, trans = 1)
+        self.lu, self.piv, info = _getrf(A.T, overwrite_a=True)
         if info > 0 or not np.isfinite(self.lu).all():
             raise SolverError("the Newton matrix is singular")
 
     def solve(self, r):
-        x, info = _getrs(self.lu, self.piv, r)
+        x, info = _getrs(self.lu, self.piv, r, trans=1)
         return x
 
 
