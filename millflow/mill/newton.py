@@ -149,7 +149,8 @@ class ChainFactor:
 @dataclass
 class NewtonResult:
     """The root ``y`` (the last evaluated state plus ``correction``), ``residual`` max|F| at the
-    last evaluated state, ``scale`` s of the criterion, ``step`` the error estimate of y (max
+    last evaluated state (or, when the last chord step was taken on its predicted residual,
+    that prediction q max|F|), ``scale`` s of the criterion, ``step`` the error estimate of y (max
     norm), ``iterations`` (Newton and pseudo-transient steps, right-hand sides of the dynamics),
     ``factorizations``, ``how`` (the phases that ran), ``factor`` (the factors kept at
     the end, for a warm start of the next solve), ``correction`` the next step at the
@@ -244,8 +245,8 @@ def newton(F, factor, y0, scale, *, tol: float, max_iter: int = MAX_ITER, ptc_it
                     if q <= 0.2 and q * res <= tol * scale(y):
                         # the step's predicted residual (q max|F|) meets the criterion: take it without
                         # evaluating F there; its error is bounded by the series q |dy| / (1 - q)
-                        return NewtonResult(y + dy, res, scale(y), q * float(np.abs(dy).max()) / (1.0 - q), its,
-                                            nfac, " + ".join(ran), fac, q * dy, q)
+                        return NewtonResult(y + dy, q * res, scale(y), q * float(np.abs(dy).max()) / (1.0 - q),
+                                            its, nfac, " + ".join(ran), fac, q * dy, q)
                 lam, ft = 1.0, None
                 while lam >= 1.0 / 256:
                     trial = safe_F(y + lam * dy)

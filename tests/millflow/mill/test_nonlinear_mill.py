@@ -59,7 +59,7 @@ def test_nonlinear_code_with_linear_physics_matches_the_linear_solvers():
     ax = nl.axial_dispersion(kin, feed, TAU, 8.0, m_cells=16)
     _, _, p_ax = solve_axial_grid(S, b, feed, TAU, 8.0, 16)
     assert np.abs(ax.product - p_ax).max() < 1e-12  # the same discretisation, solved by Newton
-    mm = nl.micromixing_bounds(kin, feed, rtd.TanksInSeries(TAU, 3))
+    mm = nl.micromixing_limits(kin, feed, rtd.TanksInSeries(TAU, 3))
     exact, _, err, _ = segregated(S, b, feed, rtd.TanksInSeries(TAU, 3), holdup=False)
     # both limits are the exact linear RTD answer, to the ODE/quadrature tolerance (rtol 1e-9)
     assert np.abs(mm.segregated - exact).max() < 1e-7 and np.abs(mm.max_mixedness - exact).max() < 1e-7
@@ -93,7 +93,7 @@ def test_tanks_one_cell_is_well_mixed_and_many_cells_approach_plug_flow():
 def test_micromixing_limits_differ_for_nonlinear_kinetics():
     grid, S, b, feed = _scene(30)
     kin = _nonlinear(grid, S, b, beta0=0.05)
-    mm = nl.micromixing_bounds(kin, feed, rtd.PerfectMixing(TAU))
+    mm = nl.micromixing_limits(kin, feed, rtd.PerfectMixing(TAU))
     # maximum mixedness of an exponential RTD is the perfect mixer itself
     assert np.abs(mm.max_mixedness - nl.well_mixed(kin, feed, TAU).product).max() < 1e-8
     assert not mm.coincide and mm.spread > 100 * mm.error_estimate
@@ -101,7 +101,7 @@ def test_micromixing_limits_differ_for_nonlinear_kinetics():
 
 def test_micromixing_for_linear_kinetics_says_they_coincide():
     grid, S, b, feed = _scene(30)
-    mm = nl.micromixing_bounds(kinetics(S, b), feed, rtd.TanksInSeries(TAU, 2))
+    mm = nl.micromixing_limits(kinetics(S, b), feed, rtd.TanksInSeries(TAU, 2))
     assert mm.coincide and mm.spread == 0.0 and "coincide" in mm.note
 
 
@@ -118,7 +118,7 @@ def test_micromixing_with_a_tabulated_hazard_axial_dispersion():
     # splined; with linear physics (zero kernel) both limits must be the exact RTD answer
     grid, S, b, feed = _scene(30)
     model = rtd.AxialDispersion(TAU, 10.0)
-    mm = nl.micromixing_bounds(_zero_kernel(grid, S, b), feed, model)
+    mm = nl.micromixing_limits(_zero_kernel(grid, S, b), feed, model)
     exact, _, _, _ = segregated(S, b, feed, model, holdup=False)
     assert np.abs(mm.segregated - exact).max() < 1e-8  # quadrature / ODE at rtol 1e-9
     assert np.abs(mm.max_mixedness - exact).max() < 1e-8
@@ -183,7 +183,7 @@ def test_micromixing_limits_are_not_bounds_class_by_class(lam, outside):
     w[:, S.size // 2:] = 3.0
     kin = kinetics(S, b, w=w, lam=lam)
     four = nl.tanks_in_series(kin, feed, TAU, 4)
-    mm = nl.micromixing_bounds(kin, feed, rtd.TanksInSeries(TAU, 4))
+    mm = nl.micromixing_limits(kin, feed, rtd.TanksInSeries(TAU, 4))
     lo = np.minimum(mm.segregated, mm.max_mixedness)
     hi = np.maximum(mm.segregated, mm.max_mixedness)
     beyond = float(np.maximum(lo - four.product, four.product - hi).max())
