@@ -41,7 +41,7 @@ from millflow.errors import InputError, SolverError
 from millflow.mill.axial import PE_MIXED, _bernoulli, refine_grids, solve_axial_grid
 from millflow.mill.axial_open import check_discharge, open_grid, solve_axial_open_grid, tail_length
 from millflow.mill.newton import BlockTridiagonalFactor, newton
-from millflow.mill.nonlinear import (NEWTON_RTOL, NonlinearSteady, _check, _discharge, _no_age, well_mixed)
+from millflow.mill.nonlinear_cell import NEWTON_RTOL, NonlinearSteady, _check, _discharge, _no_age, well_mixed
 from millflow.nonlinear.kinetics import Kinetics
 from millflow.threads import limit_blas_threads
 

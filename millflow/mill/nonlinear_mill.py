@@ -44,7 +44,7 @@ def steady_dataset(kin, b, feed, transport, d=None, *, where=None, dispersion=No
     from millflow.mill import nonlinear as nl
     from millflow.mill.accuracy import check_accuracy
     from millflow.mill.scene import _check_feed
-    from millflow.mill.steady import _GRID_NOTE, _fractions, _samples, _size_coords
+    from millflow.mill.dataset import _GRID_NOTE, _fractions, _samples, _size_coords
 
     start = time.perf_counter()
     check_no_b(kin, b, "steady_mill")

@@ -257,7 +257,7 @@ def transient_nonlinear(kin, b, transport, t, *, feed=None, initial_feed=None, p
 
     from millflow.mill.nonlinear import _NEEDS_STRUCTURE
     from millflow.mill.nonlinear_mill import check_no_b
-    from millflow.mill.steady import _GRID_NOTE, _size_coords
+    from millflow.mill.dataset import _GRID_NOTE, _size_coords
 
     start = time.perf_counter()
     check_no_b(kin, b, "transient_mill")

@@ -184,7 +184,7 @@ class Kinetics:
                              "classification (segregated flow over the exit ages)")
 
     def rates(self, M) -> np.ndarray:
-        """S_i[M] [1/s] for M (N,) or (m, N)."""
+        """The rates S_i(M) in 1/s for M (N,) or (m, N)."""
         S = self.S if self.population is None else self.S * self.population.phi(M)[0]
         if self.fines is None:
             return S
