@@ -151,3 +151,25 @@ def test_the_fines_fraction_varies_continuously_across_a_grid_edge():
     mid, top = load_at(78e-6), load_at(hi)
     assert min(at_lo[0], top) < mid < max(at_lo[0], top)
     assert abs(top - at_lo[0]) > 1e-3 * at_lo[0]  # the fines size matters (cushioning)
+
+
+@pytest.mark.parametrize("transport", ['{model = "axial_dispersion", pe = 10}',
+                                       # ~20 s: the open vessel's grids and back layer at every tear iteration
+                                       pytest.param('{model = "axial_dispersion_open", pe = 10}',
+                                                    marks=pytest.mark.slow),
+                                       '{model = "series", parts = [{model = "perfect_mixing", tau_fraction = 0.5}, '
+                                       '{model = "plug_flow", tau_fraction = 0.5}]}'])
+def test_every_transport_of_a_kinetic_mill_meets_the_units_tolerance(transport):
+    """The axial grids refine until their estimate meets the units' tolerance (they used to stop
+    at 64 volumes with 9e-5), with classification along the axis where it applies."""
+    from millflow.flowsheet.units import KINETIC_TOL
+
+    text = FILE.read_text().replace('transport = {model = "tanks_in_series", n = 3}', f"transport = {transport}")
+    if "axial_dispersion," in transport:  # (the open vessel with a grate refines to 4096 volumes: slow in a loop)
+        text = text.replace("power_kW = 3800", 'power_kW = 3800\nclassification = {curve = "screen", d50_um = 3000, '
+                                                'm = 3.0, where = "axis"}')
+    sol = solve(loads(text), tol=1e-10)
+    mill = sol.units["ball_mill"]
+    assert 0 < mill["error_estimate"] <= KINETIC_TOL
+    assert ("along the axis" in mill["method"]) == ("axial_dispersion," in transport)
+    assert abs(sol.flow("overflow").sum() - 250 / 3.6) < 1e-8 * 250 / 3.6
