@@ -59,8 +59,8 @@ def micromixing(images: Path):
     kin = kinetics(S, b, w=w, lam=-2.0, aggregation=Aggregation(constant_kernel(3e-4), grid.x[-1]), grid=grid)
     lin = kinetics(S, b)
     model = rtd.TanksInSeries(tau, 3)
-    mm = nl.micromixing_bounds(kin, feed, model)
-    ml = nl.micromixing_bounds(lin, feed, model)
+    mm = nl.micromixing_limits(kin, feed, model)
+    ml = nl.micromixing_limits(lin, feed, model)
     fig, ax = figure(1, 1, figsize=(6, 4))
     x_um = grid.x * 1e6
     for p, lab, st in ((ml.segregated, "first order (limits coincide)", "k-"),

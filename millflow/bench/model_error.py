@@ -16,7 +16,14 @@ S_i = k_i (1 + F)^(-1), F the mass below 1/30 of the top size. Tables:
   exact solve of the same mill (the baseline).
 - ``work_precision``: error against run time of the batch ODE (BDF, Radau) over
   tolerances, of the axial-dispersion Newton over the number of volumes (error against
-  256 volumes), and the micromixing limits.
+  a grid refined to 1e-11), and the micromixing limits.
+- ``speed``: the non-linear mills against the code at commit 43330ce, kept as a faithful
+  copy in :mod:`millflow.bench.nonlinear_baseline` (full Newton, a fresh Jacobian and LU at
+  every iteration, the population Jacobian by an N^3 product, axial nodes in a Python loop
+  with one LU and one inverse per node): perfect mixer and 10 tanks in series at N = 100,
+  axial dispersion Pe 10 on 64 volumes (checked against 32) at N = 40 and N = 100. CPU
+  time, median of interleaved rounds (baseline, new, baseline, new, ...) in one process;
+  ``speedup`` = baseline / new, ``max_abs_error`` the two answers' difference.
 """
 from __future__ import annotations
 
@@ -25,7 +32,8 @@ import time
 
 import numpy as np
 
-DESCRIPTION = "non-linear kinetics and mills: batch + aggregation, PM and TIS Newton, work-precision"
+DESCRIPTION = ("non-linear kinetics and mills: batch + aggregation, PM and TIS Newton, work-precision, speed "
+               "against the 43330ce code")
 
 TAU = 600.0
 N = 100
@@ -133,18 +141,25 @@ def work_precision(quick: bool) -> list[dict]:
                          "mass_balance_error": r.mass_balance_error})
     n_ax = 40
     grid, kin, lin, feed = scene(n_ax)
-    fine, _, _, _ = nl._axial_newton(kin, feed, TAU, 10.0, 128 if quick else 256, 1e-12, 40)
+    fine = nl.axial_dispersion(kin, feed, TAU, 10.0, tol=1e-9 if quick else 1e-11).product
     for m in (8, 16, 32) if quick else (8, 16, 32, 64):
         t0 = time.perf_counter()
-        p, over, res, its = nl._axial_newton(kin, feed, TAU, 10.0, m, 1e-12, 40)
+        r = nl.axial_dispersion(kin, feed, TAU, 10.0, m_cells=m)
         rows.append({"table": "work_precision", "case": "axial_nonlinear_Pe10", "method": f"{m} volumes, Newton",
                      "n_classes": n_ax, "runtime_s": time.perf_counter() - t0,
-                     "max_abs_error": float(np.abs(p - fine).max()), "residual": res, "iterations": its,
-                     "mass_balance_error": float(abs(p.sum() + over - feed.sum()))})
+                     "max_abs_error": float(np.abs(r.product - fine).max()), "error_estimate": r.error_estimate,
+                     "residual": r.residual, "iterations": r.iterations, "mass_balance_error": r.mass_balance_error})
+    for tol in (1e-6, 1e-8):
+        t0 = time.perf_counter()
+        r = nl.axial_dispersion(kin, feed, TAU, 10.0, tol=tol)
+        rows.append({"table": "work_precision", "case": "axial_nonlinear_Pe10",
+                     "method": f"refined to {tol:g} ({r.info['control_volumes']} volumes)", "n_classes": n_ax,
+                     "runtime_s": time.perf_counter() - t0, "max_abs_error": float(np.abs(r.product - fine).max()),
+                     "error_estimate": r.error_estimate, "mass_balance_error": r.mass_balance_error})
     grid, kin, lin, feed = scene()
     for model in (rtd.PerfectMixing(TAU), rtd.TanksInSeries(TAU, 3)):
         t0 = time.perf_counter()
-        mm = nl.micromixing_bounds(kin, feed, model)
+        mm = nl.micromixing_limits(kin, feed, model)
         rows.append({"table": "work_precision", "case": f"micromixing_{type(model).__name__}",
                      "method": "segregation + Zwietering", "n_classes": N, "runtime_s": time.perf_counter() - t0,
                      "max_abs_error": mm.error_estimate, "spread": mm.spread,
@@ -152,8 +167,50 @@ def work_precision(quick: bool) -> list[dict]:
     return rows
 
 
+def _interleaved(fns: dict, rounds: int):
+    """CPU time [s] of each callable: medians over ``rounds`` interleaved rounds (one call of
+    each per round, in turn), and each one's last result."""
+    times = {k: [] for k in fns}
+    out = {}
+    for _ in range(rounds):
+        for k, fn in fns.items():
+            t0 = time.process_time()
+            out[k] = fn()
+            times[k].append(time.process_time() - t0)
+    return {k: statistics.median(v) for k, v in times.items()}, out
+
+
+def speed(quick: bool) -> list[dict]:
+    """The non-linear mills against the 43330ce code (module docstring)."""
+    from millflow.bench import nonlinear_baseline as old
+    from millflow.mill import nonlinear as nl
+
+    rows = []
+    grid, kin, lin, feed = scene()
+    cases = [("well_mixed_nonlinear", N, lambda: old.well_mixed(kin, feed, TAU), lambda: nl.well_mixed(kin, feed, TAU)),
+             ("tanks10_nonlinear", N, lambda: old.tanks_in_series(kin, feed, TAU, 10),
+              lambda: nl.tanks_in_series(kin, feed, TAU, 10))]
+    for n_ax in (40,) if quick else (40, N):
+        g, k_ax, _, f_ax = scene(n_ax)
+        cases.append((f"axial_Pe10_64_volumes_N{n_ax}", n_ax,
+                      lambda k=k_ax, f=f_ax: old.axial_dispersion(k, f, TAU, 10.0, m_cells=64),
+                      lambda k=k_ax, f=f_ax: nl.axial_dispersion(k, f, TAU, 10.0, m_cells=64)))
+    for case, n, base, new in cases:
+        rounds = 3 if quick else (11 if n == N and "axial" not in case else 5)
+        med, out = _interleaved({"base": base, "new": new}, rounds)
+        r = out["new"]
+        rows.append({"table": "speed", "case": case, "method": r.method, "n_classes": n, "runtime_s": med["new"],
+                     "baseline_s": med["base"], "speedup": med["base"] / med["new"],
+                     "ratio_vs_baseline": med["new"] / med["base"],
+                     "baseline": "43330ce algorithms (millflow.bench.nonlinear_baseline), interleaved CPU time",
+                     "max_abs_error": float(np.abs(r.product - out["base"].product).max()),
+                     "error_estimate": r.error_estimate, "iterations": r.iterations,
+                     "factorizations": r.info.get("factorizations"), "mass_balance_error": r.mass_balance_error})
+    return rows
+
+
 def run(quick: bool = False) -> list[dict]:
-    return targets(quick) + work_precision(quick)
+    return targets(quick) + work_precision(quick) + speed(quick)
 
 
 def _f(v, spec):
@@ -161,9 +218,10 @@ def _f(v, spec):
 
 
 def format_table(rows) -> str:
-    out = [f"{'table':<15} {'case':<28} {'method':<32} {'ms':>9} {'error':>9} {'target ms':>9} {'x baseline':>10}"]
+    out = [f"{'table':<15} {'case':<28} {'method':<32} {'ms':>9} {'error':>9} {'target ms':>9} {'x baseline':>10} "
+           f"{'speedup':>8}"]
     for r in rows:
-        out.append(f"{r['table']:<15} {r['case']:<28} {r['method'][:32]:<32} {1e3 * r['runtime_s']:9.2f} "
+        out.append(f"{r['table']:<15} {r['case'][:28]:<28} {r['method'][:32]:<32} {1e3 * r['runtime_s']:9.2f} "
                    f"{_f(r.get('max_abs_error'), '9.1e')} {_f(r.get('target_ms'), '9.0f')} "
-                   f"{_f(r.get('ratio_vs_baseline'), '10.2f')}")
+                   f"{_f(r.get('ratio_vs_baseline'), '10.2f')} {_f(r.get('speedup'), '8.2f')}")
     return "\n".join(out)

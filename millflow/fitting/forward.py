@@ -493,7 +493,8 @@ class ForwardModel:
         # exit flows; where = "cells": every cell outlet), or in every tank (mode
         # "well_mixed", as the linear forward model places it)
         d_all = self.discharge(p, n_pop) if (spec.classification and mode != "batch") else None
-        where = (spec.where or "discharge") if mode == "mill" else "cells"
+        axis = spec.transport in _AXIAL_TRANSPORTS + ("axial_dispersion_open",)
+        where = (spec.where or ("axis" if axis else "discharge")) if mode == "mill" else "cells"
         for c in range(len(self.conditions)):
             gsel = [g for g, grp in enumerate(self.groups) if grp[0] == c]
             if mode == "batch":  # the whole population in one stacked solve
@@ -515,9 +516,9 @@ class ForwardModel:
                     if tr == "axial_dispersion":
                         kw["pe"] = float(extra["pe"][k]) if "pe" in extra else float(tp["pe"])
                     tc = float(tau_pc[k, c])
-                    if tr == "recirculating_cells":
-                        try:
-                            kw["network"] = self._transport(tc, extra, k)
+                    if tr in ("recirculating_cells", "axial_dispersion_open"):
+                        try:  # the network of cells, or the open vessel (millflow.mill.nonlinear.solve_transport)
+                            kw["network" if tr == "recirculating_cells" else "model"] = self._transport(tc, extra, k)
                         except InputError:  # outside rtd's domain (e.g. r < 0): this member only
                             out[k, gsel] = np.nan
                             continue

@@ -55,6 +55,9 @@ KINETICS_CONSTANTS = {"slowing_down": ("kappa", "t_ref_s"), "population": ("fine
 #: Parameter defaults: value, min, max.
 KINETICS_DEFAULTS = {"s_slow": (0.0, 0.0, 10.0), "lam_pop": (0.0, -5.0, 5.0), "beta0": (0.0, 0.0, 0.1)}
 KAPPA_FORMS = ("hyperbolic", "exponential")
+#: Volumes of the axial-dispersion grid inside the fit (fixed: a refined grid would change with
+#: the parameters and make the finite-difference sensitivities jump).
+AXIAL_CELLS = 64
 #: Tolerances of the ODE solves inside the fit (relative to the feed): 1e-7 keeps the
 #: finite-difference noise (rtol / h, h = rtol^(1/3) x scale) near 2e-5 relative, the
 #: model error 1e5 times below 1 % measurement noise.
@@ -205,24 +208,28 @@ class CompiledKinetics:
         return M
 
     def solve_steady(self, S, b, feed, tau, p, k, *, n_tanks: int = 1, transport: str = "well_mixed", pe=None,
-                     d=None, where: str = "discharge", network=None, locations=None):
+                     d=None, where: str = "discharge", network=None, locations=None, model=None):
         """(N,) product of member k per unit feed (overflow in class 1); NaN on failure.
-        ``d`` (N,) normalised discharge placed by ``where`` (well-mixed cells only);
-        ``network`` an rtd model of cells (recirculating cells): Newton on all cells.
+        ``d`` (N,) normalised discharge placed by ``where`` (cells: "discharge", "cells";
+        plug flow and axial dispersion: "axis", d* in the velocity);
+        ``network`` an rtd model of cells (recirculating cells): Newton on all cells;
+        ``model`` any other rtd transport (e.g. the open vessel), by
+        :func:`millflow.mill.nonlinear.solve_transport`. Axial grids are fixed
+        (:data:`AXIAL_CELLS` volumes: the forward model stays smooth in the parameters).
         ``locations`` (well-mixed cells): a list of "product", "holdup", "cell:K" gives
         (L, N) mass fractions of those samples (hold-up with its overflow in class 1)."""
         from millflow.mill import nonlinear as nl
         kin = self._kin(S, b, p, k)
-        if d is not None and transport != "well_mixed":
-            raise InputError(f"classification with transport {transport!r}: non-linear kinetics take "
-                             "classification in well-mixed cells only")
         try:
-            if network is not None:
+            if model is not None:
+                r = nl.solve_transport(kin, feed, model, d, where=None if d is None else where, tol=ODE_RTOL,
+                                       holdup=False, m_cells=AXIAL_CELLS)
+            elif network is not None:
                 r = nl.cells(kin, feed, network, d, where)
             elif transport == "plug_flow":
-                r = nl.plug_flow(kin, feed, tau, rtol=ODE_RTOL, atol=ODE_ATOL)
+                r = nl.plug_flow(kin, feed, tau, d, rtol=ODE_RTOL, atol=ODE_ATOL, holdup=False)
             elif transport == "axial_dispersion":
-                r = nl.axial_dispersion(kin, feed, tau, pe)
+                r = nl.axial_dispersion(kin, feed, tau, pe, d, m_cells=AXIAL_CELLS)
             elif n_tanks == 1:
                 r = nl.well_mixed(kin, feed, tau, d)
             else:

@@ -73,9 +73,9 @@ _DEFAULTS = {  # value, min, max
     "s_slow": (0.0, 0.0, 10.0), "lam_pop": (0.0, -5.0, 5.0), "beta0": (0.0, 0.0, 0.1),
 }
 #: Transports of mode "mill" with a non-linear steady solve (millflow.mill.nonlinear).
-_NONLINEAR_TRANSPORTS = ("perfect_mixing", "tanks_in_series", "recirculating_cells", "plug_flow", "axial_dispersion")
-#: Transports of mode "mill" where non-linear kinetics take classification (well-mixed cells).
-_NONLINEAR_CLASSIFIED = ("perfect_mixing", "tanks_in_series", "recirculating_cells")
+_NONLINEAR_TRANSPORTS = tuple(TRANSPORTS)
+#: Transports of mode "mill" where non-linear kinetics take classification: all (where the linear mill does).
+_NONLINEAR_CLASSIFIED = tuple(TRANSPORTS)
 
 
 @dataclass(frozen=True)
@@ -164,12 +164,6 @@ class ModelSpec:
         if forms and self.mode == "mill" and self.transport not in _NONLINEAR_TRANSPORTS:
             raise InputError(f"model.kinetics with transport {self.transport!r}: non-linear kinetics are fitted with "
                              f"transports {list(_NONLINEAR_TRANSPORTS)}")
-        if forms and self.classification is not None and self.mode == "mill" and (
-                self.transport not in _NONLINEAR_CLASSIFIED or self.where not in (None, "discharge", "cells")):
-            raise InputError(f"model.kinetics with classification {self.classification!r}, transport "
-                             f"{self.transport!r}, where {self.where!r}: non-linear kinetics take classification "
-                             f"at the discharge or at every cell outlet of transports {list(_NONLINEAR_CLASSIFIED)} "
-                             "(not along the axis of plug flow or axial dispersion)")
         if forms and self.mode == "mill" and self.transport == "tanks_in_series":
             n = dict(self.transport_params).get("n")
             if n is not None and float(n) != int(n):

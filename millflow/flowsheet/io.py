@@ -462,11 +462,15 @@ def _curve_params(t: _Table, curve: str, skip=()) -> dict:
 
 # --------------------------------------------------------------- units
 def _kinetics(t: _Table) -> dict:
-    """A mill's [kinetics] table: aggregation and/or fines cushioning.
+    """A mill's [kinetics] table: aggregation, population-dependent rates, slowing-down by the fines.
 
-    aggregation = "constant" (sum, product, shear), aggregation_beta0_per_s = ...,
-    x_ref_um = ... (the kernel's reference size); cushion_lambda = -1.0, fines_um = ...
+    aggregation = "constant" (sum, product, shear) with aggregation_beta0_per_s = ... (per time)
+    or aggregation_beta0_E_t_per_kWh = ... (per energy: beta0 = beta0^E P / H, with the mill's
+    power), x_ref_um = ... (the kernel's reference size); cushion_lambda = -1.0 with
+    fines_um = ... and cushion_w = 1.0 (S_i (1 + w F)^lambda); kappa_fines = "hyperbolic"
+    ("exponential") with kappa_s = ... and fines_um (S_i kappa(F)).
     """
+    from millflow.flowsheet.units import KAPPA_FINES
     from millflow.nonlinear import KERNELS
 
     out = {}
@@ -475,16 +479,36 @@ def _kinetics(t: _Table) -> dict:
         if kern not in KERNELS:
             raise InputError(f"{t.where}.aggregation = {kern!r}: unknown kernel; valid: {', '.join(sorted(KERNELS))}")
         out["aggregation_kernel"] = kern
-        out["aggregation_beta0"] = t.quantity("aggregation_beta0", "rate", allow_zero=True)
+        if any(k.startswith("aggregation_beta0_E_") for k in t.data):
+            if any(k.startswith("aggregation_beta0_") and not k.startswith("aggregation_beta0_E_") for k in t.data):
+                raise InputError(f"{t.where}: aggregation_beta0 given per time and per energy; keep one "
+                                 "(aggregation_beta0_<unit> per time, or aggregation_beta0_E_<unit> per energy)")
+            out["aggregation_beta0_E"] = t.quantity("aggregation_beta0_E", "energy_rate", allow_zero=True)
+        else:
+            out["aggregation_beta0"] = t.quantity("aggregation_beta0", "rate", allow_zero=True)
         out["x_ref_m"] = t.quantity("x_ref", "length")
     lam = t.plain("cushion_lambda", None, kind=float)
     if lam is not None:
         out["cushion_lambda"] = lam
+        w = t.plain("cushion_w", 1.0, kind=float)
+        if not (math.isfinite(w) and w > 0):
+            raise InputError(f"{t.where}.cushion_w = {w!r}: expected an interaction strength > 0")
+        out["cushion_w"] = w
+    slow = t.plain("kappa_fines", None, kind=str)
+    if slow is not None:
+        if slow not in KAPPA_FINES:
+            raise InputError(f"{t.where}.kappa_fines = {slow!r}: unknown form; valid: {', '.join(KAPPA_FINES)}")
+        s = t.plain("kappa_s", kind=float)
+        if not (math.isfinite(s) and s >= 0):
+            raise InputError(f"{t.where}.kappa_s = {s!r}: expected a slowing-down strength >= 0")
+        out["kappa_fines"], out["kappa_s"] = slow, s
+    if lam is not None or slow is not None:
         out["fines_m"] = t.quantity("fines", "length")
-    t.finish("aggregation, aggregation_beta0_per_s, x_ref_um, cushion_lambda, fines_um")
+    t.finish("aggregation, aggregation_beta0_per_s (or aggregation_beta0_E_t_per_kWh), x_ref_um, cushion_lambda, "
+             "cushion_w, kappa_fines, kappa_s, fines_um")
     if not out:
-        raise InputError(f"{t.where}: empty; give aggregation (with aggregation_beta0_<unit>, x_ref_<unit>) "
-                         "and/or cushion_lambda (with fines_<unit>)")
+        raise InputError(f"{t.where}: empty; give aggregation (with aggregation_beta0_<unit>, x_ref_<unit>), "
+                         "cushion_lambda (with fines_<unit>) and/or kappa_fines (with kappa_s, fines_<unit>)")
     return out
 
 

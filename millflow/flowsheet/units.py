@@ -25,7 +25,7 @@ import numpy as np
 
 from millflow.breakage.averaged import breakage_on_grid, curve_on_grid
 from millflow.classifiers import efficiency, mill_discharge_rates
-from millflow.errors import InputError, SolverError
+from millflow.errors import InputError, MillflowError, SolverError
 
 __all__ = [
     "Feed", "MillUnit", "Mill", "Classifier", "Mixer", "Splitter", "Product", "UNIT_TYPES", "TRANSPORTS",
@@ -61,10 +61,15 @@ def _model_params(params: dict) -> dict:
     return {k: v for k, v in params.items() if k != "discharge"}
 
 
-#: Transports a mill with non-linear kinetics runs with (millflow.mill.nonlinear).
-_KINETIC_TRANSPORTS = ("perfect_mixing", "tanks_in_series", "recirculating_cells", "plug_flow", "axial_dispersion")
-#: Of those, the transports of well-mixed cells, where non-linear kinetics take classification.
-_KINETIC_CLASSIFIED = ("perfect_mixing", "tanks_in_series", "recirculating_cells")
+#: The tolerance of a non-linear mill's product relative to its feed (that of the linear mills'
+#: transfer matrices, :func:`millflow.mill.transfer_matrix`): discretised paths (axial grids, the
+#: plug-flow ODE) refine until their error estimate meets it, or the solve raises.
+KINETIC_TOL = 1e-8
+#: The slowing-down forms kappa(F) of ``kinetics.kappa_fines`` (F the fines fraction, s >= 0).
+KAPPA_FINES = {
+    "hyperbolic": (lambda s: (lambda F: 1.0 / (1.0 + s * F)), lambda s: (lambda F: -s / (1.0 + s * F) ** 2)),
+    "exponential": (lambda s: (lambda F: math.exp(-s * F)), lambda s: (lambda F: -s * math.exp(-s * F))),
+}
 
 
 # ------------------------------------------------------------------ mill transfer
@@ -133,12 +138,18 @@ class MillUnit:
         information only (the specific energy it gives is not causal, see ``power_role``).
     kinetics : dict or None
         Non-linear kinetics: ``aggregation_kernel`` (constant, sum, product,
-        shear) with ``aggregation_beta0`` [1/s] and ``x_ref_m`` [m]; ``cushion_lambda``
-        with ``fines_m`` [m] (S_i (1 + F)^lambda, F the mass fraction at or below fines_m).
-        Such a mill is not a linear map of its feed: the solver tears its inlet flow
-        vector (:mod:`millflow.flowsheet.solve`). Classification with it: in well-mixed
-        cells (perfect mixing, tanks in series, recirculating cells), at the discharge
-        or at the cell outlets ``where`` names (:mod:`millflow.mill.nonlinear`).
+        shear) with ``aggregation_beta0`` [1/s] (per time) or ``aggregation_beta0_E`` [kg/J]
+        (per energy, beta0 = beta0^E P / H with the mill's power P and hold-up H = tau F,
+        as the breakage rates per energy: equal specific energy, equal aggregation) and
+        ``x_ref_m`` [m]; ``cushion_lambda`` with ``fines_m`` [m] and ``cushion_w`` (default 1):
+        population-dependent rates S_i (1 + w F)^lambda; ``kappa_fines`` ("hyperbolic",
+        "exponential") with ``kappa_s`` and ``fines_m``: slowing-down S_i kappa(F),
+        kappa = 1/(1 + s F) or exp(-s F). F is the mass fraction below fines_m, each class
+        counted by its share below it (the class that straddles it by its share in ln x,
+        :func:`millflow.nonlinear.kinetics.fines_fraction`). Such a mill is not a linear map
+        of its feed: the solver tears its inlet flow vector (:mod:`millflow.flowsheet.solve`).
+        Every transport and classification of the linear mill applies
+        (:func:`millflow.mill.nonlinear.solve_transport`), solved to :data:`KINETIC_TOL`.
     """
 
     name: str
@@ -167,16 +178,14 @@ class MillUnit:
         if self.transport not in TRANSPORTS and self.transport != "series":
             raise InputError(f"units.{self.name}.transport: unknown model {self.transport!r}; "
                              f"valid names: {', '.join(sorted(TRANSPORTS))}")
-        if self.kinetics is not None and self.transport not in _KINETIC_TRANSPORTS:
-            raise InputError(f"units.{self.name}: non-linear kinetics run with transport "
-                             f"{', '.join(_KINETIC_TRANSPORTS)}; got {self.transport!r}")
         if self.breakage_basis == "energy" and not (self.power is not None and self.power > 0):
             raise InputError(f"units.{self.name}: the rates are per energy (S = S^E P / H, A_E_<unit> or "
                              "per_energy); give the mill's power (power_kW) or its dimensions")
-        if self.kinetics is not None and self.classification is not None and (
-                self.transport not in _KINETIC_CLASSIFIED or self.classification.get("where") == "axis"):
-            raise InputError(f"units.{self.name}: non-linear kinetics take classification in well-mixed cells "
-                             f"({', '.join(_KINETIC_CLASSIFIED)}), not along the axis of {self.transport!r}")
+        if self.kinetics is not None and "aggregation_beta0_E" in self.kinetics and not (
+                self.power is not None and self.power > 0):
+            raise InputError(f"units.{self.name}.kinetics: the aggregation rate is per energy "
+                             "(aggregation_beta0_E_<unit>: beta0 = beta0^E P / H); give the mill's power (power_kW) "
+                             "or its dimensions")
 
     @property
     def breakage_basis(self) -> str:
@@ -210,17 +219,29 @@ class MillUnit:
         [kg/s] set the hold-up of a mill whose rates are per energy)."""
         from millflow.nonlinear import KERNELS, Aggregation, kinetics
 
+        from millflow.nonlinear.kinetics import fines_fraction
+
         S, b = self.breakage_functions(grid, tau, throughput)
         k = self.kinetics
         agg = None
         if "aggregation_kernel" in k:
-            agg = Aggregation(KERNELS[k["aggregation_kernel"]](k["aggregation_beta0"]), k["x_ref_m"])
-        w, lam = None, 0.0
+            beta0 = k.get("aggregation_beta0")
+            if beta0 is None:  # per energy: beta0 = beta0^E P / H, H = tau F (as S = S^E P / H)
+                if tau is None or throughput is None or not throughput > 0:
+                    raise SolverError(f"units.{self.name}: an aggregation rate per energy needs the mill's hold-up, "
+                                      f"H = tau F; throughput {throughput!r} kg/s")
+                beta0 = k["aggregation_beta0_E"] * float(self.power) / (float(tau) * float(throughput))
+            agg = Aggregation(KERNELS[k["aggregation_kernel"]](beta0), k["x_ref_m"])
+        w, lam, mask, kappa, dkappa = None, 0.0, None, None, None
+        if "fines_m" in k:
+            share = fines_fraction(grid, k["fines_m"])
         if "cushion_lambda" in k:
-            w = np.zeros((grid.n, grid.n))
-            w[:, grid.x <= k["fines_m"]] = 1.0
+            w = k.get("cushion_w", 1.0) * np.outer(np.ones(grid.n), share)
             lam = k["cushion_lambda"]
-        return kinetics(S, b, w=w, lam=lam, aggregation=agg, grid=grid)
+        if "kappa_fines" in k:
+            form = KAPPA_FINES[k["kappa_fines"]]
+            mask, kappa, dkappa = share, form[0](k["kappa_s"]), form[1](k["kappa_s"])
+        return kinetics(S, b, w=w, lam=lam, aggregation=agg, grid=grid, fines_mask=mask, kappa=kappa, dkappa=dkappa)
 
     def product_flows(self, grid, inflow, water=None):
         """Product flows [kg/s] for the inlet flows ``inflow`` [kg/s] (non-linear kinetics) and,
@@ -235,12 +256,17 @@ class MillUnit:
             raise SolverError(f"units.{self.name}: the mill receives no solids (inflow {total!r} kg/s)")
         if self.needs_water and water is None:
             raise SolverError(f"units.{self.name}: slurry hold-up given but the water through the mill is unknown")
+        if self.transport == "tanks_in_series":
+            n = self.transport_params["n"]
+            if not (isinstance(n, (int, float, np.integer, np.floating)) and float(n) == round(float(n)) and n >= 1):
+                raise InputError(f"units.{self.name}.transport.n = {n!r}: a mill with non-linear kinetics solves "
+                                 "each tank in turn and needs an integer number of tanks >= 1")
         tau = self.residence_time(total, water)
         kin = self.nonlinear_kinetics(grid, tau, total)
         feed = np.asarray(inflow, float) / total
         unit = f"units.{self.name}"
         c = self.discharge_efficiency(grid)
-        d, where = None, "discharge"
+        d, where = None, None
         if c is not None:  # as in blocks(): d* from the efficiency, retained classes floored at 1e-12
             d = mill_discharge_rates(c)
             trapped = np.flatnonzero((d <= 1e-12) & (kin.S <= 0))
@@ -249,22 +275,16 @@ class MillUnit:
                                   "classification and never breaks (S = 0): it can never leave the mill")
             d = np.maximum(d, 1e-12)
             w = self.classification.get("where")
-            where = "discharge" if w is None else (tuple(w) if isinstance(w, list) else w)
-        if self.transport == "recirculating_cells":
+            where = tuple(w) if isinstance(w, list) else w
+        try:
             tr = build_transport(self.transport, tau, self.transport_params)
-            r = nl.cells(kin, feed, tr, d, where)
-        elif self.transport == "perfect_mixing":
-            r = nl.well_mixed(kin, feed, tau, d, unit=unit)
-        elif self.transport == "tanks_in_series":
-            n = self.transport_params["n"]
-            if not (isinstance(n, (int, float, np.integer, np.floating)) and float(n) == round(float(n)) and n >= 1):
-                raise InputError(f"units.{self.name}.transport.n = {n!r}: a mill with non-linear kinetics solves "
-                                 "each tank in turn and needs an integer number of tanks >= 1")
-            r = nl.tanks_in_series(kin, feed, tau, int(round(float(n))), d, where)
-        elif self.transport == "plug_flow":
-            r = nl.plug_flow(kin, feed, tau)
-        else:
-            r = nl.axial_dispersion(kin, feed, tau, float(self.transport_params["pe"]))
+            r = nl.solve_transport(kin, feed, tr, d, where=where, discharge=self.transport_params.get("discharge"),
+                                   tol=KINETIC_TOL, holdup=False)
+        except MillflowError as exc:
+            raise type(exc)(f"{unit}: {exc}") from None
+        if not r.error_estimate <= KINETIC_TOL * max(float(feed.sum()), 1.0):
+            raise SolverError(f"{unit}: the non-linear mill's error estimate {r.error_estimate:.2g} of its feed is "
+                              f"above the tolerance {KINETIC_TOL:g} ({r.method})")
         p = r.product.copy()
         overflow = float(r.overflow_mass)
         if overflow > MAX_OVERFLOW:
@@ -272,7 +292,9 @@ class MillUnit:
                               f"of the size grid ({grid.x[0] * 1e6:.4g} um); expected at most {MAX_OVERFLOW:g}: "
                               "raise [grid] top_um so the aggregates are resolved")
         p[0] += overflow
-        placed = "" if d is None else ", discharge classification d*" + ("" if where == "discharge" else f" ({where})")
+        axis = self.transport in ("plug_flow", "axial_dispersion", "axial_dispersion_open")
+        placed = "" if d is None else (", classification d* along the axis" if axis else ", discharge classification d*"
+                                       + ("" if where in (None, "discharge") else f" ({where})"))
         info = {"method": f"non-linear kinetics ({kin.describe()}): {r.method}{placed}",
                 "error_estimate": r.error_estimate,
                 "residual": r.residual, "runtime_s": time.perf_counter() - t0, "tau_s": tau,

@@ -33,7 +33,9 @@ class Mill:
     """A continuous mill: breakage, transport and classification, composed.
 
     ``Mill(S, b, transport=rtd.TanksInSeries(600.0, 3), d=None)``: what is absent is
-    None; the repr shows the composition. Methods delegate to :func:`steady_mill`,
+    None; the repr shows the composition. ``Mill(kinetics, None, transport, ...)`` with a
+    :class:`millflow.nonlinear.Kinetics`: non-linear kinetics, solved by
+    :mod:`millflow.mill.nonlinear` (one feed at a time, used as given). Methods delegate to :func:`steady_mill`,
     :func:`transfer_matrix` and :func:`millflow.mill.transient.transient_mill`.
     """
 
@@ -47,6 +49,15 @@ class Mill:
     discharge: str | None = None
 
     def __post_init__(self):
+        from millflow.mill.nonlinear_mill import check_no_b, is_kinetics
+
+        kin = None
+        if is_kinetics(self.S):  # non-linear kinetics: S and b are the Kinetics' own, kept beside it
+            kin = self.S
+            check_no_b(kin, self.b, "Mill")
+            object.__setattr__(self, "S", kin.S)
+            object.__setattr__(self, "b", kin.b)
+        object.__setattr__(self, "_kinetics", None if kin is None or kin.is_linear else kin)
         sc = _scene(self.S, self.b, self.transport, self.d, self.where, self.dispersion, discharge=self.discharge)
         object.__setattr__(self, "S", sc.S)
         object.__setattr__(self, "b", sc.b)
@@ -95,13 +106,19 @@ class Mill:
 
     def __repr__(self):
         cls = "None" if self.d is None else f"d* at {self.where}"
+        kin = "" if self._kinetics is None else f", kinetics={self._kinetics.describe()!r}"
         return (f"Mill(N={self.S.size}, transport={self.transport!r}, classification={cls}, "
-                f"method={self.method!r})")
+                f"method={self.method!r}{kin})")
 
     @property
     def method(self) -> str:
-        """The method :meth:`steady` runs."""
-        return self._scene.method
+        """The method :meth:`steady` runs ("nonlinear" for non-linear kinetics)."""
+        return "nonlinear" if self._kinetics is not None else self._scene.method
+
+    @property
+    def kinetics(self):
+        """The non-linear :class:`millflow.nonlinear.Kinetics` (None for first-order breakage)."""
+        return self._kinetics
 
     def product(self, feed, tol: float = 1e-8, on_inaccuracy: str = "raise") -> np.ndarray:
         """Product flows (N,) or (N, m) for feed (N,) or (N, m): the fast path (inputs
@@ -109,6 +126,19 @@ class Mill:
         plug-flow and segregated paths kept after the first call). Each feed column is
         solved scaled to a unit total; ``tol`` and ``on_inaccuracy`` as :func:`steady_mill`."""
         feed = _check_feed(feed, self.S.size)
+        if self._kinetics is not None:  # non-linear: one feed at a time, used as given
+            from millflow.mill.nonlinear import solve_transport
+
+            cols = feed if feed.ndim == 2 else feed[:, None]
+            out = []
+            for col in cols.T:
+                r = solve_transport(self._kinetics, col, self.transport, self.d, where=self.where,
+                                    dispersion=self.dispersion, discharge=self.discharge, tol=tol, holdup=False)
+                scale = max(float(np.abs(col).sum()), 1e-300)
+                check_accuracy("Mill.product", r.method, r.mass_balance_error / scale, r.error_estimate / scale, tol,
+                               on_inaccuracy)
+                out.append(r.product)
+            return np.array(out).T if feed.ndim == 2 else out[0]
         total = np.abs(feed).sum(axis=0)
         scale = np.where((total > 0) & np.isfinite(total), total, 1.0)
         solved = _solve(self._scene, feed / scale, tol=tol, holdup=False, cache=self._cache)
@@ -128,7 +158,8 @@ class Mill:
         scheme's order p (2 for class averages, 1 for upper edges): F_s 2^p/(2^p - 1) |p_h - p_h/2|,
         F_s = 3. ``error_estimate`` is then the solver part plus the grid part.
         """
-        ds = steady_mill(self.S, self.b, feed, self.transport, self.d, where=self.where,
+        S, b = (self.S, self.b) if self._kinetics is None else (self._kinetics, None)
+        ds = steady_mill(S, b, feed, self.transport, self.d, where=self.where,
                          dispersion=self.dispersion, discharge=self.discharge, x=self.x, **kwargs)
         forms = self.__dict__.get("_forms")
         if forms is None or forms[4] == "discrete (as given)":
@@ -170,13 +201,15 @@ class Mill:
         return ds
 
     def transfer_matrix(self, **kwargs) -> np.ndarray:
-        """:func:`transfer_matrix` for this mill."""
-        return transfer_matrix(self.S, self.b, self.transport, self.d, where=self.where,
+        """:func:`transfer_matrix` for this mill (first-order kinetics only)."""
+        S = self.S if self._kinetics is None else self._kinetics
+        return transfer_matrix(S, self.b, self.transport, self.d, where=self.where,
                                dispersion=self.dispersion, discharge=self.discharge, **kwargs)
 
     def transient(self, t, **kwargs) -> xr.Dataset:
         """:func:`millflow.mill.transient.transient_mill` for this mill."""
         from millflow.mill.transient import transient_mill  # here: scipy.integrate only for dynamics
 
-        return transient_mill(self.S, self.b, self.transport, t, d=self.d, where=self.where,
+        S, b = (self.S, self.b) if self._kinetics is None else (self._kinetics, None)
+        return transient_mill(S, b, self.transport, t, d=self.d, where=self.where,
                               dispersion=self.dispersion, discharge=self.discharge, x=self.x, **kwargs)

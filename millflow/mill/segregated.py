@@ -196,10 +196,15 @@ def plug_flow(S, b, feed, tau: float, *, holdup: bool = True, blocks: SpectralBl
     return _clip(product, error), _clip(hold, error * tau), float(error), info
 
 
-def segregated_quadrature(S, b, feed, model, *, holdup: bool = True, tol: float = 1e-10):
+def segregated_quadrature(S, b, feed, model, *, holdup: bool = True, tol: float = 1e-10, theta=None):
     """Segregated flow by adaptive quadrature over the residence time:
 
         product = a f + int_0^inf E(t) exp(K t) f dt,   hold-up = int_0^inf (1 - F(t)) exp(K t) f dt,
+
+    or, with ``theta`` (a callable of the age t [s]: slowing-down in the material's age,
+    S(t) = S kappa(t), theta(t) = int_0^t kappa), exp(K theta(t)) in place of exp(K t):
+    each particle breaks at the rate of its own age, so the parcel of age t is the batch
+    grind at theta(t) (exact without classification for any micromixing).
 
     a the bypass atom of E at t = 0. exp(K t) f by :meth:`SpectralBlocks.expm_apply`,
     exact on clusters of any width (no division by rate differences), so this is the
@@ -215,7 +220,7 @@ def segregated_quadrature(S, b, feed, model, *, holdup: bool = True, tol: float 
     scale = max(float(np.abs(feed).sum()), 1e-300)
 
     def integrand(t):
-        m = blocks.expm_apply(feed, np.array([t]))[0]
+        m = blocks.expm_apply(feed, np.array([t if theta is None else float(theta(t))]))[0]
         e = float(np.asarray(model.pdf(t)))
         if not holdup:
             return e * m

@@ -52,6 +52,7 @@ from millflow.mill.scene import (AXIAL_KINDS, METHODS, WHERE, _check_feed, _part
 from millflow.mill.axial import solve_axial
 from millflow.mill.axial_open import solve_axial_open
 from millflow.mill.cells import solve_cells
+from millflow.mill.dataset import _GRID_NOTE, _fractions, _samples, _size_coords  # noqa: F401  (their home)
 from millflow.mill.segregated import plug_flow, segregated, segregated_quadrature
 from millflow.mill.well_mixed import solve_well_mixed
 
@@ -260,6 +261,16 @@ def transfer_matrix(S, b, transport, d=None, *, where=None, dispersion=None, dis
     >>> P.round(6).tolist()
     [[0.333333, 0.0], [0.666667, 1.0]]
     """
+    from millflow.mill.nonlinear_mill import is_kinetics
+
+    if is_kinetics(S) and not S.is_linear:
+        raise InputError("transfer_matrix: the kinetics are non-linear, so the product is not a matrix times the "
+                         "feed; expected first-order kinetics, or steady_mill / Mill.product for one feed")
+    if is_kinetics(S):
+        from millflow.mill.nonlinear_mill import check_no_b
+
+        check_no_b(S, b, "transfer_matrix")
+        S, b = S.S, S.b
     sc = _scene(S, b, transport, d, where, dispersion, method, discharge)
     solved = _solve(sc, np.eye(sc.S.size), tol=tol, holdup=False)
     P = solved["product"]
@@ -269,34 +280,6 @@ def transfer_matrix(S, b, transport, d=None, *, where=None, dispersion=None, dis
 
 
 # ------------------------------------------------------------------------ results
-def _size_coords(n: int, x) -> dict:
-    """Coordinates of the ``size`` dimension.
-
-    Coordinates of the ``size`` dimension. ``size`` means one thing in every millflow
-    Dataset: the upper class sizes [m] (:meth:`millflow.grid.SizeGrid.size_coord`);
-    ``size_class`` is the class number (1 = coarsest). Without ``x`` the dimension has
-    class numbers only. ``x`` holds the sizes under their old name.
-    """
-    coords = {"size_class": ("size", np.arange(1, n + 1), {"long_name": "size class (1 = coarsest)"})}
-    if x is not None:
-        xs = np.asarray(x, dtype=float) if not hasattr(x, "upper_m") else x.upper_m
-        if xs.shape != (n,):
-            raise InputError(f"x has shape {xs.shape}; expected ({n},) upper class sizes [m]")
-        attrs = {"units": "m", "long_name": "upper size of class (Austin convention)"}
-        coords["size"] = ("size", xs, attrs)
-        coords["x"] = ("size", xs, dict(attrs))
-    return coords
-
-
-def _fractions(a: np.ndarray, axis: int = -1) -> np.ndarray:
-    if a.ndim == 1:  # the common case, without the broadcasting machinery (a Dataset per call)
-        total = a.sum()
-        return a / total if total > 0 else np.zeros(a.shape)
-    total = a.sum(axis=axis, keepdims=True)
-    with np.errstate(invalid="ignore", divide="ignore"):
-        return np.where(total > 0, a / np.where(total > 0, total, 1.0), 0.0)
-
-
 def _profile(sc: _Scene, feed, solved, positions):
     """Hold-up density tau c_i(z) [s] at fractional positions, or None."""
     if positions is None:
@@ -320,47 +303,6 @@ def _profile(sc: _Scene, feed, solved, positions):
                      "rtd.PlugFlow or rtd.AxialDispersion (use locations 'cell:K' for cells)")
 
 
-def _samples(ds: xr.Dataset, locations) -> xr.DataArray:
-    """Mass fractions at named sampling locations.
-
-    Mass fractions at named sampling locations: 'discharge', 'feed', 'holdup',
-    'cell:K' (1-based), 'z:0.5' (needs ``positions`` containing 0.5).
-    """
-    if isinstance(locations, dict):
-        names, specs = list(locations), list(locations.values())
-    else:
-        names = specs = [str(s) for s in locations]
-    rows = []
-    for name, spec in zip(names, specs):
-        if spec == "discharge":
-            rows.append(ds["product_fraction"].values)
-        elif spec == "feed":
-            rows.append(_fractions(ds["feed"].values))
-        elif spec == "holdup":
-            rows.append(ds["holdup_fraction"].values)
-        elif spec.startswith("cell:") and "cell_holdup" in ds:
-            k = int(spec[5:])
-            if not 1 <= k <= ds.sizes["cell"]:
-                raise InputError(f"location {name!r}: cell {k} does not exist; expected 1..{ds.sizes['cell']}")
-            rows.append(_fractions(ds["cell_holdup"].values[k - 1]))
-        elif spec.startswith("z:") and "profile" in ds:
-            z = float(spec[2:])
-            hit = np.flatnonzero(np.isclose(ds["position"].values, z, atol=1e-12))
-            if not hit.size:
-                raise InputError(f"location {name!r}: z = {z} is not among positions")
-            rows.append(_fractions(ds["profile"].values[hit[0]]))
-        else:
-            raise InputError(f"location {name!r} = {spec!r}; expected 'discharge', 'feed', 'holdup', "
-                             "'cell:K' (cell transports) or 'z:Y' (axial transports with positions)")
-    return xr.DataArray(np.array(rows), dims=("location", "size"), coords={"location": names},
-                        attrs={"units": "1", "long_name": "mass fraction at the sampling location"})
-
-
-#: Why a mill solved from S_i and b_ij has no size-grid error of its own.
-_GRID_NOTE = ("none: S_i and b_ij given per class are the discrete model itself; continuous forms put on a "
-              "grid carry the grid error their caller estimates (flowsheet grid check, batch.grind)")
-
-
 def steady_mill(S, b, feed, transport, d=None, *, where=None, dispersion=None, discharge=None, method=None,
                 x=None, positions=None, locations=None, tol: float = 1e-8,
                 on_inaccuracy: str = "raise") -> xr.Dataset:
@@ -368,7 +310,9 @@ def steady_mill(S, b, feed, transport, d=None, *, where=None, dispersion=None, d
 
     Parameters
     ----------
-    S : (N,) specific breakage rates [1/s], coarse -> fine, S_N = 0 (sink).
+    S : (N,) specific breakage rates [1/s], coarse -> fine, S_N = 0 (sink); or a
+        :class:`millflow.nonlinear.Kinetics` (non-linear kinetics, with b = None), solved by
+        :mod:`millflow.mill.nonlinear` for every transport (:mod:`millflow.mill.nonlinear_mill`).
     b : (N, N) fractional breakage distribution b_ij (strictly lower triangular).
     feed : (N,) solids feed flows per class (any mass-rate unit, e.g. fractions of a
         unit feed rate); the product has the same unit.
@@ -413,6 +357,19 @@ def steady_mill(S, b, feed, transport, d=None, *, where=None, dispersion=None, d
     >>> ds.attrs["method"], round(float(ds["product"][0]), 6)
     ('well_mixed', 0.333333)
     """
+    from millflow.mill.nonlinear_mill import is_kinetics
+
+    if is_kinetics(S) and S.is_linear:  # first-order kinetics as a Kinetics object: the linear mill
+        from millflow.mill.nonlinear_mill import check_no_b
+
+        check_no_b(S, b, "steady_mill")
+        S, b = S.S, S.b
+    elif is_kinetics(S):  # non-linear kinetics (millflow.nonlinear.Kinetics, b = None): their own solvers
+        from millflow.mill.nonlinear_mill import steady_dataset
+
+        return steady_dataset(S, b, feed, transport, d, where=where, dispersion=dispersion, discharge=discharge,
+                              method=method, x=x, positions=positions, locations=locations, tol=tol,
+                              on_inaccuracy=on_inaccuracy)
     start = time.perf_counter()
     sc = _scene(S, b, transport, d, where, dispersion, method, discharge)
     feed = _check_feed(feed, sc.S.size)

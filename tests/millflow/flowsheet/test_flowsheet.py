@@ -30,9 +30,12 @@ def test_example_mass_balance(path):
     sol = solve(load(path))
     mb = mass_balance(sol)
     # one sparse LU + one refinement step: the residual is a few ulp of the largest flow,
-    # so 1e-12 leaves a margin of ~1e3 over rounding
-    assert mb["overall"] < 1e-12
-    assert max(mb["units"].values()) < 1e-12
+    # so 1e-12 leaves a margin of ~1e3 over rounding; a circuit torn on a mill's inlet vector
+    # (non-linear kinetics) balances to its tear: a relative change of tol per class, summed
+    tear = sol.solver.get("tear") or {}
+    limit = 1e-12 if tear.get("torn") != "inlet flow vector" else max(1e-12, tear["tolerance"] * sol.flowsheet.grid.n)
+    assert mb["overall"] < limit
+    assert max(mb["units"].values()) < limit
     assert np.all(sol.flows >= -1e-12 * sol.flows.max())
     # mass balance per unit also holds class by class where no breakage happens
     fs = sol.flowsheet

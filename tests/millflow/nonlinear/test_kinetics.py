@@ -217,8 +217,8 @@ def test_fines_slowing_needs_all_three_parts():
     grid, S, b, feed = _linear()
     with pytest.raises(InputError, match="together"):
         kinetics(S, b, kappa=lambda F: 1.0)
-    with pytest.raises(InputError, match="zeros and ones"):
-        kinetics(S, b, fines_mask=np.full(S.size, 0.5), kappa=lambda F: 1.0, dkappa=lambda F: 0.0)
+    with pytest.raises(InputError, match=r"weights in \[0, 1\]"):
+        kinetics(S, b, fines_mask=np.full(S.size, 1.5), kappa=lambda F: 1.0, dkappa=lambda F: 0.0)
 
 
 @settings(max_examples=30, deadline=None)
