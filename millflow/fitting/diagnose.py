@@ -41,6 +41,15 @@ __all__ = ["Diagnosis", "candidate_specs", "diagnose"]
 
 #: Sobol-free fixed starts of the extra non-linear parameter (besides 0), per parameter.
 _EXTRA_STARTS = {"s_slow": (0.5, 2.0), "lam_pop": (-1.0, 1.0), "beta0": (0.005, 0.02)}
+#: Bounds of the extra non-linear parameter of a candidate the user's config does not
+#: bound (a config that fits the parameter itself keeps its own bounds): s_slow in [0, 10]
+#: (kappa down to 1/11 by t_ref); lam_pop in [-2, 1] (rates down to 1/4, or up to 2x, when
+#: the whole charge is fines: beyond that the fines term no longer describes a
+#: correction to first-order breakage, and the steady solves of strong nipping fail);
+#: beta0 in [0, 0.03] 1/s (at 0.03 a first-order fit of the documented designs already
+#: misses by 2.8 noise levels, docs/model-error.md). A candidate whose estimate ends at
+#: one of these bounds is flagged by the fit ("at bound"); widen it with [params.NAME].
+EXTRA_BOUNDS = {"s_slow": (0.0, 10.0), "lam_pop": (-2.0, 1.0), "beta0": (0.0, 0.03)}
 
 
 def candidate_specs(spec: ModelSpec, data) -> dict:
@@ -113,11 +122,15 @@ def _clean(v):
 
 
 def _params_for(spec, user_params: dict, start: dict | None = None) -> dict:
-    """The user's bounds for shared parameters, defaults for the others; start values
-    from ``start`` (a previous fit) where given."""
+    """The user's bounds for shared parameters, :data:`EXTRA_BOUNDS` for a candidate's
+    extra non-linear parameter, defaults for the others; start values from ``start`` (a
+    previous fit) where given."""
     base = default_parameters(spec)
     out = {}
     for n, par in base.items():
+        if n not in user_params and n in EXTRA_BOUNDS:
+            lo, hi = EXTRA_BOUNDS[n]
+            par = Parameter(n, min(max(par.value, lo), hi), lo, hi, par.vary)
         p = user_params.get(n, par)
         v = float(start[n]) if start and n in start else p.value
         out[n] = Parameter(n, min(max(v, p.min), p.max), p.min, p.max, p.vary)
@@ -126,26 +139,34 @@ def _params_for(spec, user_params: dict, start: dict | None = None) -> dict:
 
 def _fit_candidate(model, params, linear_theta, optimizer, extra):
     """A nested non-linear candidate: local fits from the linear optimum with the extra
-    parameter at 0 and at its fixed starts; the best is kept (then its statistics)."""
+    parameter at 0 and at its fixed starts; the best start is refitted once more with
+    the profile intervals (which the other starts do not need)."""
     if linear_theta is None or not extra:
         return fit(model, params, grid_check=False, quiet=True, **optimizer)
-    best = None
+    best, last_error = None, None
     for v in (0.0,) + _EXTRA_STARTS.get(extra, ()):
-        par = dict(params)
-        p = par[extra]
-        par[extra] = Parameter(extra, min(max(v, p.min), p.max), p.min, p.max, p.vary)
-        start = {**{n: linear_theta[n] for n in par if n in linear_theta}}
-        par = {n: (Parameter(n, min(max(start[n], q.min), q.max), q.min, q.max, q.vary) if n in start else q)
-               for n, q in par.items()}
+        par = _with_start(params, {**linear_theta, extra: v})
         try:
-            r = fit(model, par, global_search=False, starts=1, grid_check=False, quiet=True)
-        except MillflowError:
+            r = fit(model, par, global_search=False, starts=1, grid_check=False, quiet=True, profile=False)
+        except MillflowError as exc:
+            last_error = f"{extra} = {v:g}: {exc}"
             continue
         if best is None or r.ssr < best.ssr:
             best = r
     if best is None:
-        raise InputError("no start of the candidate could be fitted")
-    return best
+        raise InputError(f"no start of the candidate could be fitted (last start, {last_error})")
+    par = _with_start(params, {n: s["value"] for n, s in best.stats["params"].items()})
+    try:
+        final = fit(model, par, global_search=False, starts=1, grid_check=False, quiet=True)
+    except MillflowError:
+        return best
+    return final if final.ssr <= best.ssr * (1 + 1e-9) else best
+
+
+def _with_start(params, start):
+    """``params`` with the values of ``start`` (clipped to the bounds) where it has one."""
+    return {n: (Parameter(n, min(max(float(start[n]), q.min), q.max), q.min, q.max, q.vary) if n in start else q)
+            for n, q in params.items()}
 
 
 def _drift(model, params, optimizer, result):
@@ -187,9 +208,11 @@ def _drift(model, params, optimizer, result):
     return 100.0 * math.expm1(b - a), (b - a) / math.hypot(sa, sb)
 
 
-def diagnose(cfg, *, progress=None, quiet: bool = False, loco: bool = True) -> Diagnosis:
+def diagnose(cfg, *, progress=None, quiet: bool = False, loco: bool = True, drift: bool = True) -> Diagnosis:
     """Fit the candidate set of a fit config (:class:`~millflow.fitting.config.FitConfig`)
-    and rank it; see the module docstring."""
+    and rank it; see the module docstring. ``loco=False`` skips the leave-one-condition-out
+    refits, ``drift=False`` the drift refits (neither changes the ranking by BIC, the
+    choice, or the candidates' estimates and intervals)."""
     from millflow.fitting.statistics import information_criteria
     from millflow.fitting.validate import condition_rmse
 
@@ -234,10 +257,12 @@ def diagnose(cfg, *, progress=None, quiet: bool = False, loco: bool = True) -> D
                         grid_check=False, quiet=True, profile=False)
                 errs.extend(condition_rmse(model.for_conditions([c]), r.theta).values())
             loco_rmse = float(np.sqrt(np.mean(np.square(errs))))
-        try:
-            d_pct, d_se = _drift(model, cfg.params, cfg.optimizer, res)
-        except MillflowError:
-            d_pct, d_se = None, None
+        d_pct, d_se = None, None
+        if drift:
+            try:
+                d_pct, d_se = _drift(model, cfg.params, cfg.optimizer, res)
+            except MillflowError:
+                pass
         rs = res.stats.get("residuals") or {}
         rows.append({"model": label, "label": spec.label(), "n_params": res.n_params, "ssr": res.ssr,
                      "bic": ic["bic"], "aicc": ic["aicc"], "aic": ic["aic"], "loco_rmse": loco_rmse,
