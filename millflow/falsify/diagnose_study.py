@@ -141,8 +141,8 @@ def diagnose_study(replicates: int = 20, *, truths=tuple(TRUTH_CLASSES), sigma: 
             if progress:
                 progress(records[-1])
     out = summarize(records)
-    out.update({"replicates_per_truth": replicates, "first_replicate": first, "sigma": sigma, "seed": seed, "workers": workers,
-                "runtime_s": time.perf_counter() - t0,
+    out.update({"replicates_per_truth": replicates, "first_replicate": first, "sigma": sigma, "seed": seed,
+                "workers": workers, "runtime_s": time.perf_counter() - t0,
                 "design": f"batch, times {[t / 60 for t in TIMES_S]} min, 16 root-2 sieves from 4 mm, 33 classes",
                 "replicates": records})
     return out
