@@ -76,6 +76,9 @@ def _integrate(kin: Kinetics, y0, t, method, rtol, atol, dense: bool = False):
                         jac=lambda _t, y: kin.jacobian(y), rtol=rtol, atol=atol, dense_output=dense)
         if not sol.success:
             raise SolverError(f"non-linear batch solve ({method}, rtol {rtol:g}) failed: {sol.message}")
+        if not np.isfinite(sol.y).all():  # LSODA can end "successfully" on NaN rates
+            raise SolverError(f"non-linear batch solve ({method}, rtol {rtol:g}): non-finite states (non-finite "
+                              "rates or kinetics)")
         out[order[~zero]] = sol.y.T
         stats = {"nfev": int(sol.nfev), "njev": int(sol.njev), "nlu": int(sol.nlu)}
     return out, stats, sol
