@@ -165,10 +165,14 @@ def summarize(records) -> dict:
             c = sum(bool(r["covered"].get(nm, False)) for r in ok if nm in r["covered"])
             m = sum(nm in r["covered"] for r in ok)
             cov[nm] = {"rate": c / m if m else math.nan, "n": m, "ci95": binomial_interval(c, m)}
+        right = [r for r in ok if r["best"] == label]
+        cov_right = {nm: sum(bool(r["covered"].get(nm, False)) for r in right) / len(right) if right else math.nan
+                     for nm in names if all(nm in r["covered"] for r in right)}
         joint = sum(all(r["covered"].values()) for r in ok)
         per[label] = {"n": n, "failed": n - len(ok), "chosen": chosen, "choice_rate": chosen / n,
                       "choice_ci95": binomial_interval(chosen, n), "choices": counts, "coverage": cov,
                       "joint_coverage": joint / n, "joint_ci95": binomial_interval(joint, n),
+                      "coverage_given_right_choice": cov_right,
                       "median_runtime_s": float(np.median([r["runtime_s"] for r in recs]))}
     return {"truths": per}
 
@@ -181,7 +185,10 @@ def format_summary(s: dict) -> str:
         ch = ", ".join(f"{k} {v}" for k, v in t["choices"].items())
         lines.append(f"{label:<14}{t['chosen']:>4}/{t['n']:<3}{t['choice_rate']:>8.2f} ({lo:.2f}-{hi:.2f})  {ch}"
                      + (f"; {t['failed']} failed" if t["failed"] else ""))
-        cov = "  ".join(f"{n} {c['rate']:.2f}" for n, c in t["coverage"].items())
+        cov = "  ".join(f"{n} {c['rate']:.2f}" + ("" if c["n"] == t["n"] else f" (of {c['n']})")
+                        for n, c in t["coverage"].items())
         lines.append(f"{'':<14}coverage: {cov}; all at once {t['joint_coverage']:.2f}; "
                      f"median {t['median_runtime_s']:.1f} s per replicate")
+        right = "  ".join(f"{n} {v:.2f}" for n, v in t["coverage_given_right_choice"].items())
+        lines.append(f"{'':<14}coverage where the truth's class was chosen: {right}")
     return "\n".join(lines)
