@@ -24,6 +24,10 @@ def add_parser(subparsers) -> None:
                      json="print one JSON object instead of the table", plots="do not write the plot",
                      quiet="no progress messages")
     p.add_argument("--no-loco", action="store_true", help="skip the leave-one-condition-out refits")
+    p.add_argument("--no-drift", action="store_true", help="skip the drift refits (short and long half)")
+    p.add_argument("--candidates", metavar="LABELS", default=None,
+                   help="comma-separated candidates to fit, e.g. linear,tanks_2 (default: the whole set; "
+                        "linear and the config's model are always fitted)")
     p.set_defaults(func=run)
 
 
@@ -85,7 +89,9 @@ def run(args) -> int:
     cfg = load_config(args.config)
     out = Path(args.out) if args.out else Path.cwd() / f"{Path(args.config).stem}-diagnose"
     check_target(out, overwrite=args.overwrite, input_path=args.config)  # before the fits, not after
-    diag = diagnose(cfg, progress=say, quiet=args.quiet, loco=not args.no_loco)
+    only = None if args.candidates is None else [c.strip() for c in args.candidates.split(",") if c.strip()]
+    diag = diagnose(cfg, progress=say, quiet=args.quiet, loco=not args.no_loco, drift=not args.no_drift,
+                    candidates=only)
     summary = diag.to_dict()
     with staged_folder(out, overwrite=args.overwrite, input_path=args.config, command="diagnose") as tmp:
         ds = _dataset(diag)

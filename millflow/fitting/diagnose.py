@@ -283,11 +283,13 @@ def _drift(model, params, optimizer, result):
     return 100.0 * math.expm1(b - a), (b - a) / math.hypot(sa, sb)
 
 
-def diagnose(cfg, *, progress=None, quiet: bool = False, loco: bool = True, drift: bool = True) -> Diagnosis:
+def diagnose(cfg, *, progress=None, quiet: bool = False, loco: bool = True, drift: bool = True,
+             candidates=None) -> Diagnosis:
     """Fit the candidate set of a fit config (:class:`~millflow.fitting.config.FitConfig`)
     and rank it; see the module docstring. ``loco=False`` skips the leave-one-condition-out
     refits, ``drift=False`` the drift refits (neither changes the ranking by BIC, the
-    choice, or the candidates' estimates and intervals)."""
+    choice, or the candidates' estimates and intervals). ``candidates``: labels to fit
+    (default all; ``linear`` and the user's model are always fitted)."""
     from millflow.fitting.statistics import information_criteria
     from millflow.fitting.validate import condition_rmse
 
@@ -299,6 +301,12 @@ def diagnose(cfg, *, progress=None, quiet: bool = False, loco: bool = True, drif
     if user_label is None:  # the user's own non-linear model joins the set
         user_label = "user: " + "+".join(user_spec.kinetics)
         specs[user_label] = user_spec
+    if candidates is not None:
+        unknown = sorted(set(candidates) - set(specs))
+        if unknown:
+            raise InputError(f"diagnose: candidates {unknown} are not in the set for this config; expected some of "
+                             f"{list(specs)}")
+        specs = {k: v for k, v in specs.items() if k in set(candidates) | {"linear", user_label}}
     grid = cfg.model().grid
     fits, rows, notes = {}, [], []
     if user_spec.classification is not None and "aggregation" not in specs:
