@@ -30,6 +30,8 @@ def main(argv=None) -> int:
     ap.add_argument("--seed", type=int, default=0)
     ap.add_argument("--first", type=int, default=0, help="index of the first replicate (extend a run)")
     ap.add_argument("--merge", nargs="*", default=[], help="summaries of other replicates to add to this one")
+    ap.add_argument("--strength", nargs=2, action="append", default=[], metavar=("TRUTH", "S"),
+                    help="another strength for a truth class, e.g. --strength cushioning 1.5")
     ap.add_argument("--truths", nargs="*", default=list(TRUTH_CLASSES), choices=list(TRUTH_CLASSES))
     ap.add_argument("--out", default=str(HERE / "diagnose_study_summary.json"))
     a = ap.parse_args(argv)
@@ -41,7 +43,7 @@ def main(argv=None) -> int:
               f"({rec['runtime_s']:.1f} s)", file=sys.stderr, flush=True)
 
     res = diagnose_study(a.replicates, truths=tuple(a.truths), seed=a.seed, workers=a.workers, first=a.first,
-                         progress=say)
+                         strengths={k: float(v) for k, v in a.strength}, progress=say)
     if a.merge:  # the same study over more replicates (same seed, other replicate indices)
         recs = res["replicates"] + [r for f in a.merge for r in json.loads(Path(f).read_text())["replicates"]]
         seen = {(r["truth"], r["replicate"]) for r in res["replicates"]}

@@ -60,11 +60,19 @@ def binomial_interval(k: int, n: int, level: float = 0.95) -> tuple[float, float
     return lo, hi
 
 
-def _truth(label):
+def _truth(label, strength=None):
     from millflow.falsify import nonlinear_truths, truths
-    name, strength, _, _ = TRUTH_CLASSES[label]
+    name, default, _, _ = TRUTH_CLASSES[label]
     mod = truths if hasattr(truths, name) else nonlinear_truths
-    return getattr(mod, name)(strength)
+    return getattr(mod, name)(default if strength is None else strength)
+
+
+def _truth_value(label, strength):
+    """The fitted extra parameter's truth value at ``strength`` (cushioning: lambda = -s)."""
+    _, default, extra, value = TRUTH_CLASSES[label]
+    if extra is None or strength is None:
+        return value
+    return -strength if label == "cushioning" else strength
 
 
 def _design():
@@ -74,7 +82,7 @@ def _design():
 
 def _one(task):
     """One replicate (runs in a worker): noisy data, diagnose, choice and coverage."""
-    label, k, r, seed, sigma, clean = task
+    label, k, r, seed, sigma, clean, strength = task
     from millflow.falsify.study import FIT_DEFAULTS, study_parameters
     from millflow.falsify.truths import BREAKAGE_TRUTH
     from millflow.fitting.config import FitConfig
@@ -88,8 +96,8 @@ def _one(task):
     spec = ModelSpec(mode="batch")
     cfg = FitConfig("diagnose study", data, spec, study_parameters(spec, BREAKAGE_TRUTH), design.grid,
                     {"global_search": True, **FIT_DEFAULTS, "seed": r})
-    _, _, extra, value = TRUTH_CLASSES[label]
-    truth = {**BREAKAGE_TRUTH, **({extra: value} if extra else {})}
+    extra = TRUTH_CLASSES[label][2]
+    truth = {**BREAKAGE_TRUTH, **({extra: _truth_value(label, strength)} if extra else {})}
     t0 = time.perf_counter()
     try:
         dg = diagnose(cfg, quiet=True, loco=False, drift=False)
@@ -111,10 +119,11 @@ def _one(task):
 
 
 def diagnose_study(replicates: int = 20, *, truths=tuple(TRUTH_CLASSES), sigma: float = 0.01, seed: int = 0,
-                   workers: int = 1, first: int = 0, progress=None) -> dict:
+                   workers: int = 1, first: int = 0, strengths: dict | None = None, progress=None) -> dict:
     """Run the study (module docstring) on replicates ``first`` .. ``first + replicates - 1``
-    of each truth (so that a run can be extended by another with the same seed); returns
-    the summary dict of :func:`summarize` with the raw replicate records under
+    of each truth (so that a run can be extended by another with the same seed);
+    ``strengths`` (label -> strength) replaces a truth's default strength; returns the
+    summary dict of :func:`summarize` with the raw replicate records under
     ``"replicates"``."""
     if not (isinstance(replicates, int) and replicates >= 1):
         raise InputError(f"replicates = {replicates!r}: expected an integer >= 1")
@@ -125,8 +134,9 @@ def diagnose_study(replicates: int = 20, *, truths=tuple(TRUTH_CLASSES), sigma: 
     tasks = []
     for label in truths:
         k = list(TRUTH_CLASSES).index(label)
-        clean = design.passing_at_sieves(_truth(label).mass_fractions(design)).ravel()
-        tasks += [(label, k, r, seed, sigma, clean) for r in range(first, first + replicates)]
+        strength = (strengths or {}).get(label)
+        clean = design.passing_at_sieves(_truth(label, strength).mass_fractions(design)).ravel()
+        tasks += [(label, k, r, seed, sigma, clean, strength) for r in range(first, first + replicates)]
     t0 = time.perf_counter()
     records = []
     if workers > 1:
@@ -142,6 +152,7 @@ def diagnose_study(replicates: int = 20, *, truths=tuple(TRUTH_CLASSES), sigma: 
                 progress(records[-1])
     out = summarize(records)
     out.update({"replicates_per_truth": replicates, "first_replicate": first, "sigma": sigma, "seed": seed,
+                "strengths": {label: (strengths or {}).get(label, TRUTH_CLASSES[label][1]) for label in truths},
                 "workers": workers, "runtime_s": time.perf_counter() - t0,
                 "design": f"batch, times {[t / 60 for t in TIMES_S]} min, 16 root-2 sieves from 4 mm, 33 classes",
                 "replicates": records})

@@ -301,6 +301,7 @@ def diagnose(cfg, *, progress=None, quiet: bool = False, loco: bool = True, drif
     if user_label is None:  # the user's own non-linear model joins the set
         user_label = "user: " + "+".join(user_spec.kinetics)
         specs[user_label] = user_spec
+    kinetics_left_out = user_spec.classification is not None and "aggregation" not in specs
     if candidates is not None:
         unknown = sorted(set(candidates) - set(specs))
         if unknown:
@@ -309,7 +310,7 @@ def diagnose(cfg, *, progress=None, quiet: bool = False, loco: bool = True, drif
         specs = {k: v for k, v in specs.items() if k in set(candidates) | {"linear", user_label}}
     grid = cfg.model().grid
     fits, rows, notes = {}, [], []
-    if user_spec.classification is not None and "aggregation" not in specs:
+    if kinetics_left_out:
         notes.append(f"non-linear candidates (cushioning, aggregation) take classification in well-mixed cells "
                      f"only; the model's classification ({user_spec.classification}, transport "
                      f"{user_spec.transport or user_spec.mode}) keeps them out of the set")
