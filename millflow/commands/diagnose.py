@@ -1,7 +1,8 @@
 """``millflow diagnose CONFIG.toml [--json]``: which model do the data support?
 
 Fits the candidate set of a fit config (linear, slowing-down, fines cushioning,
-aggregation; for continuous data alternative RTDs and classification), ranks them by BIC,
+aggregation; for continuous data alternative RTDs: tanks in series, recirculating cells
+with r fitted, axial dispersion with Pe fitted; and a classification), ranks them by BIC,
 AICc and leave-one-condition-out prediction error, reports the drift test and residual
 structure of each and a verdict per parameter of the config's model
 (:mod:`millflow.fitting.diagnose`). Writes table.csv, results.nc and fits.png into the
