@@ -8,7 +8,8 @@ process, one BLAS thread; median of the rounds):
 - ``batch_nonlinear`` without the error estimate (its default method, LSODA) against
   the baseline ``scipy.integrate.solve_ivp(method="BDF", jac=analytic)`` at the same
   tolerances: ratio and target >= 3x faster;
-- ``batch_nonlinear`` with the error estimate against the plain call: target <= 1.5x;
+- ``batch_nonlinear`` with the error estimate (from the one solve: propagated step
+  differences, :mod:`millflow.nonlinear.batch`) against the plain call: target <= 1.5x;
 - the max abs error of each against a Radau solve at rtol 1e-13, and the estimate.
 """
 from __future__ import annotations

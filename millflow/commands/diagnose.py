@@ -1,7 +1,8 @@
 """``millflow diagnose CONFIG.toml [--json]``: which model do the data support?
 
 Fits the candidate set of a fit config (linear, slowing-down, fines cushioning,
-aggregation; for continuous data alternative RTDs and classification), ranks them by BIC,
+aggregation; for continuous data alternative RTDs: tanks in series, recirculating cells
+with r fitted, axial dispersion with Pe fitted; and a classification), ranks them by BIC,
 AICc and leave-one-condition-out prediction error, reports the drift test and residual
 structure of each and a verdict per parameter of the config's model
 (:mod:`millflow.fitting.diagnose`). Writes table.csv, results.nc and fits.png into the
@@ -22,6 +23,10 @@ def add_parser(subparsers) -> None:
     add_output_flags(p, out="output folder (default <config stem>-diagnose in the current folder)",
                      json="print one JSON object instead of the table", plots="do not write the plot")
     p.add_argument("--no-loco", action="store_true", help="skip the leave-one-condition-out refits")
+    p.add_argument("--no-drift", action="store_true", help="skip the drift refits (short and long half)")
+    p.add_argument("--candidates", metavar="LABELS", default=None,
+                   help="comma-separated candidates to fit, e.g. linear,tanks_2 (default: the whole set; "
+                        "linear and the config's model are always fitted)")
     p.set_defaults(func=run)
 
 
@@ -84,9 +89,11 @@ def run(args) -> int:
     cfg = load_config(args.config)
     out = Path(args.out) if args.out else Path.cwd() / f"{Path(args.config).stem}-diagnose"
     check_target(out, overwrite=args.overwrite, input_path=args.config)  # before the fits, not after
+    only = None if args.candidates is None else [c.strip() for c in args.candidates.split(",") if c.strip()]
     with progress("millflow diagnose", ["candidate fits"], enabled=not args.quiet) as stage:
         stage("candidate fits")
-        diag = diagnose(cfg, progress=note, quiet=False, loco=not args.no_loco)
+        diag = diagnose(cfg, progress=note, quiet=False, loco=not args.no_loco, drift=not args.no_drift,
+                        candidates=only)
     summary = diag.to_dict()
     with staged_folder(out, overwrite=args.overwrite, input_path=args.config, command="diagnose") as tmp:
         ds = _dataset(diag)

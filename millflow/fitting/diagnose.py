@@ -6,23 +6,32 @@ Candidates, built from the user's fit config (its rate, breakage, transport and 
 - ``slowing_down`` (batch data only): S_i(t) = S_i0 / (1 + s t/t_ref);
 - ``cushioning``: population-dependent rates S_i (1 + F_fines)^lambda;
 - ``aggregation``: breakage + constant-kernel aggregation, beta0 [1/s];
-- continuous data: also the user's transport with ``n_tanks`` 2 and 3 (alternative RTDs),
-  and, without classification in the user's model, a ``screen_power`` classification
-  when the process table has a screen column.
+- continuous data, alternative RTDs: mode ``well_mixed`` with ``n_tanks`` 2 and 3; mode
+  ``mill`` with tanks in series n - 1 and n + 1 (perfect mixing: 2 and 3 tanks),
+  recirculating cells with r fitted (``cells_r_fitted``), axial dispersion with Pe
+  fitted (``axial_pe_fitted``; also for plug flow, its Pe -> infinity limit);
+- continuous data without classification in the user's model: a ``screen_power``
+  classification when the process table has a screen column.
 
-Each candidate is fitted (:func:`millflow.fitting.estimate.fit`). The non-linear
-candidates nest the linear one (their extra parameter at 0), so they start from the
-linear fit's optimum with the extra parameter at 0 and at a Sobol spread of values
-(local starts; the global search is the linear fit's). Ranking: BIC (the selection rule:
-consistent, so a true model in the set wins with probability -> 1) and AICc; the
-leave-one-condition-out prediction RMSE where there are >= 3 conditions. Per candidate:
-the drift test (ln A0 fitted to the short and the long half of the times, batch, or of
-the residence times, continuous: the classical symptom of non-linear breakage), and
-the residual structure (mean lag-1 autocorrelation within samples, runs-test rejection
-fraction). A verdict per parameter of the user's model: "consistent" when the
-best-supported model is the user's, or the parameter differs between the two by less
-than 2 combined SE; otherwise "falsified: the data prefer X, under which this parameter
-is Y +- SE".
+The non-linear kinetics keep the user's classification and transport where the
+non-linear solves take them (classification in well-mixed cells); a combination the
+model refuses is left out of the set with a note.
+
+Each candidate is fitted (:func:`millflow.fitting.estimate.fit`). A candidate with one
+extra parameter that holds the linear model at a known value (the kinetics at 0; r at the
+user's r; ln Pe at the user's, or large for plug flow) starts from the linear fit's
+optimum with the extra parameter there and at two other values (local starts: the global
+search is the linear fit's); the extra parameter's bounds are :data:`EXTRA_BOUNDS` unless
+the config bounds it. The other candidates get the config's global search. Ranking: BIC
+(the selection rule: consistent, so a true model in the set wins with probability -> 1)
+and AICc; the leave-one-condition-out prediction RMSE where there are >= 3 conditions.
+Per candidate: the drift test (ln A0 fitted to the short and the long half of the times,
+batch, or of the residence times, continuous: the classical symptom of non-linear
+breakage), and the residual structure (mean lag-1 autocorrelation within samples,
+runs-test rejection fraction). A verdict per parameter of the user's model: "consistent"
+when the best-supported model is the user's, or the parameter differs between the two by
+less than 2 combined SE; otherwise "falsified: the data prefer X, under which this
+parameter is Y +- SE".
 """
 from __future__ import annotations
 
@@ -40,7 +49,18 @@ from millflow.fitting.progress import reporter
 __all__ = ["Diagnosis", "candidate_specs", "diagnose"]
 
 #: Sobol-free fixed starts of the extra non-linear parameter (besides 0), per parameter.
-_EXTRA_STARTS = {"s_slow": (0.5, 2.0), "lam_pop": (-1.0, 1.0), "beta0": (0.005, 0.02)}
+_EXTRA_STARTS = {"s_slow": (0.5, 2.0), "lam_pop": (-0.5, -1.5), "beta0": (0.005, 0.02)}
+#: Bounds of the extra non-linear parameter of a candidate the user's config does not
+#: bound (a config that fits the parameter itself keeps its own bounds): s_slow in [0, 10]
+#: (kappa down to 1/11 by t_ref); lam_pop in [-2, 0]: the candidate is fines *cushioning*
+#: (rates down to 1/4 when the whole charge is fines; lambda > 0, nipping, is another
+#: mechanism: fit it with kinetics = "population" and its own bounds), and one-sided like
+#: the other two, so that a first-order truth's chance fluctuations towards nipping do
+#: not count as evidence (with [-2, 1], 1 of 50 linear replicates chose lambda = +0.8);
+#: beta0 in [0, 0.03] 1/s (at 0.03 a first-order fit of the documented designs already
+#: misses by 2.8 noise levels, docs/model-error.md). A candidate whose estimate ends at
+#: one of these bounds is flagged by the fit ("at bound"); widen it with [params.NAME].
+EXTRA_BOUNDS = {"s_slow": (0.0, 10.0), "lam_pop": (-2.0, 0.0), "beta0": (0.0, 0.03)}
 
 
 def candidate_specs(spec: ModelSpec, data) -> dict:
@@ -61,8 +81,62 @@ def candidate_specs(spec: ModelSpec, data) -> dict:
         for n in (2, 3):
             if n != spec.n_tanks:
                 out[f"tanks_{n}"] = replace(base, n_tanks=n)
-        if cls_ok and spec.screen_column in data.process.columns:
+    if spec.mode == "mill":
+        out.update(_transport_alternatives(base))
+    if spec.mode in ("well_mixed", "mill") and cls_ok and spec.screen_column in data.process.columns:
+        try:
             out["classification"] = replace(base, classification="screen_power")
+        except InputError:
+            pass
+    return out
+
+
+def _transport_alternatives(base: ModelSpec) -> dict:
+    """Alternative RTDs of a mode-"mill" model: tanks in series n - 1 and n + 1 (perfect
+    mixing: 2 and 3 tanks); recirculating cells with the recirculation ratio r fitted;
+    axial dispersion with the Peclet number fitted (plug flow: axial dispersion with Pe
+    fitted, which holds plug flow as Pe -> infinity). A combination the mill model refuses
+    (e.g. a classification placement of another transport) is left out."""
+    tr, tp, fitted = base.transport, dict(base.transport_params), base.transport_fit
+    specs = {}
+    if tr in ("perfect_mixing", "tanks_in_series"):
+        n = 1 if tr == "perfect_mixing" else int(round(float(tp["n"])))
+        for m in sorted({max(n - 1, 1), n + 1} - {n}) if tr == "tanks_in_series" else (2, 3):
+            specs[f"tanks_{m}" if m > 1 else "perfect_mixing"] = dict(
+                transport="tanks_in_series" if m > 1 else "perfect_mixing",
+                transport_params={**{k: v for k, v in tp.items() if k != "n"}, **({"n": m} if m > 1 else {})})
+    elif tr == "recirculating_cells" and "r" not in fitted:
+        specs["cells_r_fitted"] = dict(transport_params={k: v for k, v in tp.items() if k != "r"},
+                                       transport_fit=fitted + ("r",))
+    elif tr in ("axial_dispersion", "axial_dispersion_open") and "pe" not in fitted:
+        specs["axial_pe_fitted"] = dict(transport_params={k: v for k, v in tp.items() if k != "pe"},
+                                        transport_fit=fitted + ("pe",))
+    elif tr == "plug_flow":
+        specs["axial_pe_fitted"] = dict(transport="axial_dispersion", transport_params={},
+                                        transport_fit=fitted + ("pe",))
+    out = {}
+    for label, change in specs.items():
+        try:
+            out[label] = replace(base, **change)
+        except InputError:
+            pass
+    return out
+
+
+def _nesting_values(user: ModelSpec) -> dict:
+    """Value of each extra parameter at which its candidate is the linear (user's) model:
+    0 for the kinetics; the user's r and ln Pe for a fitted transport (ln Pe 6, Pe ~ 400,
+    for plug flow: the candidate's nearest point to it)."""
+    tp = dict(user.transport_params)
+    out = {"s_slow": 0.0, "lam_pop": 0.0, "beta0": 0.0}
+    if "r" in tp:
+        out["r"] = float(tp["r"])
+    elif user.transport == "recirculating_cells":
+        out["r"] = 1.0  # rtd's default recirculation ratio
+    if "pe" in tp:
+        out["ln_pe"] = math.log(float(tp["pe"]))
+    elif user.transport == "plug_flow":
+        out["ln_pe"] = 6.0
     return out
 
 
@@ -113,39 +187,61 @@ def _clean(v):
 
 
 def _params_for(spec, user_params: dict, start: dict | None = None) -> dict:
-    """The user's bounds for shared parameters, defaults for the others; start values
-    from ``start`` (a previous fit) where given."""
+    """The user's bounds for shared parameters, :data:`EXTRA_BOUNDS` for a candidate's
+    extra non-linear parameter, defaults for the others; start values from ``start`` (a
+    previous fit) where given."""
     base = default_parameters(spec)
     out = {}
     for n, par in base.items():
+        if n not in user_params and n in EXTRA_BOUNDS:
+            lo, hi = EXTRA_BOUNDS[n]
+            par = Parameter(n, min(max(par.value, lo), hi), lo, hi, par.vary)
         p = user_params.get(n, par)
         v = float(start[n]) if start and n in start else p.value
         out[n] = Parameter(n, min(max(v, p.min), p.max), p.min, p.max, p.vary)
     return out
 
 
-def _fit_candidate(model, params, linear_theta, optimizer, extra):
-    """A nested non-linear candidate: local fits from the linear optimum with the extra
-    parameter at 0 and at its fixed starts; the best is kept (then its statistics)."""
+def _starts(extra: str, nest: float) -> tuple:
+    """Local starts of a nested candidate's extra parameter: the nesting value first."""
+    if extra in _EXTRA_STARTS:
+        return (nest,) + _EXTRA_STARTS[extra]
+    if extra == "r":
+        return (nest, 0.25 * nest, 4.0 * nest) if nest > 0 else (0.0, 0.5, 2.0)
+    return (nest, nest - 2.0, nest - 4.0)  # ln_pe: towards more back-mixing
+
+
+def _fit_candidate(model, params, linear_theta, optimizer, extra, nest=0.0):
+    """A nested candidate (one extra parameter, the linear model at ``nest``): local fits
+    from the linear optimum with the extra parameter at ``nest`` and at fixed starts; the
+    best start is refitted once more with the profile intervals (which the other starts
+    do not need). Any other candidate: the config's global search."""
     if linear_theta is None or not extra:
         return fit(model, params, grid_check=False, quiet=True, **optimizer)
-    best = None
-    for v in (0.0,) + _EXTRA_STARTS.get(extra, ()):
-        par = dict(params)
-        p = par[extra]
-        par[extra] = Parameter(extra, min(max(v, p.min), p.max), p.min, p.max, p.vary)
-        start = {**{n: linear_theta[n] for n in par if n in linear_theta}}
-        par = {n: (Parameter(n, min(max(start[n], q.min), q.max), q.min, q.max, q.vary) if n in start else q)
-               for n, q in par.items()}
+    best, last_error = None, None
+    for v in _starts(extra, nest):
+        par = _with_start(params, {**linear_theta, extra: v})
         try:
-            r = fit(model, par, global_search=False, starts=1, grid_check=False, quiet=True)
-        except MillflowError:
+            r = fit(model, par, global_search=False, starts=1, grid_check=False, quiet=True, profile=False)
+        except MillflowError as exc:
+            last_error = f"{extra} = {v:g}: {exc}"
             continue
         if best is None or r.ssr < best.ssr:
             best = r
     if best is None:
-        raise InputError("no start of the candidate could be fitted")
-    return best
+        raise InputError(f"no start of the candidate could be fitted (last start, {last_error})")
+    par = _with_start(params, {n: s["value"] for n, s in best.stats["params"].items()})
+    try:
+        final = fit(model, par, global_search=False, starts=1, grid_check=False, quiet=True)
+    except MillflowError:
+        return best
+    return final if final.ssr <= best.ssr * (1 + 1e-9) else best
+
+
+def _with_start(params, start):
+    """``params`` with the values of ``start`` (clipped to the bounds) where it has one."""
+    return {n: (Parameter(n, min(max(float(start[n]), q.min), q.max), q.min, q.max, q.vary) if n in start else q)
+            for n, q in params.items()}
 
 
 def _drift(model, params, optimizer, result):
@@ -187,9 +283,13 @@ def _drift(model, params, optimizer, result):
     return 100.0 * math.expm1(b - a), (b - a) / math.hypot(sa, sb)
 
 
-def diagnose(cfg, *, progress=None, quiet: bool = False, loco: bool = True) -> Diagnosis:
+def diagnose(cfg, *, progress=None, quiet: bool = False, loco: bool = True, drift: bool = True,
+             candidates=None) -> Diagnosis:
     """Fit the candidate set of a fit config (:class:`~millflow.fitting.config.FitConfig`)
-    and rank it; see the module docstring."""
+    and rank it; see the module docstring. ``loco=False`` skips the leave-one-condition-out
+    refits, ``drift=False`` the drift refits (neither changes the ranking by BIC, the
+    choice, or the candidates' estimates and intervals). ``candidates``: labels to fit
+    (default all; ``linear`` and the user's model are always fitted)."""
     from millflow.fitting.statistics import information_criteria
     from millflow.fitting.validate import condition_rmse
 
@@ -201,22 +301,31 @@ def diagnose(cfg, *, progress=None, quiet: bool = False, loco: bool = True) -> D
     if user_label is None:  # the user's own non-linear model joins the set
         user_label = "user: " + "+".join(user_spec.kinetics)
         specs[user_label] = user_spec
+    kinetics_left_out = user_spec.classification is not None and "aggregation" not in specs
+    if candidates is not None:
+        unknown = sorted(set(candidates) - set(specs))
+        if unknown:
+            raise InputError(f"diagnose: candidates {unknown} are not in the set for this config; expected some of "
+                             f"{list(specs)}")
+        specs = {k: v for k, v in specs.items() if k in set(candidates) | {"linear", user_label}}
     grid = cfg.model().grid
     fits, rows, notes = {}, [], []
-    if user_spec.classification is not None and "aggregation" not in specs:
+    if kinetics_left_out:
         notes.append(f"non-linear candidates (cushioning, aggregation) take classification in well-mixed cells "
                      f"only; the model's classification ({user_spec.classification}, transport "
                      f"{user_spec.transport or user_spec.mode}) keeps them out of the set")
     linear_theta = None
+    nest = _nesting_values(user_spec)
     order = ["linear"] + [k for k in specs if k != "linear"]
     for label in order:
         spec = specs[label]
         model = cfg.model(spec, grid)
         params = _params_for(spec, cfg.params)
-        extra = [n for n in spec.param_names if n in _EXTRA_STARTS]
+        extra = [n for n in spec.param_names if n not in specs["linear"].param_names]
+        nested = extra[0] if len(extra) == 1 and extra[0] in nest else None
         say(f"fitting {label} ({len(params)} parameters)")
         try:
-            res = _fit_candidate(model, params, linear_theta, cfg.optimizer, extra[0] if len(extra) == 1 else None)
+            res = _fit_candidate(model, params, linear_theta, cfg.optimizer, nested, nest.get(nested, 0.0))
         except MillflowError as exc:
             notes.append(f"{label}: not fitted ({exc})")
             continue
@@ -234,10 +343,12 @@ def diagnose(cfg, *, progress=None, quiet: bool = False, loco: bool = True) -> D
                         grid_check=False, quiet=True, profile=False)
                 errs.extend(condition_rmse(model.for_conditions([c]), r.theta).values())
             loco_rmse = float(np.sqrt(np.mean(np.square(errs))))
-        try:
-            d_pct, d_se = _drift(model, cfg.params, cfg.optimizer, res)
-        except MillflowError:
-            d_pct, d_se = None, None
+        d_pct, d_se = None, None
+        if drift:
+            try:
+                d_pct, d_se = _drift(model, cfg.params, cfg.optimizer, res)
+            except MillflowError:
+                pass
         rs = res.stats.get("residuals") or {}
         rows.append({"model": label, "label": spec.label(), "n_params": res.n_params, "ssr": res.ssr,
                      "bic": ic["bic"], "aicc": ic["aicc"], "aic": ic["aic"], "loco_rmse": loco_rmse,

@@ -31,7 +31,7 @@ import numpy as np
 from scipy.optimize import differential_evolution, least_squares
 from scipy.stats import qmc
 
-from millflow.errors import InputError, MillflowError
+from millflow.errors import InputError, MillflowError, SolverError
 from millflow.fitting.forward import ForwardModel
 from millflow.fitting.spec import _AXIAL_TRANSPORTS, FORWARD_TOL, Parameter, default_parameters
 from millflow.fitting.progress import reporter
@@ -61,6 +61,7 @@ class FitResult:
     grid_check: dict = field(default_factory=dict)
     message: str = ""
     error_estimate: dict = field(default_factory=dict)
+    notes: list = field(default_factory=list)  # what the fit met and worked around (e.g. failed solves)
 
     @property
     def ser(self) -> float:
@@ -111,7 +112,7 @@ class FitResult:
             "error_estimate": _jsonable_tree(self.error_estimate),
             "solutions": [{"ssr": s, "params": p} for s, p in self.solutions[:10]],
             "rmse_by_condition": self.rmse_by_condition(),
-            "nfev": self.nfev, "runtime_s": self.runtime_s,
+            "nfev": self.nfev, "runtime_s": self.runtime_s, "notes": list(self.notes),
             # eq. 9 covariance at full precision and what is needed to evaluate the fitted
             # model in another mill (millflow scaleup)
             "covariance": {"names": list(self.stats["params"]),
@@ -168,6 +169,7 @@ class FitResult:
             shown = "not estimated" if gr.get("value") is None else f"{gr['value']:.2g} SE"
             lines.append(f"error estimate: grid {shown} ({gr['method']}); solver {so['value']:.1e} relative "
                          f"({so['method']})")
+        lines += [f"note: {n}" for n in self.notes]
         return "\n".join(lines)
 
 
@@ -231,6 +233,7 @@ class _Problem:
         self.row_factor = 1.0  # variance components re-weight rows (see _variance_components)
         self.sw = self.base_sw
         self.nfev = 0
+        self.notes = []
 
     def expand(self, z):
         z = np.atleast_2d(z)
@@ -255,7 +258,12 @@ class _Problem:
 
 
 def check_problem(model: ForwardModel, params: dict) -> _Problem:
-    """The checks made before any optimisation (see module docstring)."""
+    """The checks made before any optimisation (see module docstring). A model with
+    non-linear kinetics whose steady or batch solve fails at some corners (e.g. Newton's
+    iteration cap where the parameters make the mill extreme) is not refused for it: the
+    fit goes on, those points count as infeasible, and ``prob.notes`` says so; the box
+    centre or the start values must be solvable, and non-finite values without a failed
+    solve (the model undefined there) are refused as for any model."""
     prob = _Problem(model, params)
     p, n = prob.idx.size, model.n_data
     if p == 0:
@@ -267,12 +275,16 @@ def check_problem(model: ForwardModel, params: dict) -> _Problem:
     if not np.any(model.weights > 0):
         raise InputError("every weight is zero; there is nothing to fit")
     lo, hi = prob.lower, prob.upper
-    pts = [lo, hi, 0.5 * (lo + hi)]
+    pts = [lo, hi, 0.5 * (lo + hi), np.clip(prob.full[prob.idx], lo, hi)]
     corners = list(itertools.product([0, 1], repeat=p)) if p <= 6 else \
         np.random.default_rng(0).integers(0, 2, size=(64, p)).tolist()
     for c in corners:
         pts.append(np.where(np.array(c) == 1, hi, lo))
     pts = np.array(pts)
+    nonlinear = getattr(model, "_nonlinear", None)
+    failures = getattr(nonlinear, "failures", None)
+    if failures is not None:
+        failures.clear()
     try:
         R = prob.resid_pop(pts)
         bad = ~np.isfinite(R).all(axis=1)
@@ -283,8 +295,14 @@ def check_problem(model: ForwardModel, params: dict) -> _Problem:
     if bad.any():
         k = int(np.flatnonzero(bad)[0])
         where = ", ".join(f"{nm}={v:.4g}" for nm, v in zip(prob.names, pts[k]))
-        raise InputError(f"the model gives non-finite values at a corner of the bounds ({where}); "
-                         "narrow the bounds of these parameters")
+        if failures and not (bad[2] and bad[3]):
+            prob.notes.append(f"the non-linear solve failed at {int(bad.sum())} of {len(pts)} points checked in "
+                              f"the bounds (e.g. {where}: {failures[-1]}); the fit went on with them infeasible")
+        else:
+            raise InputError(f"the model gives non-finite values at a corner of the bounds ({where}); "
+                             "narrow the bounds of these parameters")
+    if failures is not None:
+        failures.clear()
     prob.nfev = 0
     return prob
 
@@ -295,8 +313,13 @@ def _local(prob: _Problem, z0, tight: bool = False):
     noise = float(getattr(prob, "fd_noise", 0.0) or 0.0)
     tol = (1e-12 if noise < 1e-12 else 1e-8) if tight else 1e-8
     z0 = np.clip(z0, prob.lower, prob.upper)
-    r = least_squares(prob.resid, z0, jac=prob.jac, bounds=(prob.lower, prob.upper), method="trf",
-                      x_scale="jac", ftol=tol, xtol=tol, gtol=tol, max_nfev=200 if tight else 60)
+    try:
+        r = least_squares(prob.resid, z0, jac=prob.jac, bounds=(prob.lower, prob.upper), method="trf",
+                          x_scale="jac", ftol=tol, xtol=tol, gtol=tol, max_nfev=200 if tight else 60)
+    except ValueError as exc:  # a start where the model cannot be solved (non-finite residuals)
+        if "not finite" not in str(exc):
+            raise
+        return z0, math.inf
     return r.x, float(2 * r.cost)
 
 
@@ -352,6 +375,14 @@ def fit(model: ForwardModel, params: dict | None = None, *, global_search: bool 
         if k % 5 == 4 or k == len(candidates) - 1:
             say(f"  local starts {k + 1}/{len(candidates)}: best SSR {min(x[0] for x in sols):.6g}")
     sols.sort(key=lambda t: t[0])
+    infeasible = sum(not math.isfinite(x[0]) for x in sols)
+    sols = [x for x in sols if math.isfinite(x[0])]
+    if not sols:
+        last = getattr(getattr(model, "_nonlinear", None), "failures", None)
+        raise SolverError(f"no start of the fit could be solved ({len(candidates)} starts)"
+                          + (f"; last failure: {last[-1]}" if last else ""))
+    if infeasible:
+        prob.notes.append(f"{infeasible} of {len(candidates)} starts could not be solved and were dropped")
     zb, sb = _local(prob, sols[0][1], tight=True)
     if sb > sols[0][0]:
         zb, sb = sols[0][1], sols[0][0]
@@ -380,7 +411,7 @@ def fit(model: ForwardModel, params: dict | None = None, *, global_search: bool 
     solutions = [(float(s), {n: float(v) for n, v in zip(names, z)}) for s, z in sols]
     say(f"done: SSR {sb:.6g}, spread {spread:.3g}, {time.perf_counter() - t0:.1f} s")
     return FitResult(model, fitted, st, sb, model.n_data, p, len(candidates), spread, solutions, prob.nfev,
-                     time.perf_counter() - t0, gc, error_estimate=ee)
+                     time.perf_counter() - t0, gc, error_estimate=ee, notes=list(prob.notes))
 
 
 def error_estimate(model: ForwardModel, gc: dict) -> dict:

@@ -65,20 +65,23 @@ sys.path.insert(0, {root!r})
 from tests.millflow.test_threads import _scene
 from millflow.nonlinear import batch_nonlinear
 kin, feed = _scene(100)
-batch_nonlinear(kin, feed, [100.0], error_estimate=False)
+# BDF: every step solves with an LU factorisation of the (N + 1)^2 iteration matrix
+# (LSODA stays non-stiff on this scene and factorises nothing)
+batch_nonlinear(kin, feed, [100.0], error_estimate=False, method="BDF")
 ts = []
 for _ in range(3):
     t0 = time.perf_counter()
-    r = batch_nonlinear(kin, feed, [100.0], error_estimate=False)
+    r = batch_nonlinear(kin, feed, [100.0], error_estimate=False, method="BDF")
     ts.append(time.perf_counter() - t0)
 print(json.dumps({{"t": sorted(ts)[1], "nlu": r.info["nlu"]}}))
 """
 
 
 def test_batch_time_does_not_grow_with_blas_threads():
-    """Same work (LU count) and about the same time with 1 and 2 BLAS threads. Without
-    the limit, 2 threads on a loaded 2-core machine cost 10-20x; the margin (2.5x) only
-    has to tell that apart from scheduling noise, it is not a timing target."""
+    """Same work (LU count, > 0: the BDF path factorises) and about the same time with 1
+    and 2 BLAS threads. Without the limit, 2 threads on a loaded 2-core machine cost
+    10-20x; the margin (2.5x) only has to tell that apart from scheduling noise, it is not
+    a timing target."""
     out = {}
     for threads in (1, 2):
         env = dict(os.environ, OPENBLAS_NUM_THREADS=str(threads), OMP_NUM_THREADS=str(threads),
@@ -86,5 +89,5 @@ def test_batch_time_does_not_grow_with_blas_threads():
         proc = subprocess.run([sys.executable, "-c", _CHILD.format(root=str(ROOT))], env=env, capture_output=True,
                               text=True, timeout=600, check=True)
         out[threads] = json.loads(proc.stdout.strip().splitlines()[-1])
-    assert out[1]["nlu"] == out[2]["nlu"]
+    assert out[1]["nlu"] == out[2]["nlu"] > 0
     assert out[2]["t"] / out[1]["t"] < 2.5
