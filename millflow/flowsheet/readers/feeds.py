@@ -15,7 +15,7 @@ from millflow.errors import GridError, InputError
 from millflow.flowsheet.readers.tables import _named_file, _plausible, _Table, _user_key, _warn_pct_slip
 from millflow.flowsheet.units import Feed
 from millflow.grid import SizeGrid
-from millflow.inputs import UNITS
+from millflow.inputs import unit_column
 from millflow.psd import from_distribution, from_sieves, gates_gaudin_schuhmann, rosin_rammler
 
 
@@ -31,10 +31,7 @@ def _sieve_table(path: Path, where: str):
     df = read_csv(path, "feed PSD file")
     cols = [c.strip() for c in df.columns]
     df.columns = cols
-    size_cols = [c for c in cols if c.startswith("size_") and c[5:] in UNITS["length"]]
-    if len(size_cols) != 1:
-        raise InputError(f"{path}: expected one size column with its unit (size_um, size_mm or size_m); "
-                         f"columns: {', '.join(cols)}")
+    size_col, size_factor = unit_column(cols, "size", "length", str(path))  # size_um, size_mm, ...
     kinds = [c for c in cols if c.rsplit("_", 1)[0] in ("passing", "cum_retained", "retained")
              and c.rsplit("_", 1)[-1] in ("pct", "frac")]
     if len(kinds) != 1:
@@ -45,7 +42,7 @@ def _sieve_table(path: Path, where: str):
     if len(df) < 2:
         raise InputError(f"{path}: {len(df)} data row(s); expected at least two sieves")
     out = {}
-    for col in (size_cols[0], kinds[0]):
+    for col in (size_col, kinds[0]):
         vals = []
         for row, v in enumerate(df[col].tolist(), start=2):
             try:
@@ -56,7 +53,7 @@ def _sieve_table(path: Path, where: str):
                 raise InputError(f"{path}: row {row}, column {col} = {v!r}; expected a finite number >= 0")
             vals.append(fv)
         out[col] = np.array(vals)
-    size = out[size_cols[0]] * UNITS["length"][size_cols[0][5:]]
+    size = out[size_col] * size_factor
     val = out[kinds[0]] * scale
     if kind == "retained":
         total = math.fsum(val)
