@@ -322,6 +322,8 @@ def _gamma_cdf_large(n: float, d) -> np.ndarray:
     eta = 0), c1(0) = -1/540; the omitted terms are O(n^-5/2): below 1e-12 for n >= 1e4.
     Temme, Special functions (1996), sec. 11.2.
     """
+    from scipy import special  # here: scipy.special is a large share of start-up
+
     d = np.asarray(d, dtype=float)
     u = 1.0 + d
     eta = np.sign(d) * np.sqrt(2.0 * _log1pmx(d))
