@@ -43,16 +43,21 @@ __all__ = ["Flowsheet", "load", "loads", "from_dict", "with_units", "unit_from_t
 
 
 class Flowsheet(graph.Flowsheet):
-    """A flowsheet (:class:`millflow.flowsheet.graph.Flowsheet`) with its readers:
+    """A flowsheet with its readers, ``from_dict`` and ``load``.
+
+    A flowsheet (:class:`millflow.flowsheet.graph.Flowsheet`) with its readers:
     ``Flowsheet.from_dict(data)`` (the document a TOML file would hold, as a dict) and
-    ``Flowsheet.load(path)``."""
+    ``Flowsheet.load(path)``.
+    """
 
     @classmethod
     def from_dict(cls, data: dict, *, source: str = "<dict>", base_dir=None) -> Flowsheet:
+        """Build a flowsheet from the parsed document ``data`` (:func:`from_dict`)."""
         return from_dict(data, source=source, base_dir=base_dir)
 
     @classmethod
     def load(cls, path) -> Flowsheet:
+        """Read a flowsheet file (:func:`load`)."""
         return load(path)
 
 #: Accepted unit suffixes per dimension, with the factor to SI (the one table:
@@ -143,10 +148,13 @@ def from_dict(data: dict, *, source: str = "<dict>", base_dir=None) -> Flowsheet
 
 
 def unit_from_table(fs: Flowsheet, name: str, table: dict):
-    """(unit, water added to its feed [kg/s] or None) built from its ``table`` (as in the
+    """A unit built again from its table on the grid, materials and slurry of ``fs``.
+
+    (unit, water added to its feed [kg/s] or None) built from its ``table`` (as in the
     document) on the grid, materials and slurry of ``fs``. A mill whose rate and breakage
     come out the very objects of the mill of that name in ``fs`` keeps its class-averaged
-    forms on the grid: they depend on neither tau, power nor transport."""
+    forms on the grid: they depend on neither tau, power nor transport.
+    """
     materials = fs.meta.get("materials")
     if materials is None:
         raise InputError("unit_from_table: the flowsheet was not built from a document (from_dict, load)")
@@ -166,10 +174,13 @@ def unit_from_table(fs: Flowsheet, name: str, table: dict):
 
 
 def with_units(fs: Flowsheet, tables: dict, built: dict | None = None) -> Flowsheet:
-    """``fs`` with the units named in ``tables`` (unit name -> its table, as in the document)
+    """The flowsheet ``fs`` with some units built again from new tables.
+
+    ``fs`` with the units named in ``tables`` (unit name -> its table, as in the document)
     built again from those tables (:func:`unit_from_table`); grid, materials, streams and
     the other units are the very objects of ``fs`` (a sweep's case that changes keys of
-    some units). ``built`` (name -> (unit, water added)) gives units built already."""
+    some units). ``built`` (name -> (unit, water added)) gives units built already.
+    """
     units, water_added = dict(fs.units), dict(fs.water_added)
     for uname, table in tables.items():
         new, added = (built or {}).get(uname) or unit_from_table(fs, uname, table)

@@ -41,9 +41,12 @@ def _positive(value, name):
 
 
 def check_operation(critical_speed_fraction=None, ball_filling=None, powder_filling=None, where="mill"):
-    """Validate the operating fractions: 0 < phi_c < 1, 0 < J < 0.5 (balls above the axis
+    """Validate the operating fractions of a ball mill.
+
+    Validate the operating fractions: 0 < phi_c < 1, 0 < J < 0.5 (balls above the axis
     no longer form a cascading charge; every correlation here is fitted for J <= 0.45),
-    0 <= U <= 2 (U = powder volume / ball-bed voids; above ~1.5 the mill is overfilled)."""
+    0 <= U <= 2 (U = powder volume / ball-bed voids; above ~1.5 the mill is overfilled).
+    """
     if critical_speed_fraction is not None:
         v = float(critical_speed_fraction)
         if not (0 < v < 1):
@@ -62,9 +65,12 @@ def check_operation(critical_speed_fraction=None, ball_filling=None, powder_fill
 
 
 def critical_speed(diameter_m, ball_size_m=0.0):
-    """Critical speed N_c [rev/s] = sqrt(2 g / (D - d)) / (2 pi): the speed at which a ball
+    """Critical speed N_c [rev/s] of a ball mill.
+
+    Critical speed N_c [rev/s] = sqrt(2 g / (D - d)) / (2 pi): the speed at which a ball
     of diameter d [m] at the shell of a mill of diameter D [m] (inside liners) centrifuges.
-    In rpm with g = 9.81 this is the familiar 42.3 / sqrt(D - d)."""
+    In rpm with g = 9.81 this is the familiar 42.3 / sqrt(D - d).
+    """
     D = _positive(diameter_m, "diameter_m")
     d = float(ball_size_m)
     if not (0 <= d < D):
@@ -73,9 +79,12 @@ def critical_speed(diameter_m, ball_size_m=0.0):
 
 
 def ball_charge_mass(diameter_m, length_m, ball_filling, ball_density_kg_m3=7800.0, bed_porosity=0.4):
-    """Mass of balls [kg] = J V rho_b (1 - eps): V = pi D^2 L / 4 [m^3] inside liners, J the
+    """Mass of the ball charge [kg].
+
+    Mass of balls [kg] = J V rho_b (1 - eps): V = pi D^2 L / 4 [m^3] inside liners, J the
     fraction of the mill volume filled by the ball bed, eps its porosity (0.4 for a
-    random bed of balls: Austin, Klimpel & Luckie 1984)."""
+    random bed of balls: Austin, Klimpel & Luckie 1984).
+    """
     D, L = _positive(diameter_m, "diameter_m"), _positive(length_m, "length_m")
     check_operation(ball_filling=ball_filling)
     eps = float(bed_porosity)
@@ -118,9 +127,11 @@ def bond_rowland_power(diameter_m, length_m, ball_filling, critical_speed_fracti
 
 def austin_power(diameter_m, length_m, ball_filling, critical_speed_fraction, ball_density_t_m3=7.8,
                  K=7.33, A=0.937, bed_porosity=0.4):
-    """Austin's ball-mill power equation (net) [kW]:
+    """Austin's ball-mill power equation (net) [kW].
 
-    m_p = K J phi_c (1 - A J) (1 - 0.1 / 2^(9 - 10 phi_c)) rho_b L D^2.3 [(1 - eps) / 0.6]
+    The net power is::
+
+        m_p = K J phi_c (1 - A J) (1 - 0.1 / 2^(9 - 10 phi_c)) rho_b L D^2.3 [(1 - eps) / 0.6]
 
     D, L [m] inside liners, rho_b [t/m^3] the density of the balls (7.8 for steel), J the
     ball filling (bed, voids included), phi_c the fraction of critical speed; K = 7.33,
@@ -155,10 +166,13 @@ def austin_power(diameter_m, length_m, ball_filling, critical_speed_fraction, ba
 
 
 def charge_arm(ball_filling, radius_m):
-    """Distance d_c [m] from the mill axis to the centre of mass of a charge that fills
+    """Distance d_c [m] from the mill axis to the charge's centre of mass.
+
+    Distance d_c [m] from the mill axis to the centre of mass of a charge that fills
     the fraction J of the circular section: a circular segment of half-angle theta with
     (2 theta - sin 2 theta) / (2 pi) = J, and d_c = 4 R sin^3(theta) / (3 (2 theta - sin 2 theta)).
-    Exact geometry (a half-full mill gives 4 R / (3 pi))."""
+    Exact geometry (a half-full mill gives 4 R / (3 pi)).
+    """
     from scipy.optimize import brentq
 
     J = float(ball_filling)

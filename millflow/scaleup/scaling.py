@@ -57,8 +57,11 @@ AUSTIN_DEFAULTS = {
 
 
 def _diameter_term(D, D_ref, N1, Delta, D_large):
-    """(D/D_ref)^N1 up to D_large, with the exponent reduced by Delta above it (AKL: large
-    mills break less per unit power than the D^0.5 trend of small mills)."""
+    """The diameter factor (D/D_ref)^N1, with a reduced exponent above D_large.
+
+    (D/D_ref)^N1 up to D_large, with the exponent reduced by Delta above it (AKL: large
+    mills break less per unit power than the D^0.5 trend of small mills).
+    """
     def g(x):
         return x ** N1 if x <= D_large else D_large ** N1 * (x / D_large) ** (N1 - Delta)
     return g(D) / g(D_ref)

@@ -16,8 +16,11 @@ _VARY = re.compile(r"^\s*([A-Za-z_][\w.]*)\s*=\s*([^:]+):([^:]+):([^:]+)\s*$")
 
 @dataclass(frozen=True)
 class Axis:
-    """A varied key (dotted path into the flowsheet's tables) from ``start`` to ``stop``
-    in ``n`` values (grid), or uniformly between them (Latin hypercube)."""
+    """A varied key of the flowsheet and its range.
+
+    A varied key (dotted path into the flowsheet's tables) from ``start`` to ``stop``
+    in ``n`` values (grid), or uniformly between them (Latin hypercube).
+    """
 
     key: str
     start: float
@@ -26,6 +29,7 @@ class Axis:
 
     @property
     def values(self) -> np.ndarray:
+        """The grid's values of this key."""
         return np.linspace(self.start, self.stop, self.n)
 
 
@@ -47,8 +51,11 @@ def parse_vary(text: str) -> Axis:
 
 
 def set_key(data: dict, key: str, value: float) -> None:
-    """Set ``data[a][b][c] = value`` for key "a.b.c"; the path must exist (a misspelt key
-    is refused, not added as a new setting)."""
+    """Set a numeric key of a flowsheet document by its dotted path.
+
+    Set ``data[a][b][c] = value`` for key "a.b.c"; the path must exist (a misspelt key
+    is refused, not added as a new setting).
+    """
     parts = key.split(".")
     node = data
     for k, part in enumerate(parts[:-1]):
