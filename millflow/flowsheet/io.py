@@ -197,7 +197,44 @@ def with_units(fs: Flowsheet, tables: dict, built: dict | None = None) -> Flowsh
 
 
 def loads(text: str, *, source: str = "<string>") -> Flowsheet:
-    """Flowsheet from TOML text."""
+    """Flowsheet from TOML text (the format of docs/flowsheets.md).
+
+    Parameters
+    ----------
+    text : str
+        The TOML document.
+    source : str
+        Name used in error messages (and, when it is a file name, the folder that files
+        the flowsheet names are read from).
+
+    Returns
+    -------
+    Flowsheet
+
+    Raises
+    ------
+    InputError
+        Invalid TOML, or a key, unit, value or stream that is wrong (one line naming it).
+    GridError
+        A size grid that does not cover the feed.
+
+    Examples
+    --------
+    >>> fs = loads('''
+    ... grid = {top_um = 1000, bottom_um = 100, n = 4}
+    ... [units]
+    ... feed = {type = "feed", solids_tph = 36, psd = {form = "ggs", xmax_um = 1000, m = 0.8}}
+    ... out = {type = "product"}
+    ... [streams]
+    ... s = {from = "feed", to = "out"}
+    ... ''')
+    >>> fs.units["feed"].solids  # 36 t/h in SI [kg/s]
+    10.0
+    >>> loads("grid = {top = 1000}")  # doctest: +ELLIPSIS
+    Traceback (most recent call last):
+    ...
+    millflow.errors.InputError: <string>: grid.top: units of measure missing; write top_<unit> with ...
+    """
     _WARNED.clear()  # a new document: its warnings are new (the grid check's re-parse is not)
     try:
         data = tomllib.loads(text)
@@ -210,7 +247,28 @@ def loads(text: str, *, source: str = "<string>") -> Flowsheet:
 
 
 def load(path) -> Flowsheet:
-    """Flowsheet from a TOML file."""
+    """Flowsheet from a TOML file (the format of docs/flowsheets.md).
+
+    Files the flowsheet names (a feed CSV, fit results) are read relative to its folder.
+
+    Parameters
+    ----------
+    path : str or path-like
+        The flowsheet file (UTF-8 TOML).
+
+    Returns
+    -------
+    Flowsheet
+        With ``meta["input_sha256"]``, the SHA-256 of the file as read.
+
+    Raises
+    ------
+    InputError
+        A missing or unreadable file, invalid TOML, or a wrong key, unit, value or stream
+        (one line naming it).
+    GridError
+        A size grid that does not cover the feed.
+    """
     import hashlib
 
     p = Path(path)

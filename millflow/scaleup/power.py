@@ -107,12 +107,42 @@ def bond_rowland_power(diameter_m, length_m, ball_filling, critical_speed_fracti
     Validity: wet overflow-discharge ball mills (Rowland: multiply by 1.16 for wet
     grate discharge, 1.08 for dry), 0.35 <= J <= 0.5 as fitted by Bond, phi_c 0.6-0.8.
 
-    Sources: F. C. Bond, Crushing and grinding calculations, Br. Chem. Eng. 6 (1961);
-    C. A. Rowland, in Design and Installation of Comminution Circuits (SME 1982) ch. 23.
+    Parameters
+    ----------
+    diameter_m, length_m : float
+        Mill diameter D and length L inside liners [m].
+    ball_filling : float
+        Fraction J of the mill volume filled by the ball bed (voids included) [-], 0 < J < 0.5.
+    critical_speed_fraction : float
+        Fraction phi_c of the critical speed [-], 0 < phi_c < 1.
+    ball_size_mm : float
+        Ball size B [mm] (the ball-size factor of mills above 3.3 m).
+    ball_density_kg_m3 : float
+        Density of the balls [kg/m3] (7800 for steel).
+    bed_porosity : float
+        Porosity of the ball bed [-] (0.4 for a random bed).
 
     Returns
     -------
-    dict: kw_per_t_balls, ball_mass_t, net_kW.
+    dict
+        ``kw_per_t_balls`` [kW/t], ``ball_mass_t`` [t], ``net_kW`` [kW].
+
+    Raises
+    ------
+    InputError
+        Dimensions not > 0, or operating fractions outside their range
+        (:func:`check_operation`).
+
+    References
+    ----------
+    F. C. Bond, Crushing and grinding calculations, Br. Chem. Eng. 6 (1961);
+    C. A. Rowland, in Design and Installation of Comminution Circuits (SME, 1982), ch. 23.
+
+    Examples
+    --------
+    >>> r = bond_rowland_power(4.0, 6.0, 0.35, 0.75, ball_size_mm=50.0)
+    >>> round(r["net_kW"]), round(r["ball_mass_t"], 1)
+    (1421, 123.5)
     """
     D = _positive(diameter_m, "diameter_m")
     check_operation(critical_speed_fraction, ball_filling)
@@ -146,12 +176,43 @@ def austin_power(diameter_m, length_m, ball_filling, critical_speed_fraction, ba
 
     Validity: ball mills, J <= 0.45, phi_c 0.5-0.9.
 
-    Source: L. G. Austin, R. R. Klimpel & P. T. Luckie, Process Engineering of Size
-    Reduction: Ball Milling (SME 1984), ch. 10.
+    Parameters
+    ----------
+    diameter_m, length_m : float
+        Mill diameter D and length L inside liners [m].
+    ball_filling : float
+        Fraction J of the mill volume filled by the ball bed (voids included) [-], 0 < J < 0.5.
+    critical_speed_fraction : float
+        Fraction phi_c of the critical speed [-], 0 < phi_c < 1.
+    ball_density_t_m3 : float
+        Density of the balls rho_b [t/m3] (7.8 for steel).
+    K, A : float
+        Constants of the equation (7.33 and 0.937 for wet overflow ball mills).
+    bed_porosity : float
+        Porosity eps of the ball bed [-] (0.4 for a random bed).
 
     Returns
     -------
-    dict: net_kW, ball_mass_t, kw_per_t_balls.
+    dict
+        ``net_kW`` [kW], ``ball_mass_t`` [t], ``kw_per_t_balls`` [kW/t].
+
+    Raises
+    ------
+    InputError
+        Dimensions not > 0, a porosity outside (0, 1), or operating fractions outside
+        their range (:func:`check_operation`).
+
+    References
+    ----------
+    L. G. Austin, R. R. Klimpel and P. T. Luckie, Process Engineering of Size Reduction:
+    Ball Milling (SME-AIME, New York, 1984), ch. 10.
+
+    Examples
+    --------
+    A 4 m x 6 m mill, 35 % ball filling, 75 % of critical speed (Bond-Rowland gives 1421 kW):
+
+    >>> round(austin_power(4.0, 6.0, 0.35, 0.75)["net_kW"])
+    1416
     """
     D, L = _positive(diameter_m, "diameter_m"), _positive(length_m, "length_m")
     check_operation(critical_speed_fraction, ball_filling)
@@ -195,12 +256,42 @@ def hogg_fuerstenau_power(diameter_m, length_m, ball_filling, critical_speed_fra
     Validity: cascading charge (phi_c below ~0.85, no cataracting mass), charge shape a
     flat-surfaced segment; it ignores the powder's contribution (add it via M_c).
 
-    Source: R. Hogg, D. W. Fuerstenau, Power relationships for tumbling mills, Trans.
-    SME-AIME 252 (1972) 418-423.
+    Parameters
+    ----------
+    diameter_m, length_m : float
+        Mill diameter D and length L inside liners [m].
+    ball_filling : float
+        Fraction J of the mill volume filled by the ball bed (voids included) [-], 0 < J < 0.5.
+    critical_speed_fraction : float
+        Fraction phi_c of the critical speed [-], 0 < phi_c < 1.
+    ball_size_mm : float
+        Ball size d [mm] in the critical speed sqrt(2 g / (D - d)) / (2 pi) (0: at the shell).
+    ball_density_kg_m3 : float
+        Density of the balls [kg/m3].
+    bed_porosity : float
+        Porosity of the ball bed [-].
+    repose_angle_deg : float
+        Dynamic angle of repose alpha of the charge [deg].
 
     Returns
     -------
-    dict: net_kW, ball_mass_t, kw_per_t_balls.
+    dict
+        ``net_kW`` [kW], ``ball_mass_t`` [t], ``kw_per_t_balls`` [kW/t].
+
+    Raises
+    ------
+    InputError
+        Dimensions not > 0, or operating fractions outside their range.
+
+    References
+    ----------
+    R. Hogg and D. W. Fuerstenau, Power relationships for tumbling mills, Trans.
+    SME-AIME 252 (1972) 418-423.
+
+    Examples
+    --------
+    >>> round(hogg_fuerstenau_power(4.0, 6.0, 0.35, 0.75)["net_kW"])
+    1282
     """
     D = _positive(diameter_m, "diameter_m")
     check_operation(critical_speed_fraction, ball_filling)

@@ -5,7 +5,8 @@
   the material, so the product depends on the specific energy E = P t / H alone.
   B (normalised) is carried unchanged.
   Source: J. A. Herbst, D. W. Fuerstenau, Scale-up procedure for continuous grinding mill
-  design using population balance models, Int. J. Miner. Process. 7 (1980) 1-31.
+  design using population balance models, Int. J. Miner. Process. 7 (1980) 1-31,
+  doi:10.1016/0301-7516(80)90034-4.
   Validity: same material, same breakage mechanism (ball size and speed in the range
   where S^E was found constant; Herbst & Fuerstenau report it for ball mills of 0.25 to
   ~1 m and pilot scale).
