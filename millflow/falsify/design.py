@@ -130,8 +130,36 @@ def batch_design(times_s, *, top_m: float = 4e-3, n_sieves: int = 16, sieve_rati
                  grid_per_sieve: int = 2, conditions=("c1",)) -> Design:
     """A batch design: feed in the top sieve interval, root-2 sieves, sampled at ``times_s`` [s].
 
-    A batch design: feed all in the top sieve interval, root-2 sieves, grid ``grid_per_sieve``
-    classes per sieve interval (sieves are grid edges), sampled at ``times_s``.
+    Parameters
+    ----------
+    times_s : sequence of float
+        Sampling times [s].
+    top_m : float
+        Top sieve size [m]; the feed is all in the interval below it.
+    n_sieves : int
+        Number of sieves, >= 3.
+    sieve_ratio : float
+        Ratio of neighbouring sieves, > 1 (root 2 by default).
+    grid_per_sieve : int
+        Grid classes per sieve interval, >= 1 (the sieves are grid edges; one more sieve
+        interval below the finest sieve, so the sink is not a measured class).
+    conditions : sequence of str
+        Names of the batch tests (each sampled at every time).
+
+    Returns
+    -------
+    Design
+
+    Raises
+    ------
+    InputError
+        A sieve count, ratio or grid density out of range.
+
+    Examples
+    --------
+    >>> d = batch_design([60, 240], n_sieves=8)
+    >>> d.is_batch, d.times_s, len(d.sieves_m), d.grid.n
+    (True, (60.0, 240.0), 8, 17)
     """
     return _design(top_m, n_sieves, sieve_ratio, grid_per_sieve, conditions=tuple(conditions), times_s=tuple(times_s))
 
@@ -140,8 +168,34 @@ def continuous_design(tau_s, *, top_m: float = 4e-3, n_sieves: int = 16, sieve_r
                       grid_per_sieve: int = 2, extra_process: dict | None = None) -> Design:
     """A continuous-mill design: one condition per mean residence time ``tau_s`` [s].
 
-    A continuous-mill design: one condition per mean residence time ``tau_s`` (column
-    ``tau_s``), product sampled; feed all in the top sieve interval.
+    The product of each condition is sampled; the process column ``tau_s`` holds the mean
+    residence times.
+
+    Parameters
+    ----------
+    tau_s : sequence of float
+        Mean residence times [s], one condition each (named tau1, tau2, ...).
+    top_m : float
+        Top sieve size [m]; the feed is all in the interval below it.
+    n_sieves : int
+        Number of sieves, >= 3.
+    sieve_ratio : float
+        Ratio of neighbouring sieves, > 1 (root 2 by default).
+    grid_per_sieve : int
+        Grid classes per sieve interval, >= 1 (the sieves are grid edges; one more sieve
+        interval below the finest sieve, so the sink is not a measured class).
+    extra_process : dict or None
+        More process columns, name -> one value per condition (e.g. ``screen_mm``).
+
+    Returns
+    -------
+    Design
+
+    Examples
+    --------
+    >>> d = continuous_design([30, 120], n_sieves=8)
+    >>> d.conditions, d.process_dict()["tau_s"].tolist()
+    (('tau1', 'tau2'), [30.0, 120.0])
     """
     names = tuple(f"tau{k + 1}" for k in range(len(tau_s)))
     proc = {"tau_s": tuple(tau_s), **{k: tuple(v) for k, v in (extra_process or {}).items()}}

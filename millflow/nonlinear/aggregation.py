@@ -21,6 +21,13 @@ virtual pivot one (last) ratio above it, v_0 = v_1^2 / v_2; what goes to v_0, an
 product coarser than v_0, is **overflow**: mass that left the top of the grid. It is an
 explicit extra component of the state (``overflow_mass`` in every result), never lost
 and never silently put back into class 1; refine or extend the grid upwards if it matters.
+
+References
+----------
+S. Kumar and D. Ramkrishna, On the solution of population balance equations by
+discretization - I. A fixed pivot technique, Chem. Eng. Sci. 51 (1996) 1311-1332;
+M. von Smoluchowski, Versuch einer mathematischen Theorie der Koagulationskinetik
+kolloider Lösungen, Z. phys. Chem. 92 (1917) 129-168.
 """
 from __future__ import annotations
 

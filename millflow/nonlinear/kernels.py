@@ -14,6 +14,21 @@ dN/dt = -beta0/2 at t = 0 under the constant kernel.
 - shear:           beta = beta0 (u^(1/3) + v^(1/3))^3        (orthokinetic, Smoluchowski)
 - user:            beta = f(u, v), vectorised over arrays, checked non-negative, finite
                    and symmetric on the pivots where it is evaluated.
+
+References
+----------
+M. von Smoluchowski, Versuch einer mathematischen Theorie der Koagulationskinetik
+kolloider Lösungen, Z. phys. Chem. 92 (1917) 129-168; A. M. Golovin, The solution of
+the coagulation equation for cloud droplets in a rising air current, Izv. Akad. Nauk
+SSSR, Ser. Geofiz. (1963).
+
+Examples
+--------
+>>> import numpy as np
+>>> k = sum_kernel(2.0)
+>>> k.matrix(np.array([2.0, 1.0]))  # beta0 (u + v) on the pivots [1/s]
+array([[8., 6.],
+       [6., 4.]])
 """
 from __future__ import annotations
 
