@@ -23,7 +23,7 @@ import numpy as np
 
 from millflow.errors import InputError
 
-__all__ = ["read_text", "read_toml", "read_json", "read_csv", "number", "integer", "boolean", "string",
+__all__ = ["read_text", "read_toml", "read_json", "read_csv", "read_matrix", "number", "integer", "boolean", "string",
            "table_of", "check_keys", "UNITS", "quantity", "unit_keys", "suffixes", "unit_column"]
 
 
@@ -68,6 +68,16 @@ def read_json(path, what: str = "JSON file"):
     except json.JSONDecodeError as exc:
         raise InputError(f"{Path(path)}: not valid JSON ({exc.msg} at line {exc.lineno}, "
                          f"column {exc.colno})") from None
+
+
+def read_matrix(path, what: str = "CSV matrix") -> np.ndarray:
+    """A 2-D array of numbers from a CSV file without a header (lines starting with ``#``
+    are comments); encodings as :func:`read_text`, anything else than numbers named."""
+    text = read_text(path, what)
+    try:
+        return np.loadtxt(io.StringIO(text), delimiter=",", ndmin=2, dtype=float)
+    except ValueError as exc:
+        raise InputError(f"{Path(path)}: not a {what} of numbers: {' '.join(str(exc).split())}") from None
 
 
 def read_csv(path, what: str = "CSV file", **kw):

@@ -34,7 +34,7 @@ import numpy as np
 from millflow.breakage import b_from_B, validate_b
 from millflow.errors import InputError
 from millflow.inputs import (boolean, check_keys, integer, number, quantity, read_csv, read_text, string,
-                             table_of, unit_column, unit_keys)
+                             read_matrix, table_of, unit_column, unit_keys)
 from millflow.fitting.data import PSDData, read_psd_table, read_sprite_folder
 from millflow.fitting.models import ModelSpec, auto_grid, default_parameters
 from millflow.grid import SizeGrid
@@ -88,10 +88,10 @@ def read_b_matrix(path, grid: SizeGrid, kind: str = "b") -> np.ndarray:
     if not os.path.isfile(path):
         raise InputError(f"b_matrix_csv {path}: file not found")
     try:
-        M = np.loadtxt(path, delimiter=",", ndmin=2, dtype=float)
-    except ValueError as exc:
-        raise InputError(f"b_matrix_csv {path}: expected N rows of N comma-separated numbers without a header "
-                         f"({exc})") from exc
+        M = read_matrix(path, "b matrix (CSV)")  # encodings and non-numbers named (millflow.inputs)
+    except InputError as exc:
+        raise InputError(f"b_matrix_csv {exc}; expected N rows of N comma-separated numbers without a "
+                         "header") from None
     n = grid.x.size
     if M.shape != (n, n):
         raise InputError(f"b_matrix_csv {path}: shape {M.shape[0]} x {M.shape[1]} does not match the numerical "

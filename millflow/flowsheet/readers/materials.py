@@ -5,13 +5,12 @@ from __future__ import annotations
 
 from pathlib import Path
 
-import numpy as np
-
 from millflow.breakage import AustinRate, NonNormalizedBreakage, NormalizedBreakage, PowerLawRate
 from millflow.breakage.energy import EnergySpecificRate, from_lab
 from millflow.errors import InputError
 from millflow.flowsheet.readers.tables import _named_file, _Table, _wrap
 from millflow.grid import SizeGrid
+from millflow.inputs import read_matrix
 
 
 def _rate(t: _Table):
@@ -79,10 +78,7 @@ def _breakage_table(t: _Table, base: Path | None, grid: SizeGrid | None):
     p = _named_file(name, base)
     if not p.is_file():
         raise InputError(f"{t.where}.file: {p} not found")
-    try:
-        M = np.loadtxt(p, delimiter=",", ndmin=2)
-    except ValueError as exc:
-        raise InputError(f"{p}: not a CSV matrix of numbers ({exc})") from None
+    M = read_matrix(p, "breakage matrix (CSV)")  # encodings and non-numbers named (millflow.inputs)
     if M.shape[0] != M.shape[1]:
         raise InputError(f"{p}: a {M.shape[0]} x {M.shape[1]} matrix; expected square (N x N)")
     if grid is not None and M.shape[0] != grid.n:

@@ -1,7 +1,8 @@
-"""Columns of the user's CSV files carry their unit in the name and are read through
+"""The user's files in one dialect. CSV columns carry their unit in the name and are read through
 millflow.inputs.unit_column: the PSD table of a fit, its tracer table and a flowsheet's
 feed sieve file accept every unit of millflow.inputs.UNITS, and a column without its unit
-or with an unknown one is one error line naming the file and the column."""
+or with an unknown one is one error line naming the file and the column; matrices are read
+through millflow.inputs.read_matrix (encodings and non-numbers named)."""
 import numpy as np
 import pandas as pd
 import pytest
@@ -117,3 +118,18 @@ def test_flowsheet_feed_csv_in_inches_equals_mm(tmp_path):
 def test_flowsheet_feed_csv_size_without_unit(tmp_path):
     with pytest.raises(InputError, match=r"feed\.csv: column 'size': units of measure missing"):
         _feed_sheet(tmp_path, "size,passing_pct", ["8,100", "2,50"])
+
+
+def test_matrix_files_are_read_through_inputs(tmp_path):
+    """A breakage matrix CSV in UTF-16 or with a word in it: one line naming the file."""
+    from millflow.inputs import read_matrix
+
+    p = tmp_path / "b.csv"
+    p.write_text("# b of two classes\n0,0\n1,0\n")
+    np.testing.assert_array_equal(read_matrix(p), [[0.0, 0.0], [1.0, 0.0]])
+    p.write_bytes("0,0\n1,0\n".encode("utf-16"))
+    with pytest.raises(InputError, match=r"b\.csv: the breakage matrix is UTF-16 encoded; save it as UTF-8"):
+        read_matrix(p, "breakage matrix")
+    p.write_text("0,0\n1,x\n")
+    with pytest.raises(InputError, match=r"b\.csv: not a CSV matrix of numbers: could not convert string 'x'"):
+        read_matrix(p)
