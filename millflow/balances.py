@@ -55,8 +55,25 @@ def _share(r: float, name: str, where: str) -> float:
 def dilution(solids_fraction: float) -> float:
     """Dilution W/S [t water / t solids] of a slurry.
 
-    Dilution W/S = (1 - C_w)/C_w [t water / t solids] of a slurry with the solids mass
-    fraction C_w in (0, 1].
+    Parameters
+    ----------
+    solids_fraction : float
+        Solids mass fraction C_w of the slurry [-], in (0, 1].
+
+    Returns
+    -------
+    float
+        W/S = (1 - C_w)/C_w [t water / t solids].
+
+    Raises
+    ------
+    InputError
+        A fraction outside (0, 1] or not a finite number.
+
+    Examples
+    --------
+    >>> round(dilution(0.6), 6)  # 60 % solids by mass
+    0.666667
     """
     c = _number(solids_fraction, "solids_fraction", "dilution")
     if not (0.0 < c <= 1.0):
@@ -67,9 +84,35 @@ def dilution(solids_fraction: float) -> float:
 def two_product(feed: float, product: float, other: float) -> float:
     """Two-product formula: the fraction of the feed that reports to ``product``.
 
-    Fraction P/F = (f - o)/(p - o) of the feed mass that reports to ``product``, from the
-    assays of one component in the feed, that product and the other product (any unit, the
-    same for all three).
+    P/F = (f - o)/(p - o), from the solids balance F = P + O and the balance of one
+    component F f = P p + O o.
+
+    Parameters
+    ----------
+    feed, product, other : float
+        Assays of one component in the feed, that product and the other product (any
+        unit, the same for all three: % metal, % passing a size, dilution W/S).
+
+    Returns
+    -------
+    float
+        P/F [-], in [0, 1].
+
+    Raises
+    ------
+    InputError
+        Products of equal assay, or assays that put P/F outside [0, 1] (the feed must lie
+        between the products).
+
+    References
+    ----------
+    B. A. Wills and J. A. Finch, Wills' Mineral Processing Technology, 8th ed.
+    (Butterworth-Heinemann, 2016), ch. 3.
+
+    Examples
+    --------
+    >>> round(two_product(feed=5.0, product=20.0, other=1.0), 6)  # % metal: 4/19 of the feed to the concentrate
+    0.210526
     """
     where = "two_product"
     f, p, o = (_number(v, n, where) for v, n in ((feed, "feed"), (product, "product"), (other, "other")))
@@ -81,9 +124,31 @@ def two_product(feed: float, product: float, other: float) -> float:
 def circulating_load(feed: float, underflow: float, overflow: float) -> float:
     """Circulating load U/O [-] around a classifier, from assays.
 
-    Circulating load U/O = (o - f)/(f - u) [-] around a classifier from the assays of one
-    component in its feed, underflow and overflow: dilutions W/S (:func:`dilution`) or
-    the fraction passing one sieve size.
+    U/O = (o - f)/(f - u): the two-product formula with the underflow as the product.
+
+    Parameters
+    ----------
+    feed, underflow, overflow : float
+        Assays of one component in the classifier's feed, underflow and overflow:
+        dilutions W/S (:func:`dilution`) or the fraction passing one sieve size.
+
+    Returns
+    -------
+    float
+        Underflow solids over overflow solids [-] (the recycle per unit of new feed when
+        the overflow is the circuit product).
+
+    Raises
+    ------
+    InputError
+        Inconsistent assays, or a feed assay equal to the underflow's.
+
+    Examples
+    --------
+    A cyclone fed at 60 % solids, underflow 75 %, overflow 35 %:
+
+    >>> round(circulating_load(dilution(0.60), dilution(0.75), dilution(0.35)), 4)
+    3.5714
     """
     r = two_product(feed, underflow, overflow)
     if r >= 1.0:
@@ -94,8 +159,29 @@ def circulating_load(feed: float, underflow: float, overflow: float) -> float:
 def three_product(feed, concentrate_1, concentrate_2, tailing) -> tuple[float, float, float]:
     """Three-product formula: the feed's split into two concentrates and a tailing.
 
-    Fractions (C1/F, C2/F, T/F) of the feed in two concentrates and a tailing, from the
-    assays (a, b) of two components in each of the four streams (see the module).
+    Solves the two component balances of the module docstring with F = C1 + C2 + T.
+
+    Parameters
+    ----------
+    feed, concentrate_1, concentrate_2, tailing : tuple of float
+        Assays (a, b) of two components in each stream (any unit, the same for all).
+
+    Returns
+    -------
+    tuple of float
+        (C1/F, C2/F, T/F) [-], each in [0, 1], summing to 1.
+
+    Raises
+    ------
+    InputError
+        Concentrates whose assays are proportional relative to the tailing (they cannot
+        be told apart), or shares outside [0, 1] (inconsistent assays).
+
+    Examples
+    --------
+    >>> c1, c2, t = three_product((3.55, 5.48), (30, 2), (1, 25), (0.5, 0.4))  # % Pb, % Zn
+    >>> round(c1, 9), round(c2, 9), round(t, 9)
+    (0.1, 0.2, 0.7)
     """
     where = "three_product"
     streams = {"feed": feed, "concentrate_1": concentrate_1, "concentrate_2": concentrate_2, "tailing": tailing}

@@ -196,8 +196,40 @@ def batch_grind_population(S, b, feed, t, *, kernel: str | None = None) -> np.nd
 def batch_grind(S, b, feed, t, method: str = "exact", *, rtol: float = 1e-10, atol: float = 1e-14) -> np.ndarray:
     """Mass fractions of a batch grind (eq. 4) at times t; shape (T, N).
 
-    The plain-array entry point; see :func:`batch_solve` for parameters and for
-    the diagnostics (method, error estimate, run time). A scalar t gives T = 1.
+    The plain-array entry point; see :func:`batch_solve` for the diagnostics (method,
+    error estimate, run time) and the methods.
+
+    Parameters
+    ----------
+    S : array_like, (N,)
+        Specific breakage rates [1/s]; S_N = 0 (the sink).
+    b : array_like, (N, N)
+        Fractional breakage distribution [-], strictly lower triangular, columns j < N
+        summing to 1.
+    feed : array_like, (N,)
+        Mass fractions at t = 0 [-].
+    t : float or array_like, (T,)
+        Times [s], >= 0; a scalar gives T = 1.
+    method : str
+        "exact" (the eigenvector recurrence, exact for equal rates too), or an ODE method
+        of :func:`batch_solve`.
+    rtol, atol : float
+        Tolerances of the ODE methods.
+
+    Returns
+    -------
+    numpy.ndarray, (T, N)
+        Mass fractions [-] at each time.
+
+    Raises
+    ------
+    InputError
+        Shapes that do not agree, negative or non-finite times.
+
+    References
+    ----------
+    K. J. Reid, A solution to the batch grinding equation, Chem. Eng. Sci. 20 (1965)
+    953-963 (the analytic solution, whose divisions by S_i - S_j the exact method avoids).
 
     Examples
     --------

@@ -23,8 +23,8 @@ import numpy as np
 
 from millflow.errors import InputError
 
-__all__ = ["read_text", "read_toml", "read_json", "read_csv", "number", "integer", "boolean", "string",
-           "table_of", "check_keys", "UNITS", "quantity", "unit_keys", "suffixes"]
+__all__ = ["read_text", "read_toml", "read_json", "read_csv", "read_matrix", "number", "integer", "boolean", "string",
+           "table_of", "check_keys", "UNITS", "quantity", "unit_keys", "suffixes", "unit_column"]
 
 
 def read_text(path, what: str = "file") -> str:
@@ -68,6 +68,16 @@ def read_json(path, what: str = "JSON file"):
     except json.JSONDecodeError as exc:
         raise InputError(f"{Path(path)}: not valid JSON ({exc.msg} at line {exc.lineno}, "
                          f"column {exc.colno})") from None
+
+
+def read_matrix(path, what: str = "CSV matrix") -> np.ndarray:
+    """A 2-D array of numbers from a CSV file without a header (lines starting with ``#``
+    are comments); encodings as :func:`read_text`, anything else than numbers named."""
+    text = read_text(path, what)
+    try:
+        return np.loadtxt(io.StringIO(text), delimiter=",", ndmin=2, dtype=float)
+    except ValueError as exc:
+        raise InputError(f"{Path(path)}: not a {what} of numbers: {' '.join(str(exc).split())}") from None
 
 
 def read_csv(path, what: str = "CSV file", **kw):
@@ -245,3 +255,32 @@ def quantity(table: dict, base: str, dim: str, where: str, default=..., *, posit
         raise InputError(f"{where + '.' if where else ''}{key} = {_show(v)}: out of range (in SI units it "
                          f"{'overflows' if not np.all(np.isfinite(out)) else 'underflows to 0'})")
     return float(out) if out.ndim == 0 else out
+
+
+def unit_column(columns, stem: str, dim: str, source: str, required: bool = True,
+                extra: dict | None = None) -> tuple[str | None, float | None]:
+    """(column, factor to SI) of the table column named ``<stem>_<unit>`` (``size_um``,
+    ``time_min``): the column-name form of :func:`quantity`, for CSV files.
+
+    Refused, each with one line naming the file and the column: the bare ``stem`` (units
+    of measure missing), an unknown unit (``size_cm``), two spellings at once, and no such
+    column where ``required``. ``extra`` adds unit spellings of this table only (a legacy
+    ``micron``). Without the column and not ``required``: (None, None).
+    """
+    units = {**UNITS[dim], **(extra or {})}
+    cols = [str(c).strip() for c in columns]
+    hits = [c for c in cols if c.startswith(stem + "_") and c[len(stem) + 1:] in units]
+    if stem in cols:
+        raise InputError(f"{source}: column {stem!r}: units of measure missing; name it {stem}_<unit> with one "
+                         f"of {suffixes(dim)} (e.g. {stem}_{next(iter(UNITS[dim]))})")
+    if len(hits) > 1:
+        raise InputError(f"{source}: columns {', '.join(hits)} give {stem!r} twice; keep one")
+    if not hits:
+        wrong = [c for c in cols if c.startswith(stem + "_")]
+        if wrong:
+            raise InputError(f"{source}: column {wrong[0]!r}: unknown unit {wrong[0][len(stem) + 1:]!r} for {stem} "
+                             f"({dim}); expected one of {suffixes(dim)}")
+        if required:
+            raise InputError(f"{source}: no column {stem}_<unit> ({dim}: {suffixes(dim)}); columns are {cols}")
+        return None, None
+    return hits[0], units[hits[0][len(stem) + 1:]]

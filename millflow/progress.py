@@ -37,8 +37,11 @@ def shown(enabled: bool = True) -> bool:
 
 
 def _columns() -> int | None:
-    """None (tqdm reads the terminal's width) unless the terminal says it has no width (a
-    fresh pseudo-terminal): then $COLUMNS, else 100."""
+    """The width for tqdm: None unless the terminal reports none.
+
+    None (tqdm reads the terminal's width) unless the terminal says it has no width (a
+    fresh pseudo-terminal): then $COLUMNS, else 100.
+    """
     try:
         if os.get_terminal_size(sys.stderr.fileno()).columns > 0:
             return None
@@ -51,8 +54,11 @@ def _columns() -> int | None:
 
 
 def note(message: str) -> None:
-    """What the work inside the current stage is doing (shown after the bar; nothing when
-    no display is open or progress is hidden). Library code may call it freely."""
+    """What the work inside the current stage is doing.
+
+    What the work inside the current stage is doing (shown after the bar; nothing when
+    no display is open or progress is hidden). Library code may call it freely.
+    """
     if _OPEN:
         _OPEN[-1].note(message)
 
@@ -129,6 +135,7 @@ class Progress:
             print(f"{self.command}: {self._note}", file=sys.stderr, flush=True)
 
     def close(self) -> None:
+        """Stop the display and leave the terminal clean."""
         self._stop.set()
         if self._thread is not None:
             self._thread.join()
@@ -140,8 +147,11 @@ class Progress:
 
 @contextlib.contextmanager
 def progress(command: str, names=(), *, total: int | None = None, unit: str = "stage", enabled: bool = True):
-    """Open the command's display: ``names`` its stages (or ``total`` items of ``unit``);
-    yields the :class:`Progress` (call it, or its ``stage``, as each stage starts)."""
+    """Open the command's display of stages or items.
+
+    Open the command's display: ``names`` its stages (or ``total`` items of ``unit``);
+    yields the :class:`Progress` (call it, or its ``stage``, as each stage starts).
+    """
     p = Progress(command, names, total=total, unit=unit, enabled=enabled)
     _OPEN.append(p)
     try:

@@ -1,10 +1,13 @@
-"""Synthetic problems with known parameters: batch-grinding data made from a stated truth.
+"""Synthetic problems with known parameters: batch data from a stated truth, a closed circuit.
 
 The synthetic truths the fit is tested and benchmarked against (the ``fit`` and
 ``scaleup`` benchmark suites and the tests of :mod:`millflow.fitting` and
 :mod:`millflow.scaleup` use the same problems). Data are made by the library's own
 forward model (eq. 4 batch grinding with eq. 5 rates and eq. 6 breakage) on a stated
-grid, with seeded Gaussian noise on cumulative passing; nothing is read from files.
+grid, with seeded Gaussian noise on cumulative passing. The closed-circuit ball mill
+(:func:`closed_circuit_case`, :func:`shipped_circuit_case`) is the circuit the flowsheet
+solver is tested on and the ``flowsheet`` and ``sweep`` suites time. Nothing is read
+from files.
 
 >>> model, params, truth = make_batch_problem(n_times=2, n_sieves=6, n_grid=11, noise=0.0)
 >>> model.n_data, sorted(truth) == sorted(params)
@@ -12,10 +15,13 @@ grid, with seeded Gaussian noise on cumulative passing; nothing is read from fil
 """
 from __future__ import annotations
 
+import tomllib
+
 import numpy as np
 import pandas as pd
 
-__all__ = ["TRUTH", "BOUNDS", "make_batch_problem", "synthetic_lab_fit"]
+__all__ = ["TRUTH", "BOUNDS", "make_batch_problem", "synthetic_lab_fit", "CLOSED_CIRCUIT_TOML",
+           "closed_circuit_case", "shipped_circuit_case"]
 
 #: Parameters of the synthetic batch problems (ln_A0 is ln of A [1/s] at x0 = 1 mm).
 TRUTH = {"ln_A0": np.log(1.0 / 60.0), "alpha": 1.0, "phi": 0.4, "gamma": 0.8, "beta": 3.5}
@@ -98,3 +104,106 @@ def synthetic_lab_fit(theta: dict, grid, noise: float, rng, label: str = "synthe
     params = default_parameters(spec, {n: {"value": float(v)} for n, v in theta.items()})
     res = fit(model, params, global_search=False, starts=1, grid_check=False, quiet=True)
     return (res.to_dict() if as_dict else fit_from_dict(res.to_dict(), label)), model
+
+
+#: The closed-circuit ball mill of flowsheets/closed_circuit_ball_mill.toml in its per-time form
+#: (rates per time, tau_min = 3.5: a linear circuit), written out so that nothing is read from
+#: files; grid and cells are set by :func:`closed_circuit_case`.
+CLOSED_CIRCUIT_TOML = """
+title = "Closed-circuit ball mill with hydrocyclones (benchmark)"
+[grid]
+top_um = 8000
+bottom_um = 2
+n = 100
+[materials.ore]
+rate = {form = "power", A_per_min = 0.9, alpha = 1.0, x0_um = 1000}
+breakage = {form = "normalized", phi = 0.55, gamma = 0.8, beta = 3.5}
+[units.fresh_feed]
+type = "feed"
+solids_tph = 250
+[units.fresh_feed.psd]
+form = "sieves"
+size_um = [6700, 4750, 3350, 2360, 1700, 1180, 850, 600, 425, 300, 212, 150, 106, 75, 53]
+passing_pct = [100, 93, 80, 66, 54, 44, 36, 29, 24, 19.5, 16, 13, 10.5, 8.5, 7]
+[units.chute]
+type = "mixer"
+[units.ball_mill]
+type = "mill"
+material = "ore"
+tau_min = 3.5
+transport = {model = "tanks_in_series", n = 10}
+power_kW = 3800
+[units.cyclones]
+type = "hydrocyclone"
+curve = "whiten"
+d50c_um = 140
+alpha = 3.0
+beta = 0.0
+bypass = 0.30
+[units.overflow_product]
+type = "product"
+[streams]
+fresh = {from = "fresh_feed", to = "chute"}
+mill_feed = {from = "chute", to = "ball_mill"}
+mill_discharge = {from = "ball_mill", to = "cyclones"}
+underflow = {from = "cyclones.underflow", to = "chute"}
+overflow = {from = "cyclones.overflow", to = "overflow_product"}
+"""
+
+
+def closed_circuit_case(n: int = 100, cells: int = 10):
+    """The closed-circuit ball mill of :data:`CLOSED_CIRCUIT_TOML` as a flowsheet.
+
+    Parameters
+    ----------
+    n : int
+        Classes of the geometric grid from 8 mm down to 2 um.
+    cells : int
+        Tanks in series of the mill's transport.
+
+    Returns
+    -------
+    millflow.flowsheet.Flowsheet
+        A linear circuit (rates per time, tau = 3.5 min): one sparse solve.
+
+    Examples
+    --------
+    >>> fs = closed_circuit_case(20, cells=3)
+    >>> fs.grid.n, sorted(fs.units)
+    (20, ['ball_mill', 'chute', 'cyclones', 'fresh_feed', 'overflow_product'])
+    """
+    from millflow.flowsheet import from_dict
+
+    data = tomllib.loads(CLOSED_CIRCUIT_TOML)
+    data["grid"] = {"top_um": 8000, "bottom_um": 2, "n": n}
+    data["units"]["ball_mill"]["transport"] = {"model": "tanks_in_series", "n": cells}
+    return from_dict(data, source=f"closed_circuit_ball_mill (N = {n}, {cells} cells)")
+
+
+def shipped_circuit_case(n: int = 100, cells: int = 10):
+    """The shipped example's circuit as the file drives it, on ``n`` classes.
+
+    Rates per energy (S = S^E P / H, Herbst and Fuerstenau), the mill given by its hold-up
+    (tau = H / F): non-linear in the mill's throughput, so the solve tears the circuit on it.
+
+    Parameters
+    ----------
+    n : int
+        Classes of the geometric grid from 8 mm down to 2 um.
+    cells : int
+        Tanks in series of the mill's transport.
+
+    Returns
+    -------
+    millflow.flowsheet.Flowsheet
+    """
+    from millflow.flowsheet import from_dict
+
+    data = tomllib.loads(CLOSED_CIRCUIT_TOML)
+    data["grid"] = {"top_um": 8000, "bottom_um": 2, "n": n}
+    data["materials"]["ore"]["rate"] = {"form": "power", "A_E_t_per_kWh": 0.675, "alpha": 1.0, "x0_um": 1000}
+    mill = data["units"]["ball_mill"]
+    del mill["tau_min"]
+    mill["holdup_t"] = 47.5
+    mill["transport"] = {"model": "tanks_in_series", "n": cells}
+    return from_dict(data, source=f"closed_circuit_ball_mill, energy and hold-up (N = {n}, {cells} cells)")

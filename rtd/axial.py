@@ -317,6 +317,21 @@ class AxialDispersion(RTDModel):
     pe : float
         Peclet number u L / D [-], > 0; accurate for 1e-2 <= pe <= 1e4 (tested).
     bc : {"closed", "open"}
+        Boundary conditions: closed (Danckwerts: no dispersion across the inlet and outlet)
+        or open (the line extends both ways; the flux measured at z = 1).
+
+    References
+    ----------
+    P. V. Danckwerts, Continuous flow systems: distribution of residence times,
+    Chem. Eng. Sci. 2 (1953) 1-13; J. F. Wehner and R. H. Wilhelm, Boundary conditions of
+    flow reactor, Chem. Eng. Sci. 6 (1956) 89-93; O. Levenspiel, Chemical Reaction
+    Engineering, 3rd ed. (Wiley, 1999), ch. 13.
+
+    Examples
+    --------
+    >>> m = AxialDispersion(tau=10.0, pe=8.0)
+    >>> round(float(m.laplace(0.0)), 12), round(m.mean, 9)  # E integrates to 1; the closed vessel's mean is tau
+    (1.0, 10.0)
     """
 
     tau: float

@@ -44,6 +44,23 @@ class PerfectMixing(RTDModel):
 
     E(t) = exp(-t/tau)/tau, F(t) = 1 - exp(-t/tau), E_hat(s) = 1/(1 + s tau);
     mean tau, variance tau^2; pole at s = -1/tau.
+
+    Parameters
+    ----------
+    tau : float
+        Mean residence time [time, any unit; s inside millflow], > 0.
+
+    References
+    ----------
+    O. Levenspiel, Chemical Reaction Engineering, 3rd ed. (Wiley, 1999), ch. 11;
+    P. V. Danckwerts, Continuous flow systems: distribution of residence times,
+    Chem. Eng. Sci. 2 (1953) 1-13.
+
+    Examples
+    --------
+    >>> m = PerfectMixing(tau=5.0)
+    >>> round(float(m.cdf(5.0)), 6)  # 1 - 1/e of a pulse has left after one mean residence time
+    0.632121
     """
 
     tau: float
@@ -106,6 +123,22 @@ class PlugFlow(RTDModel):
 
     ``pdf`` returns 0 everywhere (the delta cannot be sampled); ``cdf`` is the unit
     step at tau. For large Re s the transform underflows cleanly to 0; it is entire.
+
+    Parameters
+    ----------
+    tau : float
+        Delay (mean residence time) [time], > 0.
+
+    References
+    ----------
+    O. Levenspiel, Chemical Reaction Engineering, 3rd ed. (Wiley, 1999), ch. 11;
+    P. V. Danckwerts, Continuous flow systems: distribution of residence times,
+    Chem. Eng. Sci. 2 (1953) 1-13.
+
+    Examples
+    --------
+    >>> PlugFlow(tau=2.0).cdf([1.9, 2.0])
+    array([0., 1.])
     """
 
     tau: float
@@ -167,6 +200,25 @@ class TanksInSeries(RTDModel):
     (regularised lower incomplete gamma),  E_hat(s) = (1 + s tau/n)^(-n);
     mean tau, variance tau^2/n. For non-integer n the transform has a branch point at
     s = -n/tau (principal branch, cut along the real axis to the left of it).
+
+    Parameters
+    ----------
+    tau : float
+        Total mean residence time [time], > 0.
+    n : float
+        Number of tanks [-], >= 1 (real: the gamma form of a fitted tracer curve).
+
+    References
+    ----------
+    O. Levenspiel, Chemical Reaction Engineering, 3rd ed. (Wiley, 1999), ch. 14 (the tanks-in-series model);
+    P. V. Danckwerts, Continuous flow systems: distribution of residence times,
+    Chem. Eng. Sci. 2 (1953) 1-13.
+
+    Examples
+    --------
+    >>> m = TanksInSeries(tau=6.0, n=3)
+    >>> round(float(m.laplace(0.5)), 12), m.variance  # (1 + s tau/n)^-n = 1/8; tau^2/n
+    (0.125, 12.0)
     """
 
     tau: float

@@ -183,23 +183,37 @@ def test_rtd_stands_alone_as_a_distribution():
     assert "rtd*" in root["tool"]["setuptools"]["packages"]["find"]["include"]
 
 
+def _suite_of_test(path: Path) -> str | None:
+    """The bench suite a test file of tests/millflow/bench/ is about, by its name
+    (``test_<suite>_bench.py`` or ``test_bench_<suite>.py``), else None."""
+    if (ROOT / "tests" / "millflow" / "bench") not in path.parents:
+        return None
+    stem = path.stem
+    for pre, post in (("test_", "_bench"), ("test_bench_", "")):
+        if stem.startswith(pre) and stem.endswith(post) and len(stem) > len(pre) + len(post):
+            return stem[len(pre): len(stem) - len(post)]
+    return None
+
+
 def test_tests_take_no_fixtures_from_the_benchmark_suites():
     # the bench suites are tools of the command line; synthetic problems shared with the
-    # tests live in millflow.synthetic. Outside the suites' own tests a test may run a
-    # suite (its entry points) but take nothing else from it.
+    # tests live in millflow.synthetic. A test may run a suite (its entry points) but take
+    # nothing else from it; only the tests of a suite (tests/millflow/bench/test_<suite>_bench.py)
+    # read that suite's own parts.
     entry = {"run", "format_table", "DESCRIPTION"}
     offenders = []
     for path in (ROOT / "tests").rglob("*.py"):
-        if (ROOT / "tests" / "millflow" / "bench") in path.parents:
-            continue
+        own = _suite_of_test(path)
         tree = ast.parse(path.read_text(encoding="utf-8"))
-        suites = set()  # local names bound to a suite module
+        suites = set()  # local names bound to another suite's module
         for node in ast.walk(tree):
             if isinstance(node, ast.Import) and any(a.name.startswith("millflow.bench") for a in node.names):
                 offenders.append(f"{path.relative_to(ROOT)}:{node.lineno}: import of the bench package")
             elif isinstance(node, ast.ImportFrom) and node.module == "millflow.bench":
-                suites |= {a.asname or a.name for a in node.names}
+                suites |= {a.asname or a.name for a in node.names if a.name != own}
             elif isinstance(node, ast.ImportFrom) and (node.module or "").startswith("millflow.bench."):
+                if node.module == f"millflow.bench.{own}":
+                    continue
                 taken = {a.name for a in node.names} - entry
                 if taken:
                     offenders.append(f"{path.relative_to(ROOT)}:{node.lineno}: {sorted(taken)}")
@@ -208,3 +222,11 @@ def test_tests_take_no_fixtures_from_the_benchmark_suites():
                     and node.attr not in entry):
                 offenders.append(f"{path.relative_to(ROOT)}:{node.lineno}: {node.value.id}.{node.attr}")
     assert offenders == []
+
+
+def test_the_rule_above_names_each_suites_tests():
+    bench = ROOT / "tests" / "millflow" / "bench"
+    assert _suite_of_test(bench / "test_flowsheet_bench.py") == "flowsheet"
+    assert _suite_of_test(bench / "test_bench_core.py") == "core"
+    assert _suite_of_test(bench / "test_bench_plot.py") == "plot"  # no such suite: nothing of one is its own
+    assert _suite_of_test(ROOT / "tests" / "millflow" / "flowsheet" / "test_flowsheet_bench.py") is None

@@ -24,83 +24,29 @@ interleaved rounds (median CPU time of the process, single-threaded BLAS):
 
 ``max_abs_error`` is the largest difference between the two [kg/s]. Growth rows solve the
 circuit from N = 100 to 800 in both forms, and the shipped form (energy and hold-up: the
-mill torn on its throughput). Every example flowsheet in flowsheets/ is also solved and
+mill torn on its throughput). Every example flowsheet (flowsheets/ of the repository,
+shipped with the bench as package data: the suite reads no repository) is also solved and
 timed.
 """
 from __future__ import annotations
 
 import statistics
 import time
-import tomllib
-from pathlib import Path
 
 import numpy as np
 
-from millflow.flowsheet import from_dict, solve
+from millflow.flowsheet import solve
 from millflow.flowsheet.results import circulating_loads, mass_balance
+# the suite's circuits are synthetic problems the tests share (millflow.synthetic); kept here by their names
+from millflow.synthetic import CLOSED_CIRCUIT_TOML, closed_circuit_case, shipped_circuit_case
 
 __all__ = ["DESCRIPTION", "run", "format_table", "closed_circuit_case", "shipped_circuit_case", "growth_rows",
-           "growth_exponent", "FLOWSHEET_DIR", "CLOSED_CIRCUIT_TOML"]
+           "growth_exponent", "CLOSED_CIRCUIT_TOML"]
 
 DESCRIPTION = ("flowsheet solve: closed-circuit ball mill N = 100, 10 cells, against prebuilt substitution "
                "(target >= 3x faster); growth to N = 800; examples")
 
-#: Example flowsheets of a source checkout, relative to the working folder (run from the
-#: checkout's root; the installed package never looks beside itself for them).
-FLOWSHEET_DIR = Path("flowsheets")
 TARGET_S = 0.020
-
-
-#: The closed-circuit ball mill of flowsheets/closed_circuit_ball_mill.toml (kept here so the
-#: suite runs from an installed package too); grid and cells are set by closed_circuit_case.
-CLOSED_CIRCUIT_TOML = """
-title = "Closed-circuit ball mill with hydrocyclones (benchmark)"
-[grid]
-top_um = 8000
-bottom_um = 2
-n = 100
-[materials.ore]
-rate = {form = "power", A_per_min = 0.9, alpha = 1.0, x0_um = 1000}
-breakage = {form = "normalized", phi = 0.55, gamma = 0.8, beta = 3.5}
-[units.fresh_feed]
-type = "feed"
-solids_tph = 250
-[units.fresh_feed.psd]
-form = "sieves"
-size_um = [6700, 4750, 3350, 2360, 1700, 1180, 850, 600, 425, 300, 212, 150, 106, 75, 53]
-passing_pct = [100, 93, 80, 66, 54, 44, 36, 29, 24, 19.5, 16, 13, 10.5, 8.5, 7]
-[units.chute]
-type = "mixer"
-[units.ball_mill]
-type = "mill"
-material = "ore"
-tau_min = 3.5
-transport = {model = "tanks_in_series", n = 10}
-power_kW = 3800
-[units.cyclones]
-type = "hydrocyclone"
-curve = "whiten"
-d50c_um = 140
-alpha = 3.0
-beta = 0.0
-bypass = 0.30
-[units.overflow_product]
-type = "product"
-[streams]
-fresh = {from = "fresh_feed", to = "chute"}
-mill_feed = {from = "chute", to = "ball_mill"}
-mill_discharge = {from = "ball_mill", to = "cyclones"}
-underflow = {from = "cyclones.underflow", to = "chute"}
-overflow = {from = "cyclones.overflow", to = "overflow_product"}
-"""
-
-
-def closed_circuit_case(n: int = 100, cells: int = 10):
-    """The benchmark flowsheet: closed-circuit ball mill, N classes, a mill of ``cells`` tanks."""
-    data = tomllib.loads(CLOSED_CIRCUIT_TOML)
-    data["grid"] = {"top_um": 8000, "bottom_um": 2, "n": n}
-    data["units"]["ball_mill"]["transport"] = {"model": "tanks_in_series", "n": cells}
-    return from_dict(data, source=f"closed_circuit_ball_mill (N = {n}, {cells} cells)")
 
 
 def _median_time(fun, repeats: int):
@@ -196,14 +142,15 @@ def run(quick: bool = False) -> list[dict]:
     rows.append({"case": "closed_circuit_N100_cells10", "method": "from the flowsheet: P, c built + substitution",
                  "runtime_s": t["base"], "max_abs_error": err, "ratio_vs_baseline": 1.0})
     rows.extend(growth_rows(quick))
-    from millflow.flowsheet import load
+    from millflow.bench._shipped import shipped_document, shipped_names
+    from millflow.flowsheet import from_dict
 
-    for path in sorted(FLOWSHEET_DIR.glob("*.toml")):  # examples, when run from a checkout's root
-        fsx = load(path)
+    for name in shipped_names():  # the example flowsheets, shipped with the bench (package data)
+        fsx = from_dict(shipped_document(name), source=f"{name}.toml (shipped with millflow.bench)")
         solve(fsx)
         tx, s = _median_time(lambda: solve(fsx), repeats)
         mb = mass_balance(s)
-        rows.append({"case": path.stem, "method": s.solver["structure"], "runtime_s": tx,
+        rows.append({"case": name, "method": s.solver["structure"], "runtime_s": tx,
                      "mass_balance_error": max([mb["overall"], *mb["units"].values()]),
                      "n_unknowns": s.solver["n_unknowns"]})
     return rows
@@ -213,19 +160,6 @@ def run(quick: bool = False) -> list[dict]:
 TARGET_GROWTH = 1.6
 #: Closed circuit N = 100: the solve should be >= 3x faster than substitution (ratio <= 1/3).
 TARGET_RATIO = 1.0 / 3.0
-
-
-def shipped_circuit_case(n: int = 100, cells: int = 10):
-    """The shipped example's circuit as the file drives it (rates per energy, S = S^E P / H, mill
-    given by its hold-up, tau = H / F: torn on its throughput), on N classes, ``cells`` tanks."""
-    data = tomllib.loads(CLOSED_CIRCUIT_TOML)
-    data["grid"] = {"top_um": 8000, "bottom_um": 2, "n": n}
-    data["materials"]["ore"]["rate"] = {"form": "power", "A_E_t_per_kWh": 0.675, "alpha": 1.0, "x0_um": 1000}
-    mill = data["units"]["ball_mill"]
-    del mill["tau_min"]
-    mill["holdup_t"] = 47.5
-    mill["transport"] = {"model": "tanks_in_series", "n": cells}
-    return from_dict(data, source=f"closed_circuit_ball_mill, energy and hold-up (N = {n}, {cells} cells)")
 
 
 def growth_exponent(ns, times) -> float:

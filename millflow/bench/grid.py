@@ -22,9 +22,8 @@ import copy
 import math
 import statistics
 import time
-import tomllib
-from importlib import resources
 
+from millflow.bench._shipped import shipped_document
 from millflow.flowsheet import from_dict, solve
 from millflow.flowsheet.gridcheck import refine_document
 from millflow.flowsheet.results import stream_properties
@@ -43,16 +42,9 @@ RATIOS = {"closed_circuit_aggregating_mill": (2, 4, 8)}
 
 
 def document(name: str) -> dict:
-    """The shipped flowsheet ``name`` (package data of this suite: a copy of the repository's
+    """The shipped flowsheet ``name`` (package data of the bench: a copy of the repository's
     flowsheets/<name>.toml, kept equal by a test), parsed."""
-    try:
-        text = resources.files("millflow.bench").joinpath("data", "flowsheets", f"{name}.toml").read_text("utf-8")
-    except FileNotFoundError:
-        from millflow.errors import InputError
-
-        raise InputError(f"bench grid: circuit {name!r} is not shipped with millflow.bench; expected one of "
-                         f"{', '.join(CIRCUITS)}") from None
-    return tomllib.loads(text)
+    return shipped_document(name)
 
 
 def _with_ratio(doc: dict, m: int, scheme: str) -> dict:

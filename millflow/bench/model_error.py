@@ -18,7 +18,7 @@ S_i = k_i (1 + F)^(-1), F the mass below 1/30 of the top size. Tables:
   tolerances, of the axial-dispersion Newton over the number of volumes (error against
   a grid refined to 1e-11), and the micromixing limits.
 - ``speed``: the non-linear mills against the code at commit 43330ce, kept as a faithful
-  copy in :mod:`millflow.bench.nonlinear_baseline` (full Newton, a fresh Jacobian and LU at
+  copy in :mod:`millflow.bench._nonlinear_baseline` (full Newton, a fresh Jacobian and LU at
   every iteration, the population Jacobian by an N^3 product, axial nodes in a Python loop
   with one LU and one inverse per node): perfect mixer and 10 tanks in series at N = 100,
   axial dispersion Pe 10 on 64 volumes (checked against 32) at N = 40 and N = 100. CPU
@@ -182,7 +182,7 @@ def _interleaved(fns: dict, rounds: int):
 
 def speed(quick: bool) -> list[dict]:
     """The non-linear mills against the 43330ce code (module docstring)."""
-    from millflow.bench import nonlinear_baseline as old
+    from millflow.bench import _nonlinear_baseline as old
     from millflow.mill import nonlinear as nl
 
     rows = []
@@ -202,7 +202,7 @@ def speed(quick: bool) -> list[dict]:
         rows.append({"table": "speed", "case": case, "method": r.method, "n_classes": n, "runtime_s": med["new"],
                      "baseline_s": med["base"], "speedup": med["base"] / med["new"],
                      "ratio_vs_baseline": med["new"] / med["base"],
-                     "baseline": "43330ce algorithms (millflow.bench.nonlinear_baseline), interleaved CPU time",
+                     "baseline": "43330ce algorithms (millflow.bench._nonlinear_baseline), interleaved CPU time",
                      "max_abs_error": float(np.abs(r.product - out["base"].product).max()),
                      "error_estimate": r.error_estimate, "iterations": r.iterations,
                      "factorizations": r.info.get("factorizations"), "mass_balance_error": r.mass_balance_error})

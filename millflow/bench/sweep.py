@@ -34,7 +34,7 @@ TARGET_RATIO = 2.0
 
 
 def _write_case(folder: Path) -> Path:
-    from millflow.bench.flowsheet import CLOSED_CIRCUIT_TOML
+    from millflow.synthetic import CLOSED_CIRCUIT_TOML
 
     text = CLOSED_CIRCUIT_TOML
     lines, skip = [], False

@@ -375,12 +375,29 @@ def evaluate_b(model, grid, *, tol: float = COLUMN_TOL) -> np.ndarray:
 class NormalizedBreakage:
     """Eq. 6 distribution: phi (x_{i-1}/x_j)^gamma + (1 - phi)(x_{i-1}/x_j)^beta.
 
+    Normalized: B depends on sizes only through x_{i-1}/x_j, the same for every breaking
+    class j.
+
     Parameters
     ----------
     phi : float
-        [-] in [0, 1].
+        Weight of the fine branch [-], in [0, 1].
     gamma, beta : float
-        Exponents [-], >= 0.
+        Exponents of the two branches [-], >= 0 (gamma < beta: gamma the fines).
+
+    References
+    ----------
+    L. G. Austin, R. R. Klimpel and P. T. Luckie, Process Engineering of Size Reduction:
+    Ball Milling (SME-AIME, New York, 1984), ch. 4.
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> from millflow.grid import SizeGrid
+    >>> x = SizeGrid.geometric(4e-3, 2.0, 4).x
+    >>> b = NormalizedBreakage(phi=0.5, gamma=0.9, beta=4.0).b(x)
+    >>> np.allclose(b.sum(axis=0), [1, 1, 1, 0])  # every breaking class's fragments sum to 1
+    True
     """
 
     phi: float

@@ -1,14 +1,15 @@
 """Breakage per unit of specific energy (Herbst and Fuerstenau): S_i = S_i^E P / H.
 
 A specific rate measured in one mill, S_i [1/s], depends on how hard that mill works. Herbst
-and Fuerstenau (1980, Int. J. Miner. Process. 7, 1-31) found it proportional to the net power
-drawn per unit mass of charge held: S_i = S_i^E P / H, with P the mill power [W], H the solids
-hold-up [kg] and S_i^E [kg/J] a property of the material alone (the energy-specific rate,
-usually quoted in t/kWh). In a continuous mill of mean residence time tau = H / F (F the
-solids flow through the mill), S_i tau = S_i^E P / F = S_i^E E: the product depends on the
-specific energy E = P / F [J/kg] and the shape of the residence time distribution only, not on
-power, hold-up or feed rate separately. :class:`EnergySpecificRate` carries S^E; a mill turns
-it into a time rate with its own power and hold-up (:func:`time_rates`).
+and Fuerstenau (1980, Int. J. Miner. Process. 7, 1-31, doi:10.1016/0301-7516(80)90034-4) found
+it proportional to the net power drawn per unit mass of charge held: S_i = S_i^E P / H, with P
+the mill power [W], H the solids hold-up [kg] and S_i^E [kg/J] a property of the material
+alone (the energy-specific rate, usually quoted in t/kWh). In a continuous mill of mean
+residence time tau = H / F (F the solids flow through the mill), S_i tau = S_i^E P / F = S_i^E
+E: the product depends on the specific energy E = P / F [J/kg] and the shape of the residence
+time distribution only, not on power, hold-up or feed rate separately.
+:class:`EnergySpecificRate` carries S^E; a mill turns it into a time rate with its own power
+and hold-up (:func:`time_rates`).
 """
 from __future__ import annotations
 

@@ -1,4 +1,6 @@
-"""Falsification studies (Principle I): fit an assumed linear model to synthetic
+"""Falsification studies: how wrong fitted kinetics are when the assumed model misses physics.
+
+Falsification studies (Principle I): fit an assumed linear model to synthetic
 data from a truth with model error, over replicates and strengths, and measure bias,
 coverage, goodness of fit, residual structure and rate drift. See docs/model-error.md.
 

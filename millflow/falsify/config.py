@@ -14,6 +14,7 @@ type = "tanks_in_series" # tanks_in_series | axial_dispersion | recirculating_ce
 # aggregation: strength = beta0 [1/s]; kernel = "constant" (sum, product, shear);
 #   x_ref_um = reference size of the kernel's volumes (default the finest sieve)
 # population: strength = cushioning exponent; fines_um (default the middle sieve)
+# (sizes and times in any unit: x_ref_mm, fines_mm, tau_h, top_size_mm, ...)
 # either, continuous designs: n_tanks = 3 (tanks in series instead of perfect mixing)
 strengths = [1, 2, 3, 5] # or strength = 3; n cells, Pe, n_screen, slowing-down s
 r = 1.0                  # recirculating_cells back-flow ratio
@@ -29,7 +30,7 @@ min = 0.2
 max = 2.5
 
 [design]
-tau_s = [30, 60, 120, 240, 480]     # continuous (or tau_min), or times_s / times_min (batch)
+tau_s = [30, 60, 120, 240, 480]     # continuous (tau_<unit>: _s, _min, _h), or times_<unit> (batch)
 top_size_um = 4000
 n_sieves = 16
 sieve_ratio = 1.4142135623730951
@@ -44,6 +45,12 @@ starts = 3
 popsize = 8
 maxiter = 60
 ```
+
+Keys with a dimension carry their unit in the name and are read through
+:func:`millflow.inputs.quantity` (the reader of every user file): ``tau_<time>``,
+``times_<time>``, ``top_size_<length>``, ``x_ref_<length>``, ``fines_<length>``, with the
+units of :data:`millflow.inputs.UNITS`. A key written without its unit (``tau = [...]``)
+or with an unknown one (``top_size_cm``) is one error line naming the key.
 """
 from __future__ import annotations
 
@@ -52,7 +59,7 @@ import tomllib
 from dataclasses import dataclass
 
 from millflow.errors import InputError
-from millflow.inputs import read_text
+from millflow.inputs import UNITS, quantity, read_text
 from millflow.falsify.design import batch_design, continuous_design
 from millflow.falsify.noise import make_noise
 from millflow.falsify.nonlinear_truths import AggregationTruth, PopulationTruth
@@ -68,11 +75,13 @@ _NUM = (int, float)
 _TOP = {"replicates": int, "seed": int, "workers": int, "drift_replicates": int,
         "truth": dict, "assumed": dict, "design": dict, "noise": dict, "fit": dict}
 _TRUTH = {"type": str, "strength": _NUM, "strengths": list, "r": _NUM, "params": dict, "n_screen": _NUM,
-          "kernel": str, "x_ref_um": _NUM, "fines_um": _NUM, "n_tanks": int}
+          "kernel": str, "n_tanks": int}
 _ASSUMED = {"mode": str, "rate": str, "breakage": str, "classification": str, "n_tanks": int, "transport": str,
             "transport_params": dict, "where": str, "params": dict, "kinetics": (str, list), "kinetics_params": dict}
-_DESIGN = {"tau_s": list, "tau_min": list, "times_s": list, "times_min": list, "top_size_um": _NUM,
-           "n_sieves": int, "sieve_ratio": _NUM, "grid_per_sieve": int}
+_DESIGN = {"n_sieves": int, "sieve_ratio": _NUM, "grid_per_sieve": int}
+#: Keys with a unit in their name: base -> (dimension, a list of values, zero allowed).
+_TRUTH_UNITS = {"x_ref": ("length", False, False), "fines": ("length", False, False)}
+_DESIGN_UNITS = {"tau": ("time", True, False), "times": ("time", True, True), "top_size": ("length", False, False)}
 _NOISE = {"kind": str, "sigma": _NUM, "rho": _NUM}
 _FIT = {"starts": int, "popsize": int, "maxiter": int, "de_tol": _NUM, "global_search": bool}
 
@@ -99,10 +108,27 @@ class StudyConfig:
                      drift_replicates=self.drift_replicates, workers=self.workers, progress=progress)
 
 
-def _check(table: dict, schema: dict, where: str, src: str) -> dict:
+def _check(table: dict, schema: dict, where: str, src: str, units: dict | None = None) -> tuple[dict, dict]:
+    """(table, quantities): plain keys checked against ``schema`` (name -> type), keys with a
+    unit (``units``: base -> (dimension, list, zero allowed)) read in SI through
+    :func:`millflow.inputs.quantity` (base -> value, None when absent); any other key is
+    refused in one line naming it."""
+    used: set = set()
+    values = {}
+    for base, (dim, many, zero) in (units or {}).items():
+        v = quantity(table, base, dim, f"{src}: {where[:-1]}", None, allow_zero=zero, array=many, used=used)
+        if v is not None and many:
+            key = next(k for k in used if k.startswith(base + "_") and k[len(base) + 1:] in UNITS[dim])
+            if not isinstance(table[key], list) or not table[key]:
+                raise InputError(f"{src}: {where}{key} = {table[key]!r}: expected a non-empty list of numbers")
+            v = [float(e) for e in v]
+        values[base] = v
     for key, val in table.items():
+        if key in used:
+            continue
         if key not in schema:
-            raise InputError(f"{src}: unknown key {where}{key}; expected one of {sorted(schema)}")
+            known = sorted(schema) + [f"{b}_<unit>" for b in (units or {})]
+            raise InputError(f"{src}: unknown key {where}{key}; expected one of {known}")
         typ = schema[key]
         ok = isinstance(val, typ) and not (isinstance(val, bool) and typ is not bool)
         if not ok:
@@ -110,7 +136,7 @@ def _check(table: dict, schema: dict, where: str, src: str) -> dict:
             raise InputError(f"{src}: {where}{key} = {val!r}: expected {want}")
         if isinstance(val, float) and not math.isfinite(val):
             raise InputError(f"{src}: {where}{key} = {val!r}: expected a finite number")
-    return table
+    return table, values
 
 
 def _numbers(vals, key: str, src: str) -> list:
@@ -132,11 +158,11 @@ def parse_config(raw: dict, src: str = "<config>") -> StudyConfig:
     for key in ("truth", "assumed", "design", "noise"):
         if key not in raw:
             raise InputError(f"{src}: missing table [{key}]")
-    tr = _check(raw["truth"], _TRUTH, "truth.", src)
-    asm = _check(raw["assumed"], _ASSUMED, "assumed.", src)
-    des = _check(raw["design"], _DESIGN, "design.", src)
-    noi = _check(raw["noise"], _NOISE, "noise.", src)
-    fopt = _check(raw.get("fit", {}), _FIT, "fit.", src)
+    tr, tru = _check(raw["truth"], _TRUTH, "truth.", src, _TRUTH_UNITS)
+    asm, _ = _check(raw["assumed"], _ASSUMED, "assumed.", src)
+    des, desu = _check(raw["design"], _DESIGN, "design.", src, _DESIGN_UNITS)
+    noi, _ = _check(raw["noise"], _NOISE, "noise.", src)
+    fopt, _ = _check(raw.get("fit", {}), _FIT, "fit.", src)
     for key in ("replicates", "workers", "drift_replicates"):
         if key in raw and raw[key] < (2 if key == "replicates" else 0 if key == "drift_replicates" else 1):
             raise InputError(f"{src}: {key} = {raw[key]!r}: expected an integer >= "
@@ -149,26 +175,22 @@ def parse_config(raw: dict, src: str = "<config>") -> StudyConfig:
             raise InputError(f"{src}: fit.{key} = {fopt[key]!r}: expected an integer >= 1")
 
     # design
-    times = [k for k in ("times_s", "times_min") if k in des]
-    taus = [k for k in ("tau_s", "tau_min") if k in des]
-    if len(times) + len(taus) != 1:
-        raise InputError(f"{src}: [design] needs exactly one of times_s, times_min (batch) or tau_s, tau_min "
-                         f"(continuous); got {times + taus}")
-    kw = {"top_m": float(des.get("top_size_um", 4000.0)) * 1e-6, "n_sieves": des.get("n_sieves", 16),
+    times, taus = desu["times"], desu["tau"]
+    if (times is None) == (taus is None):
+        raise InputError(f"{src}: [design] needs exactly one of times_<unit> (batch: times_s, times_min, ...) or "
+                         f"tau_<unit> (continuous: tau_s, tau_min, ...); got "
+                         f"{sorted(k for k in des if k.startswith(('times_', 'tau_')))}")
+    top = desu["top_size"]
+    kw = {"top_m": 4000e-6 if top is None else top, "n_sieves": des.get("n_sieves", 16),
           "sieve_ratio": float(des.get("sieve_ratio", 2 ** 0.5)), "grid_per_sieve": des.get("grid_per_sieve", 2)}
-    if kw["top_m"] <= 0:
-        raise InputError(f"{src}: design.top_size_um = {des['top_size_um']!r}: expected a number > 0")
     ttype = tr.get("type")
     if ttype not in TRUTH_TYPES:
         raise InputError(f"{src}: truth.type = {ttype!r}: expected one of {list(TRUTH_TYPES)}")
-    if times:
-        vals = _numbers(des[times[0]], f"design.{times[0]}", src)
-        design = batch_design([v * (60.0 if times[0] == "times_min" else 1.0) for v in vals], **kw)
+    if times is not None:
+        design = batch_design(times, **kw)
     else:
-        vals = _numbers(des[taus[0]], f"design.{taus[0]}", src)
-        extra = {"screen_mm": [1.0] * len(vals)} if ttype == "classification" else None
-        design = continuous_design([v * (60.0 if taus[0] == "tau_min" else 1.0) for v in vals],
-                                   extra_process=extra, **kw)
+        extra = {"screen_mm": [1.0] * len(taus)} if ttype == "classification" else None
+        design = continuous_design(taus, extra_process=extra, **kw)
 
     # assumed model
     akw = {k: v for k, v in asm.items() if k not in ("params", "kinetics", "kinetics_params")}
@@ -180,9 +202,10 @@ def parse_config(raw: dict, src: str = "<config>") -> StudyConfig:
     if not design.is_batch and akw.get("mode", "batch") in ("well_mixed", "plug_flow", "mill"):
         akw["tau_column"] = "tau_s"
     if akw.get("mode", "batch") == "batch" and not design.is_batch:
-        raise InputError(f"{src}: assumed.mode = 'batch' needs design.times_s or times_min")
+        raise InputError(f"{src}: assumed.mode = 'batch' needs design.times_<unit> (times_s, times_min, times_h)")
     if design.is_batch and akw.get("mode", "batch") != "batch":
-        raise InputError(f"{src}: assumed.mode = {akw['mode']!r} needs design.tau_s or tau_min (a continuous design)")
+        raise InputError(f"{src}: assumed.mode = {akw['mode']!r} needs design.tau_s (or tau_min, tau_h: a "
+                         "continuous design)")
     if akw.get("classification") in ("screen", "screen_power") and "screen_mm" not in dict(design.process):
         raise InputError(f"{src}: assumed.classification needs truth.type = 'classification' (which adds a "
                          "screen_mm column to the design)")
@@ -211,21 +234,23 @@ def parse_config(raw: dict, src: str = "<config>") -> StudyConfig:
     if "n_screen" in tr and ttype not in ("tanks_in_series", "recirculating_cells", "axial_dispersion"):
         raise InputError(f"{src}: truth.n_screen (classification inside an RTD mill) is only for RTD truths")
     if ttype in ("tanks_in_series", "axial_dispersion", "recirculating_cells", "classification") and design.is_batch:
-        raise InputError(f"{src}: truth.type = {ttype!r} needs a continuous design (design.tau_s or tau_min)")
+        raise InputError(f"{src}: truth.type = {ttype!r} needs a continuous design (design.tau_<unit>: tau_s, "
+                         "tau_min, tau_h)")
     if ttype == "slowing_down" and not design.is_batch:
-        raise InputError(f"{src}: truth.type = 'slowing_down' needs a batch design (design.times_s or times_min)")
+        raise InputError(f"{src}: truth.type = 'slowing_down' needs a batch design (design.times_<unit>: "
+                         "times_s, times_min, times_h)")
     if "n_tanks" in tr and (ttype not in ("aggregation", "population") or design.is_batch):
         raise InputError(f"{src}: truth.n_tanks is only for truth.type = 'aggregation' or 'population' with a "
                          "continuous design")
-    for key, only in (("kernel", "aggregation"), ("x_ref_um", "aggregation"), ("fines_um", "population")):
-        if key in tr and ttype != only:
-            raise InputError(f"{src}: truth.{key} is only for truth.type = {only!r}")
-        if key.endswith("_um") and key in tr and tr[key] <= 0:
-            raise InputError(f"{src}: truth.{key} = {tr[key]!r}: expected a size > 0 [um]")
+    for key, only in (("kernel", "aggregation"), ("x_ref", "aggregation"), ("fines", "population")):
+        given = tr.get(key) if key == "kernel" else tru[key]
+        if given is not None and ttype != only:
+            name = key if key == "kernel" else next(k for k in tr if k.startswith(key + "_"))
+            raise InputError(f"{src}: truth.{name} is only for truth.type = {only!r}")
     if "n_screen" in tr:
         screens = {"screen_mm": [1.0] * len(design.conditions)}
         design = continuous_design(list(dict(design.process)["tau_s"]), extra_process=screens, **kw)
-    truth = _truth_factory(ttype, tparams, tr, assumed, src)
+    truth = _truth_factory(ttype, tparams, tr, tru, assumed, src)
     for s in strengths:  # build once here, so that bad strengths fail before any fit
         truth(s)
 
@@ -236,7 +261,8 @@ def parse_config(raw: dict, src: str = "<config>") -> StudyConfig:
                        raw.get("seed", 0), raw.get("workers", 1), raw.get("drift_replicates", 10), fopt, src)
 
 
-def _truth_factory(ttype, tparams, tr, assumed, src):
+def _truth_factory(ttype, tparams, tr, sizes, assumed, src):
+    """strength -> truth of ``truth.type``; ``sizes`` holds x_ref and fines in m (or None)."""
     if ttype in ("tanks_in_series", "axial_dispersion", "recirculating_cells"):
         n_screen = tr.get("n_screen")
         return lambda s: rtd_truth(ttype, s, tparams, r=float(tr.get("r", 1.0)),
@@ -248,10 +274,10 @@ def _truth_factory(ttype, tparams, tr, assumed, src):
         return lambda s: SlowingDownTruth(s, tparams)
     if ttype == "aggregation":
         kernel = tr.get("kernel", "constant")
-        x_ref = float(tr["x_ref_um"]) * 1e-6 if "x_ref_um" in tr else None
+        x_ref = sizes["x_ref"]
         return lambda s: AggregationTruth(s, tparams, kernel=kernel, x_ref_m=x_ref, n_tanks=tr.get("n_tanks", 1))
     if ttype == "population":
-        fines = float(tr["fines_um"]) * 1e-6 if "fines_um" in tr else None
+        fines = sizes["fines"]
         return lambda s: PopulationTruth(s, tparams, fines_m=fines, n_tanks=tr.get("n_tanks", 1))
     missing = [n for n in assumed.param_names if n not in tparams]
     if missing:

@@ -75,12 +75,16 @@ class Design:
 
     @property
     def is_batch(self) -> bool:
+        """True for a batch design (sampled at times), False for a continuous one."""
         return len(self.times_s) > 0
 
     def data(self, passing=None, keys=None) -> PSDData:
-        """The design as a PSD data set; ``passing`` (one value per sample row, in the order of
+        """The design as a PSD data set, filled with the given passing values.
+
+        The design as a PSD data set; ``passing`` (one value per sample row, in the order of
         ``keys`` = [(condition, location, time_s), ...] times the sieves) fills the samples
-        (None: a placeholder curve, for compiling models)."""
+        (None: a placeholder curve, for compiling models).
+        """
         s = np.asarray(self.sieves_m)
         rows = [pd.DataFrame({"condition": "*", "location": "feed", "time_s": 0.0, "size_m": s,
                               "passing": np.asarray(self.feed_passing)})]
@@ -101,8 +105,11 @@ class Design:
         return [(c, loc, 0.0) for c in sorted(self.conditions) for loc in sorted(self.locations)]
 
     def passing_at_sieves(self, mass) -> np.ndarray:
-        """Cumulative passing at the sieves of mass fractions on the grid, (..., N) -> (..., n_sieves),
-        interpolated linearly in size as the fitting models do (P = 0 at 0, 1 above the grid)."""
+        """Cumulative passing at the sieves of mass fractions on the grid.
+
+        (..., N) -> (..., n_sieves), interpolated linearly in size as the fitting models do (P = 0 at
+        0, 1 above the grid).
+        """
         mass = np.asarray(mass, float)
         P = np.cumsum(mass[..., ::-1], axis=-1)[..., ::-1]  # passing the upper edge x_i
         xc = np.concatenate([[0.0], self.grid.x[::-1]])
@@ -111,6 +118,7 @@ class Design:
         return out.reshape(P.shape[:-1] + (len(self.sieves_m),))
 
     def process_dict(self) -> dict:
+        """The process columns as arrays, column -> values per condition."""
         return {k: np.asarray(v) for k, v in self.process}
 
 
@@ -120,15 +128,75 @@ def _sieves(top_m: float, n: int, ratio: float) -> np.ndarray:
 
 def batch_design(times_s, *, top_m: float = 4e-3, n_sieves: int = 16, sieve_ratio: float = 2 ** 0.5,
                  grid_per_sieve: int = 2, conditions=("c1",)) -> Design:
-    """A batch design: feed all in the top sieve interval, root-2 sieves, grid ``grid_per_sieve``
-    classes per sieve interval (sieves are grid edges), sampled at ``times_s``."""
+    """A batch design: feed in the top sieve interval, root-2 sieves, sampled at ``times_s`` [s].
+
+    Parameters
+    ----------
+    times_s : sequence of float
+        Sampling times [s].
+    top_m : float
+        Top sieve size [m]; the feed is all in the interval below it.
+    n_sieves : int
+        Number of sieves, >= 3.
+    sieve_ratio : float
+        Ratio of neighbouring sieves, > 1 (root 2 by default).
+    grid_per_sieve : int
+        Grid classes per sieve interval, >= 1 (the sieves are grid edges; one more sieve
+        interval below the finest sieve, so the sink is not a measured class).
+    conditions : sequence of str
+        Names of the batch tests (each sampled at every time).
+
+    Returns
+    -------
+    Design
+
+    Raises
+    ------
+    InputError
+        A sieve count, ratio or grid density out of range.
+
+    Examples
+    --------
+    >>> d = batch_design([60, 240], n_sieves=8)
+    >>> d.is_batch, d.times_s, len(d.sieves_m), d.grid.n
+    (True, (60.0, 240.0), 8, 17)
+    """
     return _design(top_m, n_sieves, sieve_ratio, grid_per_sieve, conditions=tuple(conditions), times_s=tuple(times_s))
 
 
 def continuous_design(tau_s, *, top_m: float = 4e-3, n_sieves: int = 16, sieve_ratio: float = 2 ** 0.5,
                       grid_per_sieve: int = 2, extra_process: dict | None = None) -> Design:
-    """A continuous-mill design: one condition per mean residence time ``tau_s`` (column
-    ``tau_s``), product sampled; feed all in the top sieve interval."""
+    """A continuous-mill design: one condition per mean residence time ``tau_s`` [s].
+
+    The product of each condition is sampled; the process column ``tau_s`` holds the mean
+    residence times.
+
+    Parameters
+    ----------
+    tau_s : sequence of float
+        Mean residence times [s], one condition each (named tau1, tau2, ...).
+    top_m : float
+        Top sieve size [m]; the feed is all in the interval below it.
+    n_sieves : int
+        Number of sieves, >= 3.
+    sieve_ratio : float
+        Ratio of neighbouring sieves, > 1 (root 2 by default).
+    grid_per_sieve : int
+        Grid classes per sieve interval, >= 1 (the sieves are grid edges; one more sieve
+        interval below the finest sieve, so the sink is not a measured class).
+    extra_process : dict or None
+        More process columns, name -> one value per condition (e.g. ``screen_mm``).
+
+    Returns
+    -------
+    Design
+
+    Examples
+    --------
+    >>> d = continuous_design([30, 120], n_sieves=8)
+    >>> d.conditions, d.process_dict()["tau_s"].tolist()
+    (('tau1', 'tau2'), [30.0, 120.0])
+    """
     names = tuple(f"tau{k + 1}" for k in range(len(tau_s)))
     proc = {"tau_s": tuple(tau_s), **{k: tuple(v) for k, v in (extra_process or {}).items()}}
     return _design(top_m, n_sieves, sieve_ratio, grid_per_sieve, conditions=names, process=proc)

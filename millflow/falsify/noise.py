@@ -23,6 +23,8 @@ __all__ = ["GaussianNoise", "AR1Noise", "make_noise"]
 
 @dataclass(frozen=True)
 class GaussianNoise:
+    """Independent Gaussian noise of standard deviation ``sigma`` [-] on cumulative passing."""
+
     sigma: float = 0.01
 
     def __post_init__(self):
@@ -30,11 +32,14 @@ class GaussianNoise:
             raise InputError(f"noise.sigma = {self.sigma!r}: expected a finite number > 0")
 
     def sample(self, rng, n_samples: int, n_sieves: int) -> np.ndarray:
+        """Noise (n_samples, n_sieves) drawn from ``rng``."""
         return self.sigma * rng.standard_normal((n_samples, n_sieves))
 
 
 @dataclass(frozen=True)
 class AR1Noise:
+    """AR(1) noise along the sieves of a sample: marginal SD ``sigma`` [-], lag-1 correlation ``rho``."""
+
     sigma: float = 0.01
     rho: float = 0.5
 
@@ -45,6 +50,7 @@ class AR1Noise:
             raise InputError(f"noise.rho = {self.rho!r}: expected a number in (-1, 1)")
 
     def sample(self, rng, n_samples: int, n_sieves: int) -> np.ndarray:
+        """Noise (n_samples, n_sieves) drawn from ``rng``, correlated along each row."""
         u = rng.standard_normal((n_samples, n_sieves))
         e = np.empty_like(u)
         e[:, 0] = u[:, 0]
@@ -55,6 +61,7 @@ class AR1Noise:
 
 
 def make_noise(kind: str, sigma: float, rho: float | None = None):
+    """The noise model of a config's ``[noise]`` table: kind "gaussian" or "ar1" (with ``rho``)."""
     if kind == "gaussian":
         if rho is not None:
             raise InputError("noise.rho is only for kind = 'ar1'")

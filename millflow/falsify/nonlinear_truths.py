@@ -1,4 +1,6 @@
-"""Non-linear truths of a falsification study (millflow.nonlinear): aggregation and
+"""Non-linear truths of a falsification study: aggregation and population-dependent rates.
+
+Non-linear truths of a falsification study (millflow.nonlinear): aggregation and
 population-dependent breakage rates, on top of the first-order core of eqs. 5-6 at the
 truth's breakage parameters.
 
@@ -82,11 +84,15 @@ class AggregationTruth:
 
     @property
     def kinetic_truth(self) -> dict:
-        """The fit's parameter of this truth (``beta0`` of :mod:`millflow.fitting.kinetics`;
-        meaningful when the fit uses the same kernel and x_ref)."""
+        """The fit's parameter of this truth (``beta0``).
+
+        The fit's parameter of this truth (``beta0`` of :mod:`millflow.fitting.kinetics`;
+        meaningful when the fit uses the same kernel and x_ref).
+        """
         return {"beta0": self.strength}
 
     def mass_fractions(self, design) -> np.ndarray:
+        """Mass fractions on the design's grid per sample, with aggregation."""
         S, b, feed = SlowingDownTruth(0.0, self.params).linear_parts(design)
         x_ref = self.x_ref_m or float(design.sieves_m[-1])
         kin = kinetics(S[0], b, aggregation=Aggregation(KERNELS[self.kernel](self.strength), x_ref), grid=design.grid)
@@ -112,11 +118,11 @@ class PopulationTruth:
 
     @property
     def kinetic_truth(self) -> dict:
-        """The fit's parameter of this truth (``lam_pop`` = -strength, with w = 1 and the same
-        fines size)."""
+        """The fit's parameter of this truth (``lam_pop`` = -strength, with w = 1 and the same fines size)."""
         return {"lam_pop": -self.strength}
 
     def mass_fractions(self, design) -> np.ndarray:
+        """Mass fractions on the design's grid per sample, with fines cushioning."""
         S, b, feed = SlowingDownTruth(0.0, self.params).linear_parts(design)
         sieves = np.asarray(design.sieves_m)
         fines = self.fines_m or float(sieves[len(sieves) // 2])

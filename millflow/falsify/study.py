@@ -1,4 +1,6 @@
-"""The falsification study (Principle I): how wrong are fitted kinetics when the
+"""The falsification study: fit an assumed model to data from a truth with model error.
+
+The falsification study (Principle I): how wrong are fitted kinetics when the
 assumed model leaves out physics that the truth has?
 
 For every strength of the model error a truth is built, its noiseless measurements are
@@ -55,8 +57,11 @@ BOUNDS = {"ln_A0": (-9.0, 0.0), "alpha": (0.2, 2.5), "phi": (0.0, 1.0), "gamma":
 
 
 def study_parameters(spec: ModelSpec, truth_params: dict, overrides: dict | None = None) -> dict:
-    """Parameters of the assumed model: :data:`BOUNDS` (else the fitting defaults), start at the
-    truth's value where it has one, updated by ``overrides`` (name -> value/min/max/vary)."""
+    """Parameters of the assumed model, started at the truth's values.
+
+    Parameters of the assumed model: :data:`BOUNDS` (else the fitting defaults), start at the
+    truth's value where it has one, updated by ``overrides`` (name -> value/min/max/vary).
+    """
     base = default_parameters(spec)
     overrides = dict(overrides or {})
     out = {}
@@ -100,14 +105,18 @@ def lag1(r, slices) -> float:
 
 @dataclass
 class StudyResult:
-    """Outcome of :func:`study`: ``dataset`` (dims strength x parameter, and strength x
-    replicate x parameter for the raw estimates) and :meth:`summary`."""
+    """Outcome of :func:`study`: a Dataset of estimates and their summary.
+
+    Outcome of :func:`study`: ``dataset`` (dims strength x parameter, and strength x
+    replicate x parameter for the raw estimates) and :meth:`summary`.
+    """
 
     dataset: xr.Dataset
     runtime_s: float
     settings: dict = field(default_factory=dict)
 
     def summary(self) -> dict:
+        """Bias, coverage, fit statistics and drift per strength, as plain numbers (JSON-able)."""
         ds = self.dataset
         rows = []
         for k, s in enumerate(ds.strength.values):
@@ -124,6 +133,7 @@ class StudyResult:
                 "fit_options": ds.attrs["fit_options"], "runtime_s": self.runtime_s, "strengths": rows}
 
     def text(self) -> str:
+        """The summary as lines of text."""
         s = self.summary()
         lines = [f"truth {s['truth']}, assumed {s['assumed']}, {s['replicates']} replicates, noise {s['noise']}, "
                  f"{s['runtime_s']:.1f} s"]
@@ -183,7 +193,7 @@ def _fit_one(task):
 
 
 def _drift(model, params, fit_opts, seed, split):
-    """ln A0 fitted on the long half minus the short half, and its SE."""
+    """The fitted ln A0 of the long half minus that of the short half, and its SE."""
     est = []
     for part in split:
         sub = model.data.subset(part) if part and isinstance(part[0], str) else None

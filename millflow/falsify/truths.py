@@ -46,11 +46,15 @@ BREAKAGE_TRUTH = {"ln_A0": math.log(1.0 / 60.0), "alpha": 1.0, "phi": 0.4, "gamm
 
 @runtime_checkable
 class Truth(Protocol):
+    """What a truth provides: ``name``, ``strength``, ``params`` and the data it makes."""
+
     name: str
     strength: float
     params: dict
 
-    def mass_fractions(self, design) -> np.ndarray: ...
+    def mass_fractions(self, design) -> np.ndarray:
+        """Mass fractions on the design's grid, one row per sample."""
+        ...
 
 
 def _theta(spec: ModelSpec, params: dict) -> np.ndarray:
@@ -70,6 +74,7 @@ class LinearTruth:
     strength: float = 0.0
 
     def mass_fractions(self, design) -> np.ndarray:
+        """Mass fractions on the design's grid per sample, from the assumed model's own forward model."""
         model = ForwardModel(self.spec, design.data(), design.grid)
         M = model.predict_grid(_theta(self.spec, self.params))[0]
         if not np.isfinite(M).all():
@@ -79,10 +84,13 @@ class LinearTruth:
 
 def rtd_truth(transport: str, strength: float, params: dict | None = None, *, r: float = 1.0,
               classification: str | None = None, n_screen: float | None = None) -> LinearTruth:
-    """A linear mill with a real RTD: ``tanks_in_series`` (strength = n), ``axial_dispersion``
+    """A linear mill with a real RTD (tanks in series, axial dispersion or recirculating cells).
+
+    A linear mill with a real RTD: ``tanks_in_series`` (strength = n), ``axial_dispersion``
     (strength = Pe), ``recirculating_cells`` (strength = n, with back-flow ratio ``r``);
     tau from the design's ``tau_s`` column. Optional classification ``screen_power`` with
-    exponent ``n_screen`` at every cell outlet (cell transports) or along the axis."""
+    exponent ``n_screen`` at every cell outlet (cell transports) or along the axis.
+    """
     key = {"tanks_in_series": "n", "recirculating_cells": "n", "axial_dispersion": "pe"}.get(transport)
     if key is None:
         raise InputError(f"truth.type = {transport!r}: expected tanks_in_series, axial_dispersion or "
@@ -105,9 +113,12 @@ def rtd_truth(transport: str, strength: float, params: dict | None = None, *, r:
 
 
 def classification_truth(strength: float, params: dict | None = None) -> LinearTruth:
-    """A perfectly mixed mill with internal classification d_i* = (x_i/x0)^-n_screen
+    """A perfectly mixed mill with internal classification of strength ``n_screen``.
+
+    A perfectly mixed mill with internal classification d_i* = (x_i/x0)^-n_screen
     (``screen_power`` with a single screen: the design needs a ``screen_mm`` column),
-    strength = n_screen (0: no classification)."""
+    strength = n_screen (0: no classification).
+    """
     spec = ModelSpec(mode="well_mixed", tau_column="tau_s", classification="screen_power")
     p = {**BREAKAGE_TRUTH, **(params or {}), "n_screen": float(strength)}
     return LinearTruth(spec, p, name="classification", strength=float(strength))
@@ -136,8 +147,11 @@ class SlowingDownTruth:
 
     @property
     def kinetic_truth(self) -> dict:
-        """The fit's parameter of this truth (``s_slow``; the default hyperbolic kappa and
-        t_ref = the last sampling time, as the fit's defaults; none for a user kappa or t_ref)."""
+        """The fit's parameter of this truth (``s_slow``).
+
+        The fit's parameter of this truth (``s_slow``; the default hyperbolic kappa and
+        t_ref = the last sampling time, as the fit's defaults; none for a user kappa or t_ref).
+        """
         return {} if self.kappa is not None or self.t_ref_s is not None else {"s_slow": self.strength}
 
     def theta(self, t, t_ref: float) -> np.ndarray:
@@ -159,6 +173,7 @@ class SlowingDownTruth:
         return S, b, feed
 
     def mass_fractions(self, design) -> np.ndarray:
+        """Mass fractions on the design's grid per sample, with slowing-down in time."""
         if not design.is_batch:
             raise InputError("truth slowing_down needs a batch design (design.times_s)")
         t = np.asarray(design.times_s)
@@ -187,6 +202,7 @@ class CallableTruth:
     strength: float = 0.0
 
     def mass_fractions(self, design) -> np.ndarray:
+        """Mass fractions on the design's grid per sample, from the user's callable."""
         if not design.is_batch:
             raise InputError(f"truth {self.name!r}: a callable truth needs a batch design (design.times_s)")
         t = np.asarray(design.times_s)

@@ -34,7 +34,7 @@ import numpy as np
 from millflow.breakage import b_from_B, validate_b
 from millflow.errors import InputError
 from millflow.inputs import (boolean, check_keys, integer, number, quantity, read_csv, read_text, string,
-                             table_of, unit_keys)
+                             read_matrix, table_of, unit_column, unit_keys)
 from millflow.fitting.data import PSDData, read_psd_table, read_sprite_folder
 from millflow.fitting.models import ModelSpec, auto_grid, default_parameters
 from millflow.grid import SizeGrid
@@ -88,10 +88,10 @@ def read_b_matrix(path, grid: SizeGrid, kind: str = "b") -> np.ndarray:
     if not os.path.isfile(path):
         raise InputError(f"b_matrix_csv {path}: file not found")
     try:
-        M = np.loadtxt(path, delimiter=",", ndmin=2, dtype=float)
-    except ValueError as exc:
-        raise InputError(f"b_matrix_csv {path}: expected N rows of N comma-separated numbers without a header "
-                         f"({exc})") from exc
+        M = read_matrix(path, "b matrix (CSV)")  # encodings and non-numbers named (millflow.inputs)
+    except InputError as exc:
+        raise InputError(f"b_matrix_csv {exc}; expected N rows of N comma-separated numbers without a "
+                         "header") from None
     n = grid.x.size
     if M.shape != (n, n):
         raise InputError(f"b_matrix_csv {path}: shape {M.shape[0]} x {M.shape[1]} does not match the numerical "
@@ -294,8 +294,9 @@ def load_config(path, data_dir: str | None = None) -> FitConfig:
 
 
 def read_tracer_table(path):
-    """Tracer F(t) table (CSV): columns ``condition``, ``time_s`` or ``time_min``, ``F``
-    (fraction of a pulse that has left by t, 0..1, or a step response)."""
+    """Tracer F(t) table (CSV): columns ``condition``, ``time_<unit>`` (``time_s``, ``time_min``,
+    ``time_h``: :func:`millflow.inputs.unit_column`), ``F`` (fraction of a pulse that has left
+    by t, 0..1, or a step response)."""
     import pandas as pd
     if not os.path.isfile(path):
         raise InputError(f"{path}: tracer table not found")
@@ -303,11 +304,13 @@ def read_tracer_table(path):
         t = read_csv(path, "tracer table")
     except (ValueError, pd.errors.ParserError) as exc:
         raise InputError(f"{path}: cannot read the tracer table as CSV ({exc})") from exc
-    if "time_min" in t.columns and "time_s" not in t.columns:
-        t = t.assign(time_s=pd.to_numeric(t.time_min, errors="coerce") * 60.0)
-    missing = [c for c in ("condition", "time_s", "F") if c not in t.columns]
+    t.columns = [str(c).strip() for c in t.columns]
+    tcol, factor = unit_column(t.columns, "time", "time", str(path))  # time_s, time_min, time_h
+    missing = [c for c in ("condition", "F") if c not in t.columns]
     if missing:
-        raise InputError(f"{path}: columns {missing} missing; expected condition, time_s (or time_min), F")
+        raise InputError(f"{path}: columns {missing} missing; expected condition, time_<unit> (time_s, time_min, "
+                         "time_h), F")
+    t = t.assign(time_s=pd.to_numeric(t[tcol], errors="coerce") * factor) if tcol != "time_s" else t
     for col in ("time_s", "F"):
         v = pd.to_numeric(t[col], errors="coerce")
         if v.isna().any():

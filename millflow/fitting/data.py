@@ -5,7 +5,7 @@ A PSD data set is a *long table* (one row per measured value) with columns
 - ``condition``: the name of an operating condition (a batch test, a steady state);
 - ``location``: ``feed``, ``product``, ``holdup`` (mill content) or any sample point;
 - ``time_<unit>`` (optional, batch tests): sampling time, unit ``s``, ``min`` or ``h``;
-- ``size_<unit>``: sieve size, unit ``m``, ``mm`` or ``um``;
+- ``size_<unit>``: sieve size, unit ``m``, ``mm``, ``um`` (or ``in``, ``ft``);
 - ``passing`` (cumulative mass fraction passing the size) or ``retained`` (mass
   fraction retained on that sieve, i.e. between this size and the next coarser one);
 - ``weight`` (optional): a weight per value, e.g. 1/variance of the measurement.
@@ -13,8 +13,10 @@ A PSD data set is a *long table* (one row per measured value) with columns
 Feed rows with condition ``*`` apply to every condition that has no feed of its own.
 A second table gives the process parameters: column ``condition`` and one numeric
 column per parameter (``speed_m_s``, ``moisture``, ``screen_mm``...; any positive
-number). Everything is converted to SI on reading (sizes in m, times in s), and every
-error names the file, the column and the row.
+number). Everything is converted to SI on reading (sizes in m, times in s) by the units
+of :data:`millflow.inputs.UNITS` (:func:`millflow.inputs.unit_column`): a ``size`` or
+``time`` column without its unit, or with an unknown one, is refused. Every error names
+the file, the column and the row.
 """
 from __future__ import annotations
 
@@ -26,12 +28,12 @@ import numpy as np
 import pandas as pd
 
 from millflow.errors import InputError
-from millflow.inputs import read_csv
+from millflow.inputs import read_csv, unit_column
 
 __all__ = ["PSDData", "read_psd_table", "read_process_table", "read_sprite_folder", "psd_data_from_frames"]
 
-_SIZE_UNITS = {"m": 1.0, "mm": 1e-3, "um": 1e-6, "micron": 1e-6}
-_TIME_UNITS = {"s": 1.0, "min": 60.0, "h": 3600.0}
+#: A size unit this table took before it read columns through millflow.inputs (size_micron).
+_LEGACY_SIZE = {"micron": 1e-6}
 _TOL = 1e-6  # cumulative passing may rise by rounding this much between sieves
 
 
@@ -94,21 +96,6 @@ class PSDData:
 #: Rounding allowed above 1 in a sample's sum of retained fractions (six-digit tables).
 RETAINED_TOL = 1e-6
 
-def _unit_column(df: pd.DataFrame, stem: str, units: dict, source: str, required: bool):
-    pat = re.compile(rf"^{stem}_({'|'.join(units)})$")
-    hits = [c for c in df.columns if pat.match(str(c))]
-    if not hits:
-        if required:
-            raise InputError(
-                f"{source}: no column '{stem}_<unit>' (unit one of {', '.join(units)}); columns are {list(df.columns)}"
-            )
-        return None, None
-    if len(hits) > 1:
-        raise InputError(f"{source}: several {stem} columns {hits}; expected exactly one")
-    col = hits[0]
-    return col, units[pat.match(col).group(1)]
-
-
 def _numeric(df: pd.DataFrame, col: str, source: str) -> np.ndarray:
     vals = pd.to_numeric(df[col], errors="coerce").to_numpy(dtype=float)
     bad = np.flatnonzero(~np.isfinite(vals))
@@ -131,8 +118,8 @@ def psd_data_from_frames(psd: pd.DataFrame, process: pd.DataFrame | None = None,
             raise InputError(f"{source}: missing column {col!r}; columns are {list(df.columns)}")
     if df.empty:
         raise InputError(f"{source}: the PSD table has no rows")
-    scol, sfac = _unit_column(df, "size", _SIZE_UNITS, source, True)
-    tcol, tfac = _unit_column(df, "time", _TIME_UNITS, source, False)
+    scol, sfac = unit_column(df.columns, "size", "length", source, extra=_LEGACY_SIZE)
+    tcol, tfac = unit_column(df.columns, "time", "time", source, required=False)
     size = _numeric(df, scol, source) * sfac
     if np.any(size < 0):
         k = int(np.flatnonzero(size < 0)[0])

@@ -65,17 +65,21 @@ class FitResult:
 
     @property
     def ser(self) -> float:
+        """Standard error of regression, sqrt(SSR / (n - p))."""
         return self.stats["ser"]
 
     @property
     def theta(self) -> np.ndarray:
+        """The estimate as a vector in the order of ``model.param_names``."""
         return np.array([self.params[n].value for n in self.model.param_names])
 
     @property
     def criteria(self) -> dict:
+        """Information criteria (AIC, AICc, BIC) of the fit."""
         return information_criteria(self.ssr, self.n_data, self.n_params)
 
     def predicted(self) -> np.ndarray:
+        """Predicted values at the estimate, in the order of the data."""
         return self.model.predict(self.theta)
 
     def rmse_by_condition(self, model: ForwardModel | None = None) -> dict:
@@ -85,6 +89,7 @@ class FitResult:
         return {c: float(np.sqrt(np.mean(r[m.condition_of_value == c] ** 2))) for c in m.conditions}
 
     def to_dict(self) -> dict:
+        """The fit as the JSON-able dict ``millflow fit --json`` prints."""
         out = {"model": self.model.spec.label(), "params": {}, "fixed": {}}
         for name, par in self.params.items():
             if name in self.stats["params"]:
@@ -122,6 +127,7 @@ class FitResult:
         return out
 
     def summary(self) -> str:
+        """The fit as a table of text: statistics and one row per parameter."""
         lines = [f"model: {self.model.spec.label()}",
                  f"n_data {self.n_data}, n_params {self.n_params}, SSR {self.ssr:.6g}, SER {self.ser:.4g}, "
                  f"starts {self.starts}, spread {self.spread:.3g}, "
@@ -415,7 +421,9 @@ def fit(model: ForwardModel, params: dict | None = None, *, global_search: bool 
 
 
 def error_estimate(model: ForwardModel, gc: dict) -> dict:
-    """The fit's error split by source: ``solver`` (relative error of the predicted values from
+    """The fit's error split by source: solver and size grid.
+
+    The fit's error split by source: ``solver`` (relative error of the predicted values from
     the forward solves) and ``grid`` (how far the parameters are from those of the continuous
     model, in SE: from the re-fit on the grid refined 2x in ln x, Richardson's estimate at the
     scheme's order p, times the safety factor of :func:`millflow.grid.richardson`):
@@ -498,8 +506,11 @@ def _variance_components(prob: _Problem, z) -> dict | None:
 
 
 def _grid_check(model, params, theta, zb, sb, st, row_factor=1.0) -> dict:
-    """Principle IV: SSR on ``grid.refine(2)`` at the estimate, and after a local re-fit
-    there, with the largest parameter change in units of its SEP."""
+    """Principle IV: the SSR and the estimate on the grid refined twice.
+
+    Principle IV: SSR on ``grid.refine(2)`` at the estimate, and after a local re-fit
+    there, with the largest parameter change in units of its SEP.
+    """
     try:
         fine = model.with_grid(model.grid.refine(2))
     except InputError as exc:
@@ -521,12 +532,15 @@ def _grid_check(model, params, theta, zb, sb, st, row_factor=1.0) -> dict:
 
 
 def _profile_intervals(prob: _Problem, zb, sb: float, st: dict, n_data: int) -> None:
-    """95 % profile-likelihood intervals for the parameters whose symmetric interval
+    """95 % profile-likelihood intervals for parameters at or across a bound.
+
+    95 % profile-likelihood intervals for the parameters whose symmetric interval
     crosses a bound or that sit at one: {v : min over the others of SSR(v) <= SSR_best
     (1 + D^2 F_{1,n-p,0.95} / (n - p))}, D the parameter's SE inflation for correlated
     residuals (1 under eq. 9), found by bisection to 1e-3 of the range and clipped to
     the bounds; asymmetric where the likelihood is. Stored as ``ci95`` (the symmetric one
-    stays as ``ci95_wald``) with a flag saying so."""
+    stays as ``ci95_wald``) with a flag saying so.
+    """
     from scipy import stats as _stats
 
     p = len(prob.names)

@@ -80,7 +80,9 @@ __all__ = ["ForwardModel", "auto_grid"]
 
 
 def auto_grid(data: PSDData, ratio: float = 2 ** 0.25, conditions=None) -> SizeGrid:
-    """Geometric grid from the coarsest feed or sample size down to half the finest positive
+    """A geometric grid spanning the data's sieve sizes.
+
+    Geometric grid from the coarsest feed or sample size down to half the finest positive
     sieve (the finest edge then at or below it).
 
     Its top is the coarsest measured size itself, so that a geometric sieve series whose
@@ -150,8 +152,11 @@ class ForwardModel:
                                      "product samples, and with well-mixed cells to holdup and cell:K samples")
 
     def solver_accuracy(self) -> tuple[float, str]:
-        """(relative error bound of the predicted values, how): what the forward solves add
-        to the predictions, beside the grid (:meth:`grid_order`)."""
+        """Relative error bound of the predicted values from the forward solves, and how.
+
+        (relative error bound of the predicted values, how): what the forward solves add
+        to the predictions, beside the grid (:meth:`grid_order`).
+        """
         if self._nonlinear is not None and self.fd_noise > float(np.finfo(float).eps):
             return self.fd_noise, "non-linear kinetics: stiff ODE / Newton solves at their relative tolerance"
         if self.spec.mode == "mill" and self._chain_cells() is None and not (
@@ -161,8 +166,11 @@ class ForwardModel:
                                                      "eigenbasis of eq. 4): rounding, ~N eps")
 
     def grid_order(self) -> tuple[int | None, str]:
-        """(order p of the size discretisation in the class width, how); None for a b matrix
-        given on this grid (the discrete model itself: no grid error of its own)."""
+        """Order of the size discretisation in the class width, and how.
+
+        (order p of the size discretisation in the class width, how); None for a b matrix
+        given on this grid (the discrete model itself: no grid error of its own).
+        """
         if self.spec.breakage == "fixed":
             return None, "b given on the numerical grid: the discrete model itself, no grid error of its own"
         if self.grid.scheme == "upper_edge":
@@ -171,13 +179,16 @@ class ForwardModel:
 
     # ----------------------------------------------------------------- compilation
     def _build_tracer(self):
-        """Tracer rows (mode "mill"): measured F(t), the fraction of a pulse that has
+        """Tracer rows (mode "mill"): measured F(t) joined to the PSD rows.
+
+        Tracer rows (mode "mill"): measured F(t), the fraction of a pulse that has
         left by time t (or a step response), columns ``condition``, ``time_s``, ``F``.
         They join the PSD rows in one objective; ``kind_weights`` (data kind -> weight,
         default 1: F and cumulative passing are both fractions of order one with
         comparable measurement noise) scales each kind's rows. Kinds: the PSD location
         kinds ``product``, ``holdup``, ``cell``, ``z`` (and ``mill`` for batch) and
-        ``tracer``."""
+        ``tracer``.
+        """
         kinds = np.array([self._kind(self.groups[g][1]) for g in range(len(self.groups))
                           for _ in range(self.group_slices[g + 1] - self.group_slices[g])], dtype=object)
         unknown = set(self.kind_weights) - set(kinds) - {"tracer"}
@@ -214,8 +225,11 @@ class ForwardModel:
         return loc.split(":")[0] if ":" in loc else loc
 
     def transport_values(self, p):
-        """Per member and condition: tau [s] (P, C) and the fitted transport parameters
-        (name -> (P,)) of mode "mill" (:meth:`Translator.transport_values`)."""
+        """Tau [s] per member and condition and the fitted transport parameters.
+
+        Per member and condition: tau [s] (P, C) and the fitted transport parameters
+        (name -> (P,)) of mode "mill" (:meth:`Translator.transport_values`).
+        """
         col = self._proc[self.spec.tau_column] if self.spec.tau_column else None
         return self.translator.transport_values(p, col, len(self.conditions))
 
@@ -311,9 +325,12 @@ class ForwardModel:
         self.times = np.array(sorted({t for _, _, t in groups}))
 
     def sample_ids(self) -> np.ndarray:
-        """For each measured value (in the order of ``y``), the sample it belongs to: one sieve
+        """For each measured value, the sample (sieve curve or tracer curve) it belongs to.
+
+        For each measured value (in the order of ``y``), the sample it belongs to: one sieve
         curve (condition, location, time) or one tracer curve. Residuals are correlated
-        within a sample, not between samples (the clusters of the robust covariance)."""
+        within a sample, not between samples (the clusters of the robust covariance).
+        """
         ids = np.repeat(np.arange(len(self.groups)), np.diff(self.group_slices))
         blocks = [ids]
         for k, (_, times) in enumerate(getattr(self, "_tracer", [])):
@@ -351,18 +368,24 @@ class ForwardModel:
         return out
 
     def _measured_sizes(self) -> list:
-        """[finest, coarsest] sieve size of the measured samples (not the feed) [m]: the
-        size range a prediction with this model is calibrated on."""
+        """The finest and coarsest measured sieve size [m].
+
+        [finest, coarsest] sieve size of the measured samples (not the feed) [m]: the
+        size range a prediction with this model is calibrated on.
+        """
         t = self.data.table
         sizes = t.loc[t.location != "feed", "size_m"].to_numpy(float)
         sizes = sizes[sizes > 0]
         return [float(sizes.min()), float(sizes.max())] if sizes.size else []
 
     def _grinding_times(self) -> list:
-        """[shortest, longest] grinding time of the fitted data [s]: the batch sample times
+        """The shortest and longest grinding time of the fitted data [s].
+
+        [shortest, longest] grinding time of the fitted data [s]: the batch sample times
         (> 0), or the conditions' mean residence times of a continuous mill (tau column);
         [] when unknown (tau = 1 without a column). With the lab mill's power per hold-up it
-        gives the specific-energy range the fit is calibrated on (scale-up warns outside it)."""
+        gives the specific-energy range the fit is calibrated on (scale-up warns outside it).
+        """
         if self.spec.mode == "batch":
             t = [g[2] for g in self.groups if g[2] > 0]
         elif self.spec.tau_column:
@@ -372,8 +395,11 @@ class ForwardModel:
         return [float(min(t)), float(max(t))] if t else []
 
     def describe(self) -> dict:
-        """The spec, grid and eq. 10 reference values as plain JSON-able data (for the fit
-        JSON: what another program needs to evaluate S and B of this model elsewhere)."""
+        """The spec, grid and eq. 10 reference values as plain JSON-able data.
+
+        The spec, grid and eq. 10 reference values as plain JSON-able data (for the fit
+        JSON: what another program needs to evaluate S and B of this model elsewhere).
+        """
         s = self.spec
         proc = self.data.process
         return {"mode": s.mode, "rate": s.rate, "breakage": s.breakage, "classification": s.classification,
@@ -392,10 +418,12 @@ class ForwardModel:
     # ------------------------------------------------------------------- evaluation
     @property
     def param_names(self):
+        """Names of the parameters, in the order of the vector theta."""
         return self.spec.param_names
 
     @property
     def n_data(self) -> int:
+        """Number of measured values fitted."""
         return int(self.y.size)
 
     def _unpack(self, theta):
@@ -406,9 +434,12 @@ class ForwardModel:
         return self.translator.condition_values(p, name, self._proc, len(self.conditions))
 
     def breakage(self, p):
-        """(S (P, C, N) [1/s] (or tau*S if no tau column), b (P, N, N) or (P, C, N, N) [-]) of the
+        """S and b of the members on this model's grid (eqs. 5-8 with eq. 10).
+
+        (S (P, C, N) [1/s] (or tau*S if no tau column), b (P, N, N) or (P, C, N, N) [-]) of the
         members on this model's grid: class averages of eqs. 5-8 with eq. 10 (the grid's
-        ``scheme`` "upper_edge": Austin's edge values), by :class:`Translator`."""
+        ``scheme`` "upper_edge": Austin's edge values), by :class:`Translator`.
+        """
         S, b = self.translator.breakage_on_grid(p, self._proc, len(self.conditions), self.grid)
         return S, (b[:, 0] if b.shape[1] == 1 else b)
 
@@ -421,8 +452,11 @@ class ForwardModel:
         return self.breakage(p)[1]
 
     def discharge(self, p, n_pop=None):
-        """Normalised discharge d* (P, C, N), ones without classification (class averages of the
-        curves of :mod:`millflow.classifiers`, by :meth:`Translator.discharge`)."""
+        """Normalised discharge d* (P, C, N) of the classification.
+
+        Normalised discharge d* (P, C, N), ones without classification (class averages of the
+        curves of :mod:`millflow.classifiers`, by :meth:`Translator.discharge`).
+        """
         return self.translator.discharge(p, self._proc, len(self.conditions), self.grid)
 
     def predict_grid(self, theta):
@@ -479,9 +513,12 @@ class ForwardModel:
         return out
 
     def _predict_nonlinear(self, S, b, p, tau, out):
-        """Non-linear kinetics (:mod:`millflow.fitting.kinetics`), member by member and
+        """Predictions with non-linear kinetics, member by member and condition by condition.
+
+        Non-linear kinetics (:mod:`millflow.fitting.kinetics`), member by member and
         condition by condition: batch (eq. 4 + R(M)), plug flow, well-mixed tanks
-        (n_tanks), or mode "mill" with a transport of :data:`_NONLINEAR_TRANSPORTS`."""
+        (n_tanks), or mode "mill" with a transport of :data:`_NONLINEAR_TRANSPORTS`.
+        """
         spec, nl = self.spec, self._nonlinear
         mode = spec.mode
         tau_pc = None
@@ -534,8 +571,11 @@ class ForwardModel:
                 out[k, gsel] = nl.solve_steady(S[k, c], bk, self._feeds[c], tc, p, k, **kw)
 
     def _chain_cells(self):
-        """Number of equal well-mixed cells in a row for transports that are such a chain
-        (perfect mixing, tanks in series with integer n), else None."""
+        """Number of equal well-mixed cells in a row, or None.
+
+        Number of equal well-mixed cells in a row for transports that are such a chain
+        (perfect mixing, tanks in series with integer n), else None.
+        """
         spec = self.spec
         if spec.transport == "perfect_mixing":
             return 1
@@ -545,13 +585,16 @@ class ForwardModel:
         return None
 
     def _predict_chain(self, S, b, d, tau, out, sep):
-        """Mode "mill" for a chain of equal well-mixed cells, vectorised over the population
+        """Mode "mill" for a chain of equal well-mixed cells, vectorised.
+
+        Mode "mill" for a chain of equal well-mixed cells, vectorised over the population
         and the conditions: eq. 3 per cell (tau/n each) by
         :func:`millflow.mill.well_mixed.well_mixed_population`, classification at the
         discharge (the last cell's outflow) or at every cell outlet (``where="cells"``).
         Cell content per unit feed rate is tau_k p_k / d (classified outlet) or tau_k p_k.
         ``b`` None: eqs. 6/8 on a geometric grid, by the O(N) recurrences of ``sep``
-        (:func:`millflow.mill.well_mixed.well_mixed_population_separable`)."""
+        (:func:`millflow.mill.well_mixed.well_mixed_population_separable`).
+        """
         n = self._chain_cells()
         ones = np.ones_like(S)
         stream = np.broadcast_to(self._feeds, S.shape)
@@ -576,12 +619,15 @@ class ForwardModel:
             out[:, g] = m / m.sum(axis=1, keepdims=True)
 
     def _predict_plug(self, S, b, d, tau, out):
-        """Mode "mill" with plug flow (product and z:Y samples), vectorised over the
+        """Mode "mill" with plug flow, vectorised over the population.
+
+        Mode "mill" with plug flow (product and z:Y samples), vectorised over the
         population: eq. 4 in the contact time, classification along the axis (class i
         travels at d_i* u, so its rate per unit length is S_i/d_i*), by
         :func:`millflow.batch.batch_grind_population` on the dimensionless rates
         tau S/d* at the positions Y (1 = the discharge). The content at Y is
-        tau M(Y)/d* per unit length (normalised)."""
+        tau M(Y)/d* per unit length (normalised).
+        """
         rates = S * tau[:, :, None] if d is None else S * tau[:, :, None] / d
         for c in range(len(self.conditions)):
             gsel = [g for g, grp in enumerate(self.groups) if grp[0] == c]
@@ -593,10 +639,13 @@ class ForwardModel:
                     out[:, g] = m / m.sum(axis=1, keepdims=True)
 
     def _predict_network(self, S, b, d, tau, extra, out):
-        """Mode "mill" for recirculating cells, vectorised over the population and the
+        """Mode "mill" for recirculating cells, vectorised over the population and the conditions.
+
+        Mode "mill" for recirculating cells, vectorised over the population and the
         conditions (:func:`millflow.mill.cells.solve_cells_population`: a batched n x n
         solve per class); one network per member and condition when transport
-        parameters are fitted. Members outside rtd's domain (e.g. r < 0) give NaN."""
+        parameters are fitted. Members outside rtd's domain (e.g. r < 0) give NaN.
+        """
         from millflow.mill.cells import network_of, solve_cells_population
         n_pop, C = S.shape[:2]
         nets = np.empty((n_pop, C), dtype=object)
@@ -670,13 +719,17 @@ class ForwardModel:
                         out[k, g] = ds["product"].values if loc == "product" else vals[r]
 
     def _cum_at_rows(self, theta):
-        """Cumulative passing of the grid solution read at every measured row
-        (:class:`~millflow.fitting.sieves.SieveReduction`); (P, rows)."""
+        """Cumulative passing of the grid solution at every measured row.
+
+        Cumulative passing of the grid solution read at every measured row
+        (:class:`~millflow.fitting.sieves.SieveReduction`); (P, rows).
+        """
         M = self.predict_grid(theta)
         P = np.cumsum(M[..., ::-1], axis=-1)[..., ::-1]
         return self._reduction.reduce(P)
 
     def predict(self, theta):
+        """Predicted values (n_data,) for theta, or (P, n_data) for P vectors."""
         theta = np.asarray(theta, dtype=float)
         single = theta.ndim == 1
         Y = self._cum_at_rows(theta)
@@ -707,12 +760,14 @@ class ForwardModel:
         return self._cum_at_rows(np.atleast_2d(theta))[0]
 
     def with_grid(self, grid: SizeGrid) -> "ForwardModel":
+        """The same model on another size grid (the grid check)."""
         spec = self.spec
         if spec.breakage == "fixed":
             raise InputError("a fixed b matrix belongs to one grid; give it on the refined grid to refine")
         return ForwardModel(spec, self.data, grid, self.conditions, tracer=self.tracer, kind_weights=self.kind_weights)
 
     def for_conditions(self, conditions) -> "ForwardModel":
+        """The same model on a subset of the conditions (validation)."""
         return ForwardModel(self.spec, self.data, self.grid, conditions, tracer=self.tracer,
                             kind_weights=self.kind_weights)
 
@@ -722,8 +777,11 @@ class ForwardModel:
 
 
 def _column_factor(col: str, key: str, dim: str, target: float) -> float:
-    """Factor from the unit in a process column's name (``tau_min``, ``screen_um``) to the
-    model's unit ``target`` (in SI: 1 s, 1e-3 m); a name without a known unit is refused."""
+    """Factor from the unit in a process column's name to the model's unit.
+
+    Factor from the unit in a process column's name (``tau_min``, ``screen_um``) to the
+    model's unit ``target`` (in SI: 1 s, 1e-3 m); a name without a known unit is refused.
+    """
     from millflow.inputs import UNITS
 
     suffix = col.rsplit("_", 1)[-1] if "_" in col else ""

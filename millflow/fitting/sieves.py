@@ -143,9 +143,11 @@ def _interior(s_left, s_right, h_left, h_right):
 
 
 def _end(s, s_next, h, h_next, has_next):
-    """Steffen's one-sided slope at an end node: the parabola through the end interval and
-    its neighbour, limited to [0, 2 s] with the sign of s (the secant alone if the grid
-    has only that interval)."""
+    """Steffen's one-sided slope at an end node.
+
+    The parabola through the end interval and its neighbour, limited to [0, 2 s] with the
+    sign of s (the secant alone if the grid has only that interval).
+    """
     w = h / np.where(has_next, h + h_next, 1.0)
     p = np.where(has_next, s * (1 + w) - s_next * w, s)
     p = np.where(p * s <= 0, 0.0, p)

@@ -33,8 +33,11 @@ MODES = ("batch", "plug_flow", "well_mixed", "mill")
 FORWARD_TOL = 1e-5
 
 def _transports() -> dict:
-    """name -> (rtd class name, required, optional): a view of rtd's one table
-    (:mod:`rtd.names`); a fixed keyword such as the axial vessel's ``bc`` may be overridden."""
+    """Transport name -> (rtd class name, required, optional), from :mod:`rtd.names`.
+
+    name -> (rtd class name, required, optional): a view of rtd's one table
+    (:mod:`rtd.names`); a fixed keyword such as the axial vessel's ``bc`` may be overridden.
+    """
     from rtd import names
 
     return {name: (e.cls.__name__, e.required, e.optional + tuple(k for k, _ in e.fixed))
@@ -50,9 +53,12 @@ _AXIAL_TRANSPORTS = ("plug_flow", "axial_dispersion")
 
 
 def canonical_location(loc) -> str:
-    """One spelling of a sampling location: ``cell:K`` (content of cell K, 1-based) and
+    """One spelling of a sampling location (``cell:K``, ``z:Y``).
+
+    One spelling of a sampling location: ``cell:K`` (content of cell K, 1-based) and
     ``z:Y`` (fractional axial position), as :func:`millflow.steady_mill` reads them;
-    the fit's earlier spelling ``cell_K`` is accepted as an alias."""
+    the fit's earlier spelling ``cell_K`` is accepted as an alias.
+    """
     loc = str(loc)
     if loc.startswith("cell_") and loc[5:].isdigit():
         return "cell:" + loc[5:]
@@ -225,8 +231,11 @@ class ModelSpec:
             raise InputError("model.where is given but there is no classification")
 
     def make_transport(self, tau: float, **fitted):
-        """The rtd transport model of mode "mill" with mean residence time ``tau`` [s]
-        (``fitted``: values of fitted transport parameters, e.g. pe=8.0, r=1.0)."""
+        """The rtd transport model of mode "mill" with mean residence time ``tau`` [s].
+
+        The rtd transport model of mode "mill" with mean residence time ``tau`` [s]
+        (``fitted``: values of fitted transport parameters, e.g. pe=8.0, r=1.0).
+        """
         import rtd
         from rtd import names as rtd_names
         entry = rtd_names.TRANSPORTS[self.transport]
@@ -238,10 +247,12 @@ class ModelSpec:
 
     @property
     def base_names(self) -> tuple:
+        """Parameters of the rate, breakage and classification forms, before eq. 10."""
         return (RATE_FORMS[self.rate] + BREAKAGE_FORMS[self.breakage] + CLASSIFICATIONS[self.classification])
 
     @property
     def param_names(self) -> tuple:
+        """Names of the fitted parameters, in the order of the vector theta."""
         names = list(RATE_FORMS[self.rate][:1])
         for name in [f"a_{p}" for p in self.rate_process] + list(self.base_names[1:]):
             names.append(name)
@@ -252,6 +263,7 @@ class ModelSpec:
         return tuple(names)
 
     def label(self) -> str:
+        """A short label of the model (mode, forms, transport)."""
         parts = [self.mode, f"rate={self.rate}", f"B={self.breakage}"]
         if self.mode == "mill":
             parts.insert(1, f"transport={self.transport}" + "".join(f",{k}={v}" for k, v in self.transport_params
@@ -269,9 +281,12 @@ class ModelSpec:
 
 
 def default_parameters(spec: ModelSpec, overrides: dict | None = None, where: str = "params") -> dict:
-    """Parameters of a spec with default values and bounds, updated by ``overrides``
+    """Parameters of a spec with default values and bounds, updated by ``overrides``.
+
+    Parameters of a spec with default values and bounds, updated by ``overrides``
     (name -> table with any of value, min, max (numbers), vary (true/false)). A varied
-    parameter needs min < max and its value inside; a fixed one may have min = max."""
+    parameter needs min < max and its value inside; a fixed one may have min = max.
+    """
     from millflow.inputs import boolean, check_keys, number
 
     overrides = dict(overrides or {})

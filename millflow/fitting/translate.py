@@ -96,7 +96,7 @@ class Translator:
 
     # ------------------------------------------------------------------ decoding
     def unpack(self, theta) -> dict:
-        """name -> (P,) values of parameter vector(s) theta, (n_params,) or (P, n_params)."""
+        """Name -> (P,) values of parameter vector(s) theta, (n_params,) or (P, n_params)."""
         t = np.atleast_2d(np.asarray(theta, dtype=float))
         if t.shape[-1] != len(self.names):
             raise ValueError(f"parameter vectors of length {t.shape[-1]}; expected {len(self.names)} "
@@ -104,8 +104,11 @@ class Translator:
         return {name: t[:, k] for k, name in enumerate(self.names)}
 
     def physical(self, theta) -> np.ndarray:
-        """Mask (P,) of parameter vectors inside the physical domain of the rate and breakage
-        forms: gamma > 0; eq. 6: 0 <= phi <= 1, beta > 0; eq. 7: Lambda > 0."""
+        """Mask (P,) of parameter vectors inside the physical domain of the forms.
+
+        Mask (P,) of parameter vectors inside the physical domain of the rate and breakage
+        forms: gamma > 0; eq. 6: 0 <= phi <= 1, beta > 0; eq. 7: Lambda > 0.
+        """
         p = self.unpack(theta)
         ok = p["gamma"] > 0 if "gamma" in p else np.ones(next(iter(p.values())).shape, bool)
         if self.breakage in ("normalized", "non_normalized"):
@@ -128,7 +131,7 @@ class Translator:
         return v
 
     def ln_A(self, p: dict, process: dict, n: int, A_factor: float = 1.0) -> np.ndarray:
-        """ln A per member and condition (P, n) by eq. 10, plus ln of a scale-up factor."""
+        """The ln A per member and condition (P, n) by eq. 10, plus ln of a scale-up factor."""
         cols = self.rate_process
         ln0 = p["ln_A0"][:, None] + math.log(A_factor)
         lnA = ln_process_power_law(ln0, {c: process[c] for c in cols},
@@ -200,8 +203,11 @@ class Translator:
 
     def separable_on_grid(self, p: dict, process: dict, n: int, grid, ratio: float, A_factor: float = 1.0,
                           mu_factor: float = 1.0):
-        """(S, w1, c1, w2, c2) for :func:`millflow.mill.well_mixed.well_mixed_population_separable`
-        on a geometric grid of ``ratio`` (eqs. 6/8; not for breakage ``fixed``)."""
+        """The separable form of S and b on a geometric grid.
+
+        (S, w1, c1, w2, c2) for :func:`millflow.mill.well_mixed.well_mixed_population_separable`
+        on a geometric grid of ``ratio`` (eqs. 6/8; not for breakage ``fixed``).
+        """
         x = as_sizes(grid)
         phi0, gamma, beta, theta = self.distribution(p, process, n)
         c1, c2 = np.exp(-gamma * math.log(ratio)), np.exp(-beta * math.log(ratio))
@@ -232,8 +238,11 @@ class Translator:
         return continuous_B(x, y, phi0, gamma, beta, th, top)
 
     def discharge(self, p: dict, process: dict, n: int, grid) -> np.ndarray:
-        """Normalised discharge d* (P, n, N) of the classification (ones without), class averaged
-        (at the upper edges on an "upper_edge" grid)."""
+        """Normalised discharge d* (P, n, N) of the classification.
+
+        Normalised discharge d* (P, n, N) of the classification (ones without), class averaged
+        (at the upper edges on an "upper_edge" grid).
+        """
         x = as_sizes(grid)
         P = p[self.names[0]].shape[0]
         if self.classification is None:
@@ -260,8 +269,11 @@ class Translator:
         return d
 
     def transport_values(self, p: dict, tau_column, n: int):
-        """tau [s] per member and condition (P, n) and the fitted transport parameters
-        (name -> (P,)) of mode "mill": ``tau_column`` the conditions' tau [s] (or None: 1)."""
+        """Tau [s] per member and condition and the fitted transport parameters of mode "mill".
+
+        tau [s] per member and condition (P, n) and the fitted transport parameters
+        (name -> (P,)) of mode "mill": ``tau_column`` the conditions' tau [s] (or None: 1).
+        """
         col = np.asarray(tau_column, float) if tau_column is not None else np.ones(n)
         P = p[self.names[0]].shape[0]
         if "tau" in self.transport_fit:

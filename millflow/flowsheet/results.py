@@ -32,9 +32,12 @@ TPH = 3.6  # kg/s -> t/h
 
 
 def _p80_p50(x, cum) -> tuple[float, float]:
-    """P80 and P50 [m] from the cumulative passing of a PSD made here (non-negative,
+    """P80 and P50 [m] from cumulative passing.
+
+    P80 and P50 [m] from the cumulative passing of a PSD made here (non-negative,
     summing to 1: not validated again); NaN for one that lies in the sink (unknown on
-    this grid)."""
+    this grid).
+    """
     P = cum.copy()
     P[0] = 1.0
     try:
@@ -48,8 +51,11 @@ def _p80_p50(x, cum) -> tuple[float, float]:
 
 
 def stream_properties(sol) -> dict:
-    """Per stream: ``solids_kg_s``, ``fraction``, ``cum_passing``, ``p80_m``, ``p50_m``,
-    ``passing`` (at named sizes)."""
+    """Properties of each stream.
+
+    Per stream: ``solids_kg_s``, ``fraction``, ``cum_passing``, ``p80_m``, ``p50_m``,
+    ``passing`` (at named sizes).
+    """
     fs = sol.flowsheet
     out = {}
     for k, name in enumerate(fs.stream_names):
@@ -86,15 +92,21 @@ def is_wet(sol) -> bool:
 
 
 def recycle_streams(fs) -> list[str]:
-    """The streams that close recycle loops: back edges of a depth-first walk of each loop
-    from where its new feed enters, following streams in file order (for a ball mill with
-    cyclones, the underflow; a splitter's returning branch is another)."""
+    """The streams that close recycle loops.
+
+    Back edges of a depth-first walk of each loop from where its new feed enters, following
+    streams in file order (for a ball mill with cyclones, the underflow; a splitter's
+    returning branch is another).
+    """
     return list(_loops(fs)[1])
 
 
 def _loops(fs) -> tuple:
-    """(loop label per unit, recycle streams) of the flowsheet's connections, computed once
-    per connection pattern: a sweep's cases share their base flowsheet's streams."""
+    """Loop label per unit and the recycle streams, computed once per connection pattern.
+
+    (loop label per unit, recycle streams) of the flowsheet's connections, computed once
+    per connection pattern: a sweep's cases share their base flowsheet's streams.
+    """
     got = _LOOPS.get(id(fs.streams))
     if got is None or got[0] is not fs.streams or got[1] != tuple(fs.units):
         lab = dict(zip(fs.units, fs.components()))
@@ -136,7 +148,9 @@ def _recycle_streams(fs, lab) -> list[str]:
 
 
 def circulating_loads(sol) -> dict:
-    """Circulating load [-] of each recycle stream (:func:`recycle_streams`), as the engineer
+    """Circulating load [-] of each recycle stream.
+
+    Circulating load [-] of each recycle stream (:func:`recycle_streams`), as the engineer
     reads it: the stream's solids flow over the new feed of its recycle loop (the solids of
     the streams entering the loop from outside). For a closed ball-mill/cyclone circuit this
     is U/F_new (= U/O at steady state).
@@ -159,8 +173,11 @@ def _circulating(fs, tot) -> dict:
 
 
 def mass_balance(sol) -> dict:
-    """Relative mass balance errors: ``overall`` (products vs feeds) and per unit, of the solids
-    and (``water``, ``water_units``) of the water."""
+    """Relative mass balance errors, overall and per unit, of the solids and the water.
+
+    Relative mass balance errors: ``overall`` (products vs feeds) and per unit, of the solids
+    and (``water``, ``water_units``) of the water.
+    """
     fs = sol.flowsheet
     tot = {n: math.fsum(sol.flows[k]) for k, n in enumerate(fs.stream_names)}
     feed = math.fsum(u.solids for u in fs.units.values() if u.type == "feed")
@@ -187,7 +204,8 @@ def to_dataset(sol, props=None, grid_check=None):
     """The solution as an xarray Dataset with dimensions ``stream``, ``size`` (and ``unit``, ``classifier``).
 
     Built from numpy arrays by :func:`millflow._dataset.dataset` (no merge or alignment,
-    no dask import: the same Dataset ``xr.Dataset`` would make)."""
+    no dask import: the same Dataset ``xr.Dataset`` would make).
+    """
     from millflow._dataset import dataset
 
     fs = sol.flowsheet
@@ -309,7 +327,7 @@ def _clean(v):
 
 
 def _provenance(fs) -> dict:
-    """millflow version and the SHA-256 of the input file (hashed once, when it was read)."""
+    """The millflow version and the SHA-256 of the input file (hashed once, when it was read)."""
     from millflow import __version__
 
     out = {"millflow_version": __version__}
@@ -326,10 +344,13 @@ def _kernel_status() -> str:
 
 
 def error_report(sol, grid_check=None) -> dict:
-    """The error estimate of a solved flowsheet split by source: ``solver`` (the largest of
+    """The error estimate of a solved flowsheet split by source: solver and size grid.
+
+    The error estimate of a solved flowsheet split by source: ``solver`` (the largest of
     the recycle solve's relative residual and the units' error estimates) and ``grid``
     (the largest relative grid error of P80, P50 and circulating loads from the grid
-    check, :mod:`millflow.flowsheet.gridcheck`), each with the method that estimated it."""
+    check, :mod:`millflow.flowsheet.gridcheck`), each with the method that estimated it.
+    """
     unit_err = max((float(r.get("error_estimate") or 0.0) for r in sol.units.values()), default=0.0)
     solver = {"value": max(float(sol.solver.get("relative_residual") or 0.0), unit_err),
               "method": "largest of the recycle solve's relative residual and the units' own error estimates"}
@@ -395,10 +416,13 @@ def summary(sol, props=None, grid_check=None) -> dict:
 
 
 def key_figures(sol, streams=None) -> dict:
-    """The numbers a sweep keeps of a solved case, as :func:`summary` gives them (the same
+    """The numbers a sweep keeps of a solved case, as :func:`summary` gives them.
+
+    The numbers a sweep keeps of a solved case, as :func:`summary` gives them (the same
     arithmetic), without the rest of the summary: ``p80_um`` and ``p50_um`` of ``streams``
     (default: every stream), ``circulating_load``, ``specific_energy_kWh_per_t`` and
-    ``mass_balance_error``."""
+    ``mass_balance_error``.
+    """
     fs = sol.flowsheet
     names = fs.stream_names
     x = fs.grid.x
@@ -442,9 +466,11 @@ def _cyclone_columns(r) -> dict:
 
 
 def notes(sol) -> list[str]:
-    """What a reader of the results must know once: mills whose power is information only. (Models
-    used outside their range are warned, :class:`millflow.errors.ModelRangeWarning`, and listed in
-    the summary's ``model_range``.)"""
+    """What a reader of the results must know once: mills whose power is information only.
+
+    (Models used outside their range are warned, :class:`millflow.errors.ModelRangeWarning`, and
+    listed in the summary's ``model_range``.)
+    """
     out = []
     for u, unit in sol.flowsheet.units.items():
         if unit.type == "mill" and getattr(unit, "power_role", None) and unit.breakage_basis != "energy":
@@ -455,7 +481,7 @@ def notes(sol) -> list[str]:
 
 
 def stream_table(sol, props=None):
-    """pandas DataFrame: one row per stream (t/h, P80 and P50 in um, % passing named sizes)."""
+    """A pandas DataFrame of one row per stream (t/h, P80 and P50 in um, % passing named sizes)."""
     import pandas as pd
 
     fs = sol.flowsheet
@@ -477,7 +503,7 @@ def stream_table(sol, props=None):
 
 
 def unit_table(sol):
-    """pandas DataFrame: one row per unit (type, method, error estimate, run time, mass balance, energy)."""
+    """A pandas DataFrame of one row per unit (type, method, error estimate, run time, mass balance, energy)."""
     import pandas as pd
 
     from millflow.report.html import method_text  # numbers in the text at the CSV's 10 digits
@@ -497,8 +523,7 @@ def unit_table(sol):
 
 
 def psd_table(sol, props=None):
-    """pandas DataFrame: cumulative passing [%] of every stream (columns ``<stream>_passing_pct``)
-    at every grid size (rows, index ``size_um``)."""
+    """A pandas DataFrame of the cumulative passing [%] of every stream at every grid size."""
     import pandas as pd
 
     fs = sol.flowsheet
@@ -509,10 +534,13 @@ def psd_table(sol, props=None):
 
 
 def write_netcdf(ds, path) -> None:
-    """``ds.to_netcdf(path, engine="scipy")`` (netCDF-3, 64-bit offsets) without xarray's
+    """Write a Dataset to netCDF-3 without xarray's probe for a dask scheduler.
+
+    ``ds.to_netcdf(path, engine="scipy")`` (netCDF-3, 64-bit offsets) without xarray's
     probe for a dask scheduler: ``to_netcdf`` imports dask and dask.distributed when they
     are installed (about half a second of a command's start-up) to choose a file lock.
-    Our datasets hold numpy arrays only, so a plain lock is the right one."""
+    Our datasets hold numpy arrays only, so a plain lock is the right one.
+    """
     import threading
 
     from xarray.backends import ScipyDataStore

@@ -78,6 +78,7 @@ class FlowsheetSolution:
         return float(self.water.flows[self.flowsheet.stream_names.index(stream)]) if self.water is not None else 0.0
 
     def flow(self, stream: str) -> np.ndarray:
+        """Solids flows [kg/s] per size class of ``stream``."""
         return self.flows[self.flowsheet.stream_names.index(stream)]
 
 
@@ -86,8 +87,11 @@ MASS_TOL = 1e-9
 
 
 def _unit_blocks(fs, state):
-    """Blocks of every unit; ``state`` maps a torn unit to its torn inlet values (``throughput``
-    [kg/s] of solids, ``water`` [kg/s], ``recovery`` C [-]) passed as keywords."""
+    """Blocks of every unit, at the torn inlet values of the torn units.
+
+    Blocks of every unit; ``state`` maps a torn unit to its torn inlet values (``throughput``
+    [kg/s] of solids, ``water`` [kg/s], ``recovery`` C [-]) passed as keywords.
+    """
     blocks, infos = {}, {}
     for name, unit in fs.units.items():
         blocks[name], infos[name] = unit.blocks(fs.grid, **state.get(name, {}))
@@ -95,8 +99,11 @@ def _unit_blocks(fs, state):
 
 
 def assemble(fs, blocks, extra_sources=None):
-    """Sparse matrix A = I - T and source vector s (size-major ordering) of the flowsheet;
-    ``extra_sources`` (stream -> flows) adds constant sources (torn non-linear mills)."""
+    """Sparse matrix A = I - T and source vector s of the flowsheet.
+
+    Sparse matrix A = I - T and source vector s (size-major ordering) of the flowsheet;
+    ``extra_sources`` (stream -> flows) adds constant sources (torn non-linear mills).
+    """
     import scipy.sparse as sp  # imported here: a flowsheet of cell-chain mills never needs it (start-up)
 
     names = fs.stream_names
@@ -217,14 +224,17 @@ def _linear_solve(fs, blocks, extra_sources=None):
 
 # --------------------------------------------------------------- tear methods
 def _relative_change(gx, x) -> float:
-    """max |g(x) - x| / |g(x)| (a variable that is and stays 0, such as the water of a dry mill, counts 0)."""
+    """The largest relative change max |g(x) - x| / |g(x)| (a variable that is and stays 0 counts 0)."""
     d = np.abs(gx - x)
     return float(np.max(np.where(d == 0, 0.0, d / np.where(gx != 0, np.abs(gx), 1e-300))))
 
 
 def _substitute_negative(x, gx):
-    """Torn values (flows, water, recovery) are >= 0: where the extrapolation would make one
-    negative, that component takes the plain substitution step."""
+    """Plain substitution where the extrapolation would make a torn value negative.
+
+    Torn values (flows, water, recovery) are >= 0: where the extrapolation would make one
+    negative, that component takes the plain substitution step.
+    """
     return np.where(x < 0, gx, x)
 
 
@@ -241,10 +251,13 @@ def _substitution(g, x0, tol, maxiter, err=_relative_change):
 
 def _wegstein(g, x0, tol, maxiter, qmin=-5.0, qmax=0.0, err=_relative_change, bound=_substitute_negative,
               stall: int | None = None):
-    """Wegstein's accelerated substitution, componentwise, q bounded to [qmin, qmax]; ``err``
-    measures the change, ``bound(x, g(x))`` keeps the extrapolated iterate physical. With
-    ``stall`` it gives up (not converged) when the smallest change of the last ``stall``
-    iterations is not 10 x below the smallest before them (a caller then switches method)."""
+    """Wegstein's accelerated substitution, componentwise.
+
+    The factor q is bounded to [qmin, qmax]; ``err`` measures the change, ``bound(x, g(x))`` keeps the
+    extrapolated iterate physical. With ``stall`` it gives up (not converged) when the
+    smallest change of the last ``stall`` iterations is not 10 x below the smallest before
+    them (a caller then switches method).
+    """
     x_prev, g_prev = x0, g(x0)
     hist = [err(g_prev, x_prev)]
     if hist[-1] < tol:
@@ -278,9 +291,12 @@ def _at_rounding_floor(hist) -> bool:
 
 
 def _newton(g, x0, tol, maxiter):
-    """scipy's hybrid Powell (Newton with a finite-difference Jacobian and trust region) on
+    """Scipy's hybrid Powell on g(x) - x for a torn scalar.
+
+    scipy's hybrid Powell (Newton with a finite-difference Jacobian and trust region) on
     g(x) - x; the answer is the evaluated point with the smallest relative change (hybr may
-    wander off a root it has found, e.g. when g does not depend on x)."""
+    wander off a root it has found, e.g. when g does not depend on x).
+    """
     from scipy.optimize import root
 
     hist, best = [], [np.inf, x0]
@@ -444,9 +460,12 @@ _vector_wegstein = functools.partial(_wegstein, err=_vector_err, bound=lambda x,
 
 
 def _vector_newton(g, x0, tol, maxiter, err=_vector_err, scale=None, project=None):
-    """scipy's hybrid Powell on (g(x) - x) / scale for a torn vector (flows >= 0); the answer is
+    """Scipy's hybrid Powell on a torn vector.
+
+    scipy's hybrid Powell on (g(x) - x) / scale for a torn vector (flows >= 0); the answer is
     g at the evaluated point with the smallest change ``err``, accepted when that change is
-    below ``tol`` (or at the rounding floor of the unit solves), the same test as Wegstein's."""
+    below ``tol`` (or at the rounding floor of the unit solves), the same test as Wegstein's.
+    """
     from scipy.optimize import root
 
     hist = []
@@ -477,8 +496,11 @@ _VECTOR_TEARS = {"wegstein": _vector_wegstein, "substitution": _vector_substitut
 
 
 def _torn_state(fs, torn, wet, recov, flows, infos, water=None) -> list:
-    """Torn variables of the units torn on their throughput: each one's solids throughput,
-    the water of those that need it, the corrected recovery C of the predicted cyclones."""
+    """Torn variables of the units torn on their throughput.
+
+    Each one's solids throughput, the water of those that need it, the corrected recovery C
+    of the predicted cyclones.
+    """
     names = fs.stream_names
     out = [math.fsum(math.fsum(flows[names.index(s)]) for s in fs.inlets(u)) for u in torn]
     if wet:

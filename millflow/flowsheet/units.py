@@ -46,9 +46,12 @@ TRANSPORTS = _transport_registry()
 
 
 def build_transport(model: str, tau: float, params: dict):
-    """The rtd model of a mill: a name of :data:`TRANSPORTS` with its parameters, or
+    """The rtd model of a mill from its transport name and parameters.
+
+    The rtd model of a mill: a name of :data:`TRANSPORTS` with its parameters, or
     ``"series"`` with ``params["parts"]`` = [(model, parameters, tau_fraction), ...]
-    (rtd.Series of the parts, part k with tau_k = tau_fraction_k tau)."""
+    (rtd.Series of the parts, part k with tau_k = tau_fraction_k tau).
+    """
     if model == "series":
         import rtd
 
@@ -85,8 +88,11 @@ def mill_transfer_matrix(S, b, transport, d=None, where=None, discharge=None) ->
 # ------------------------------------------------------------------------- units
 @dataclass(frozen=True)
 class Feed:
-    """Fresh feed: a constant solids flow ``solids`` [kg/s] with mass fractions ``psd`` on the grid,
-    and ``water`` [kg/s] (0 for a dry feed; :mod:`millflow.flowsheet.water`)."""
+    """Fresh feed: solids flow [kg/s], PSD on the grid and water [kg/s].
+
+    Fresh feed: a constant solids flow ``solids`` [kg/s] with mass fractions ``psd`` on the grid,
+    and ``water`` [kg/s] (0 for a dry feed; :mod:`millflow.flowsheet.water`).
+    """
 
     name: str
     solids: float
@@ -97,19 +103,21 @@ class Feed:
 
     @property
     def ports(self) -> tuple[str, ...]:
+        """The outlet ports: ``("out",)``."""
         return ("out",)
 
     def blocks(self, grid, throughput=None, water=None):
+        """No block (a feed is a constant source)."""
         return {}, {"method": "constant source", "error_estimate": 0.0, "runtime_s": 0.0}
 
     def source(self) -> dict:
+        """The feed's solids flows [kg/s] per size class."""
         return {"out": self.solids * np.asarray(self.psd, dtype=float)}
 
 
 @dataclass(frozen=True)
 class MillUnit:
-    """Continuous mill: breakage (``rate``, ``breakage``) with a transport model and optional
-    discharge classification.
+    """Continuous mill: breakage (``rate``, ``breakage``) with a transport model and optional discharge classification.
 
     Parameters
     ----------
@@ -215,8 +223,11 @@ class MillUnit:
         return self.kinetics is not None
 
     def nonlinear_kinetics(self, grid, tau=None, throughput=None):
-        """:class:`millflow.nonlinear.Kinetics` of this mill on ``grid`` (``tau`` [s] and ``throughput``
-        [kg/s] set the hold-up of a mill whose rates are per energy)."""
+        """The non-linear kinetics of this mill on ``grid``.
+
+        :class:`millflow.nonlinear.Kinetics` of this mill on ``grid`` (``tau`` [s] and ``throughput``
+        [kg/s] set the hold-up of a mill whose rates are per energy).
+        """
         from millflow.nonlinear import KERNELS, Aggregation, kinetics
 
         from millflow.nonlinear.kinetics import fines_fraction
@@ -244,10 +255,13 @@ class MillUnit:
         return kinetics(S, b, w=w, lam=lam, aggregation=agg, grid=grid, fines_mask=mask, kappa=kappa, dkappa=dkappa)
 
     def product_flows(self, grid, inflow, water=None):
-        """Product flows [kg/s] for the inlet flows ``inflow`` [kg/s] (non-linear kinetics) and,
+        """Product flows [kg/s] for the inlet flows (non-linear kinetics).
+
+        Product flows [kg/s] for the inlet flows ``inflow`` [kg/s] (non-linear kinetics) and,
         for a mill given by its slurry hold-up, the water through it [kg/s] (tau = V / Q at
         those flows); the aggregation overflow (coarser than the grid) is added to class 1
-        and reported, and above :data:`MAX_OVERFLOW` of the throughput refused."""
+        and reported, and above :data:`MAX_OVERFLOW` of the throughput refused.
+        """
         from millflow.mill import nonlinear as nl
 
         t0 = time.perf_counter()
@@ -314,12 +328,16 @@ class MillUnit:
 
     @property
     def ports(self) -> tuple[str, ...]:
+        """The outlet ports: ``("out",)``."""
         return ("out",)
 
     @property
     def nonlinear(self) -> bool:
-        """True when the block depends on the mill's throughput: tau from a hold-up, or rates per energy
-        (S = S^E P / H with H = tau F)."""
+        """True when the mill's block depends on its throughput.
+
+        True when the block depends on the mill's throughput: tau from a hold-up, or rates per energy
+        (S = S^E P / H with H = tau F).
+        """
         return self.holdup is not None or self.slurry_volume is not None or self.breakage_basis == "energy"
 
     @property
@@ -328,6 +346,7 @@ class MillUnit:
         return self.slurry_volume is not None
 
     def discharge_efficiency(self, grid) -> np.ndarray | None:
+        """The discharge classification's efficiency on ``grid``, or None."""
         if self.classification is None:
             return None
         params = dict(self.classification)
@@ -336,7 +355,7 @@ class MillUnit:
         return curve_on_grid(lambda x: efficiency(curve, x, **params), grid)
 
     def residence_time(self, throughput=None, water=None) -> float:
-        """tau [s]: given, H / F (solids hold-up), or V / Q (slurry hold-up, Q in m3/s)."""
+        """Mean residence time tau [s]: given, H / F (solids hold-up), or V / Q (slurry hold-up, Q in m3/s)."""
         if self.tau is not None:
             return float(self.tau)
         if self.slurry_volume is not None:
@@ -354,10 +373,13 @@ class MillUnit:
         return tau
 
     def breakage_functions(self, grid, tau=None, throughput=None):
-        """(S [1/s], b [-]) on ``grid``: continuous forms class-averaged (or at the upper edges
+        """S [1/s] and b [-] of this mill on ``grid``.
+
+        (S [1/s], b [-]) on ``grid``: continuous forms class-averaged (or at the upper edges
         on an "upper_edge" grid), a user's discrete S_i, b_ij as given
         (:func:`millflow.breakage.averaged.breakage_on_grid`); rates per energy become
-        S = S^E P / H with H = tau F [kg] (the class average of S^E times P / H: the map is linear)."""
+        S = S^E P / H with H = tau F [kg] (the class average of S^E times P / H: the map is linear).
+        """
         S, b = self._on_grid(grid)
         if self.breakage_basis == "energy":
             if tau is None or throughput is None or not throughput > 0:
@@ -369,9 +391,12 @@ class MillUnit:
         return S, b
 
     def _on_grid(self, grid):
-        """(S or S^E, b) of this mill's forms on ``grid``, computed once per grid object and kept
+        """S (or S^E) and b of this mill on ``grid``, computed once per grid.
+
+        (S or S^E, b) of this mill's forms on ``grid``, computed once per grid object and kept
         read-only on the unit (a torn mill asks for them at every tear iteration; they do not
-        depend on tau or the throughput)."""
+        depend on tau or the throughput).
+        """
         kept = self.__dict__.get("_grid_forms")
         if kept is not None and kept[0] is grid:
             return kept[1], kept[2]
@@ -382,8 +407,11 @@ class MillUnit:
         return S, b
 
     def discretisation(self, grid) -> str:
-        """How this mill's breakage is put on ``grid``: "class average", "upper edge" or
-        "discrete (as given)" (:func:`millflow.breakage.averaged.breakage_on_grid`)."""
+        """How this mill's breakage is put on ``grid``.
+
+        "class average", "upper edge" or "discrete (as given)"
+        (:func:`millflow.breakage.averaged.breakage_on_grid`).
+        """
         from millflow.breakage.averaged import continuous_rate
 
         if continuous_rate(self.rate) is None or not callable(getattr(self.breakage, "cumulative", None)):
@@ -391,6 +419,7 @@ class MillUnit:
         return "class average" if grid.scheme == "class_average" else "upper edge"
 
     def blocks(self, grid, throughput=None, water=None):
+        """The mill's transfer matrix (its block) and its report, at the given throughput [kg/s]."""
         t0 = time.perf_counter()
         tau = self.residence_time(throughput, water)
         S, b = self.breakage_functions(grid, tau, throughput)
@@ -457,12 +486,15 @@ class Classifier:
 
     @property
     def ports(self) -> tuple[str, ...]:
+        """The outlet ports (coarse, fine) of this kind of classifier."""
         return CLASSIFIER_PORTS[self.kind]
 
     def efficiency(self, grid) -> np.ndarray:
+        """Fraction to the coarse stream per class, class-averaged on ``grid``."""
         return curve_on_grid(lambda x: efficiency(self.curve, x, **self.params), grid)
 
     def blocks(self, grid, throughput=None, water=None):
+        """The two diagonal blocks (coarse, fine) and the report."""
         t0 = time.perf_counter()
         c = self.efficiency(grid)
         coarse, fine = self.ports
@@ -482,9 +514,11 @@ class Mixer:
 
     @property
     def ports(self) -> tuple[str, ...]:
+        """The outlet ports: ``("out",)``."""
         return ("out",)
 
     def blocks(self, grid, throughput=None, water=None):
+        """The identity block (the inlets summed) and the report."""
         return {"out": np.ones(grid.n)}, {"method": "sum", "error_estimate": 0.0, "runtime_s": 0.0}
 
 
@@ -505,9 +539,11 @@ class Splitter:
 
     @property
     def ports(self) -> tuple[str, ...]:
+        """The outlet ports, one per fraction."""
         return tuple(self.fractions)
 
     def blocks(self, grid, throughput=None, water=None):
+        """A constant block per outlet (its fraction) and the report."""
         return ({p: np.full(grid.n, float(f)) for p, f in self.fractions.items()},
                 {"method": "fixed fractions", "error_estimate": 0.0, "runtime_s": 0.0})
 
@@ -522,9 +558,11 @@ class Product:
 
     @property
     def ports(self) -> tuple[str, ...]:
+        """No outlets (a product is a sink)."""
         return ()
 
     def blocks(self, grid, throughput=None, water=None):
+        """No block (a product is a sink)."""
         return {}, {"method": "sink", "error_estimate": 0.0, "runtime_s": 0.0}
 
 

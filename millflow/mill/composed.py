@@ -121,10 +121,13 @@ class Mill:
         return self._kinetics
 
     def product(self, feed, tol: float = 1e-8, on_inaccuracy: str = "raise") -> np.ndarray:
-        """Product flows (N,) or (N, m) for feed (N,) or (N, m): the fast path (inputs
+        """Product flows for a feed: the fast path.
+
+        Product flows (N,) or (N, m) for feed (N,) or (N, m): the fast path (inputs
         validated once at construction, no Dataset, the spectral decomposition of the
         plug-flow and segregated paths kept after the first call). Each feed column is
-        solved scaled to a unit total; ``tol`` and ``on_inaccuracy`` as :func:`steady_mill`."""
+        solved scaled to a unit total; ``tol`` and ``on_inaccuracy`` as :func:`steady_mill`.
+        """
         feed = _check_feed(feed, self.S.size)
         if self._kinetics is not None:  # non-linear: one feed at a time, used as given
             from millflow.mill.nonlinear import solve_transport

@@ -1,4 +1,6 @@
-"""Continuous mills with non-linear kinetics (aggregation, population-dependent rates,
+"""Continuous mills with non-linear kinetics: the steady product of eq. 1 with R(M).
+
+Continuous mills with non-linear kinetics (aggregation, population-dependent rates,
 slowing-down kappa(fines) or kappa(t)): the steady product of eq. 1 with R(M) of
 :mod:`millflow.nonlinear.kinetics` in place of the linear K M, for every transport of
 the linear mill, with classification d* where the linear mill takes it.
@@ -73,7 +75,7 @@ __all__ = ["NonlinearSteady", "MicromixingLimits", "MicromixingBounds", "well_mi
 
 def tanks_in_series(kin: Kinetics, feed, tau: float, n: int, d=None, where="discharge", *,
                     tol: float = NEWTON_RTOL, max_iter: int = MAX_ITER, ptc_iter: int = PTC_ITER) -> NonlinearSteady:
-    """n equal perfect mixers in series (total mean residence time tau), one cell at a time.
+    """Non-linear kinetics in n equal perfect mixers in series (total mean residence time tau).
 
     ``d`` (N,) normalised discharge d_i* (None: none), acting where ``where`` says:
     "discharge" (the last cell's outflow), "cells" (every cell's outflow) or a sequence
@@ -83,7 +85,8 @@ def tanks_in_series(kin: Kinetics, feed, tau: float, n: int, d=None, where="disc
     vectorised call), started from the first-order cells with the rates frozen at the
     previous cell's content; error estimate: the last cell's outflow under the next chord
     step (:mod:`millflow.mill.newton`). If that does not converge, the cells are solved
-    one at a time, each with pseudo-transient continuation (:func:`_one_by_one`)."""
+    one at a time, each with pseudo-transient continuation (:func:`_one_by_one`).
+    """
     feed, tau = _check(kin, feed, tau)
     if int(n) != n or n < 1:
         raise InputError(f"n = {n!r}: expected an integer number of tanks >= 1")
@@ -124,8 +127,11 @@ def tanks_in_series(kin: Kinetics, feed, tau: float, n: int, d=None, where="disc
 
 
 def _chain_guess(kin: Kinetics, y_in, tau, Dm):
-    """First-order cells in turn, each with the rates frozen at the previous cell's content
-    (a Picard start carrying the population and fines terms), the overflow passing."""
+    """A start for the chain: first-order cells with frozen rates.
+
+    First-order cells in turn, each with the rates frozen at the previous cell's content
+    (a Picard start carrying the population and fines terms), the overflow passing.
+    """
     n = Dm.shape[0]
     Y = np.empty((n, y_in.size))
     state, inflow, first = None, y_in, _FirstOrder(kin.b)
@@ -137,10 +143,13 @@ def _chain_guess(kin: Kinetics, y_in, tau, Dm):
 
 
 def _chain(kin: Kinetics, y_in, tau, Dm, *, tol, max_iter):
-    """All cells of a chain together: F_k = D_(k-1) y_(k-1) - D_k y_k + tau R(y_k) (y_(-1) D = the
+    """All cells of a chain together by Newton with a block bidiagonal Jacobian.
+
+    All cells of a chain together: F_k = D_(k-1) y_(k-1) - D_k y_k + tau R(y_k) (y_(-1) D = the
     feed), Newton with the block lower bidiagonal Jacobian (forward substitution, one LU
     per cell, kept while the chord iteration contracts): the rates of all cells in one
-    vectorised evaluation."""
+    vectorised evaluation.
+    """
     n, n1 = Dm.shape
     diag = np.arange(n1)
     feed_size = float(np.abs(y_in).sum())
@@ -175,10 +184,12 @@ def _chain(kin: Kinetics, y_in, tau, Dm, *, tol, max_iter):
 
 
 def _one_by_one(kin: Kinetics, y_in, tau, Dm, tol, max_iter, ptc_iter):
-    """The cells of a chain one at a time, each by Newton with pseudo-transient continuation,
-    started from the previous cell's factors. Error estimate: the sum over the cells of each
+    """The cells of a chain one at a time, each by Newton with pseudo-transient continuation.
+
+    Started from the previous cell's factors. Error estimate: the sum over the cells of each
     cell's estimate in the 1-norm (an error in a cell's outflow passes through the cells
-    downstream, maps whose columns sum to ~1: mass is conserved)."""
+    downstream, maps whose columns sum to ~1: mass is conserved).
+    """
     n = Dm.shape[0]
     Y = np.empty((n, y_in.size))
     y, warm, state = y_in, None, None
@@ -196,8 +207,11 @@ def _one_by_one(kin: Kinetics, y_in, tau, Dm, tol, max_iter, ptc_iter):
 
 
 def _classified(n: int, where) -> np.ndarray:
-    """Cells (n,) whose outflow is classified: "discharge" the last (a chain's exit),
-    "cells" all, or the listed 1-based cells."""
+    """The cells whose outflow is classified.
+
+    Cells (n,) whose outflow is classified: "discharge" the last (a chain's exit),
+    "cells" all, or the listed 1-based cells.
+    """
     if where in (None, "discharge"):
         mask = np.zeros(n, dtype=bool)
         mask[-1] = True
@@ -215,11 +229,14 @@ def _classified(n: int, where) -> np.ndarray:
 
 
 def network_operator(net, dx, where, n1: int):
-    """The cells' linear exchange on the stacked state c (cells x n1 components, c_k the
+    """The cells' linear exchange on the stacked state.
+
+    The cells' linear exchange on the stacked state c (cells x n1 components, c_k the
     content of cell k per unit volume): (T sparse (n n1, n n1), inlet (n,) the share of the
     feed entering each cell, (1 - beta) u_k, out (n1, n) the product per unit content, H_l o_l),
     with the classification factors G (inter-cell flows), H (exit flows) of ``where``
-    (:mod:`millflow.mill.cells`): (T c)_k = sum_(l != k) G_l F[k, l] c_l - (G_k sum_(j != k) F[j, k] + H_k o_k) c_k."""
+    (:mod:`millflow.mill.cells`): (T c)_k = sum_(l != k) G_l F[k, l] c_l - (G_k sum_(j != k) F[j, k] + H_k o_k) c_k.
+    """
     import scipy.sparse
 
     from millflow.mill.cells import _factors
@@ -243,7 +260,9 @@ def network_operator(net, dx, where, n1: int):
 
 def cells(kin: Kinetics, feed, transport, d=None, where="discharge", *, tol: float = NEWTON_RTOL,
           max_iter: int = MAX_ITER, ptc_iter: int = PTC_ITER) -> NonlinearSteady:
-    """Steady product of a network of well-mixed cells (``transport`` an rtd model with a
+    """Steady product of a network of well-mixed cells with non-linear kinetics.
+
+    Steady product of a network of well-mixed cells (``transport`` an rtd model with a
     ``network()``, e.g. :class:`rtd.RecirculatingCells`, or an
     :class:`rtd.CompartmentNetwork`) with non-linear kinetics and classification.
 
@@ -263,7 +282,8 @@ def cells(kin: Kinetics, feed, transport, d=None, where="discharge", *, tol: flo
     Newton stalls (its own budget ``ptc_iter``); the stated criterion of
     :func:`well_mixed` with the scale max(feed, transport flows x state, V_k breakage
     flux). Error estimate: the product's change under the next (chord) step at the
-    answer, divided by 1 - rho (:mod:`millflow.mill.newton`)."""
+    answer, divided by 1 - rho (:mod:`millflow.mill.newton`).
+    """
     import scipy.sparse
 
     from millflow.mill.cells import network_of, solve_cells
@@ -339,8 +359,11 @@ PLUG_RTOL, PLUG_ATOL = 1e-8, 1e-12
 
 
 def _plug_ode(kin: Kinetics, y0, tau, v, z, rtol, atol, holdup: bool):
-    """Integrate dF/dz = tau R(F / v) (and dQ/dz = F / v, the hold-up, when asked) from
-    F(0) = y0 to the positions z; returns (T, n1) fluxes and (T, n1) or None hold-ups."""
+    """Integrate the plug-flow ODE in the fractional position z.
+
+    Integrate dF/dz = tau R(F / v) (and dQ/dz = F / v, the hold-up, when asked) from
+    F(0) = y0 to the positions z; returns (T, n1) fluxes and (T, n1) or None hold-ups.
+    """
     from scipy.integrate import solve_ivp
 
     n1 = y0.size
@@ -381,7 +404,9 @@ def _plug_ode(kin: Kinetics, y0, tau, v, z, rtol, atol, holdup: bool):
 @limit_blas_threads
 def plug_flow(kin: Kinetics, feed, tau: float, d=None, *, rtol: float = PLUG_RTOL, atol: float = PLUG_ATOL,
               holdup: bool = True, positions=None) -> NonlinearSteady:
-    """Plug flow: the ODE in the fractional position z along the mill,
+    """Plug flow with non-linear kinetics: the ODE in the fractional position z along the mill.
+
+    The flux F obeys::
 
         dF/dz = tau R(c),   c = F / d*,   F(0) = f,   product p = F(1),
 
@@ -391,7 +416,8 @@ def plug_flow(kin: Kinetics, feed, tau: float, d=None, *, rtol: float = PLUG_RTO
     Solved by LSODA with the analytic Jacobian at (rtol, atol) and at tolerances 10x
     tighter; the tighter solution is returned, the largest difference of product and
     hold-up / tau between the two is the error estimate (measured, not the tolerance).
-    ``positions`` (fractions of the length): ``info["profile"]`` tau c at them [s]."""
+    ``positions`` (fractions of the length): ``info["profile"]`` tau c at them [s].
+    """
     feed, tau = _check(kin, feed, tau)
     start = time.perf_counter()
     dx = _discharge(kin, d)
@@ -436,8 +462,10 @@ _AGE_CLASSIFIED = ("kinetics with kappa(t) (slowing-down in the material's age) 
 
 
 def age_slowing(kin: Kinetics, feed, transport, *, tol: float = 1e-10, holdup: bool = True) -> NonlinearSteady:
-    """A continuous mill with slowing-down in the material's age, S_i = S_i0 kappa(t), t the
-    time a particle has spent in the mill, without classification: segregated flow,
+    """A continuous mill with slowing-down in the material's age, S_i = S_i0 kappa(t).
+
+    Here t is the time a particle has spent in the mill; without classification, in
+    segregated flow::
 
         product = a f + int_0^inf E(t) exp(K theta(t)) f dt,   hold-up = int_0^inf (1 - F(t)) exp(K theta(t)) f dt,
 
@@ -445,7 +473,8 @@ def age_slowing(kin: Kinetics, feed, transport, *, tol: float = 1e-10, holdup: b
     of its own age, independently of the others; the exit-age density E of ``transport``
     is all that matters). Plug flow: the batch grind at theta(tau). Adaptive quadrature
     (:func:`millflow.mill.segregated.segregated_quadrature`), whose estimate is the error
-    estimate."""
+    estimate.
+    """
     feed, _ = _check(kin, feed, float(getattr(transport, "mean", 1.0)))
     if kin.age is None:
         raise InputError("age_slowing: the kinetics have no kappa(t) (kinetics(..., kappa_t=...))")
@@ -492,7 +521,9 @@ _NEEDS_STRUCTURE = ("non-linear kinetics depend on how the mill mixes, which a r
 def solve_transport(kin: Kinetics, feed, transport, d=None, *, where=None, dispersion=None, discharge=None,
                     tol: float = 1e-8, holdup: bool = True, positions=None, m_cells: int | None = None
                     ) -> NonlinearSteady:
-    """Steady product of a mill with non-linear kinetics and any transport of the linear
+    """Steady product of a mill with non-linear kinetics and any transport.
+
+    Steady product of a mill with non-linear kinetics and any transport of the linear
     mill (``rtd`` model, tau in s), classification ``d`` placed by ``where`` as in
     :func:`millflow.mill.steady_mill` ("discharge"/"cells"/cell numbers for cells, "axis"
     for plug flow and axial dispersion), ``dispersion`` and ``discharge`` of the axial
@@ -506,7 +537,8 @@ def solve_transport(kin: Kinetics, feed, transport, d=None, *, where=None, dispe
     grid, where the kinetics neither break nor aggregate it); errors add. Parallel: each
     branch receives its weight of the feed in its own volume, so its contents have the
     concentrations of a branch fed the whole feed: the branch is solved for the feed and
-    its product and hold-up scaled by its weight."""
+    its product and hold-up scaled by its weight.
+    """
     from millflow.mill.scene import _scene
 
     if not isinstance(kin, Kinetics):
@@ -584,13 +616,16 @@ def _composed(kin: Kinetics, feed, transport, tol: float, holdup: bool, m_cells=
 # ------------------------------------------------------------------ micromixing
 @dataclass(frozen=True)
 class MicromixingLimits(_SplitError):
-    """Products of the two micromixing limits for one RTD: ``segregated`` and
-    ``max_mixedness`` (N,), ``spread`` max |difference|, ``coincide`` True for linear
-    kinetics (then both are the one exact answer), ``note`` what the user should know.
+    """Products of the two micromixing limits for one RTD.
+
+    ``segregated`` and ``max_mixedness`` (N,), ``spread`` max |difference|, ``coincide``
+    True for linear kinetics (then both are the one exact answer), ``note`` what the user
+    should know.
 
     They are the two extremes of micromixing, not bounds on a real mill's product: with
     coupled non-linear rates a mill of intermediate mixing can lie outside both, class by
-    class (module docstring)."""
+    class (module docstring).
+    """
 
     segregated: np.ndarray
     max_mixedness: np.ndarray
@@ -613,12 +648,15 @@ def _survival(model, t):
 
 
 def _hazard(model, lam_max, nodes: int = 8001):
-    """h(lambda) = E / (1 - F) on [0, lam_max]. Analytic for perfect mixing and tanks in
-    series; otherwise the survival is integrated from the tail, S(t) = (1 - F(lam_max)) +
-    int_t^lam_max E (cumulative Simpson on ``nodes`` points, accurate in relative terms
-    where 1 - F(t) would cancel), and h interpolated by a cubic spline: a smooth forcing
-    for the implicit integrator. Returns (h, interpolation error estimate of h relative
-    to its maximum: the spline against the half grid)."""
+    """h(lambda) = E / (1 - F) on [0, lam_max].
+
+    Analytic for perfect mixing and tanks in series; otherwise the survival is integrated
+    from the tail, S(t) = (1 - F(lam_max)) + int_t^lam_max E (cumulative Simpson on
+    ``nodes`` points, accurate in relative terms where 1 - F(t) would cancel), and h
+    interpolated by a cubic spline: a smooth forcing for the implicit integrator. Returns
+    (h, interpolation error estimate of h relative to its maximum: the spline against the
+    half grid).
+    """
     from scipy.integrate import cumulative_simpson
     from scipy.interpolate import CubicSpline
 
@@ -647,12 +685,15 @@ def _horizon(model, eps=1e-13):
 
 
 def micromixing_limits(kin: Kinetics, feed, model, *, rtol: float = 1e-9, atol: float = 1e-13) -> MicromixingLimits:
-    """Both micromixing limits for the RTD ``model`` (an rtd model with pdf and cdf):
+    """Both micromixing limits (segregation, maximum mixedness) for an RTD.
+
+    Both micromixing limits for the RTD ``model`` (an rtd model with pdf and cdf):
     complete segregation and maximum mixedness (module docstring). Limits, not bounds:
     Zwietering's ordering (segregation above maximum mixedness in conversion for a rate
     of order > 1, below for order < 1) holds for one species with a rate of one
     convexity; for a population whose rates couple, a real mill's product can lie outside
-    both class by class (``note`` says so)."""
+    both class by class (``note`` says so).
+    """
     from scipy.integrate import quad_vec, solve_ivp
 
     from millflow.nonlinear.batch import batch_nonlinear

@@ -1,5 +1,7 @@
-"""Axial-dispersion mills with non-linear kinetics: the closed and the open vessel, with
-classification along the axis (class i at velocity d_i* u) and size-dependent dispersion.
+"""Axial-dispersion mills with non-linear kinetics: the closed and the open vessel.
+
+With classification along the axis (class i at velocity d_i* u) and size-dependent
+dispersion.
 
 The steady convection-dispersion-reaction equation of every class,
 
@@ -53,9 +55,12 @@ M_MAX = 4096
 
 @dataclass(frozen=True)
 class _Line:
-    """One grid: nodes z, control volumes ``weights``, the node-balance coefficients
+    """One grid of the axial line: nodes, control volumes and node-balance coefficients.
+
+    One grid: nodes z, control volumes ``weights``, the node-balance coefficients
     (lower (m - 1, n1): of c_(k-1) in equation k; diag (m, n1); upper (m - 1, n1): of
-    c_(k+1)), the feed node, and the weights of the hold-up."""
+    c_(k+1)), the feed node, and the weights of the hold-up.
+    """
 
     z: np.ndarray
     weights: np.ndarray
@@ -105,9 +110,12 @@ def _scale_terms(line):
 
 
 def _newton_line(kin: Kinetics, line: _Line, tau, src, C0, *, tol, unit, fixed=None, warm=None):
-    """Newton on the node balances of ``line`` with source ``src`` (m, n1); ``fixed`` (n1,):
+    """Newton on the node balances of ``line``.
+
+    Newton on the node balances of ``line`` with source ``src`` (m, n1); ``fixed`` (n1,):
     the last node's value held fixed (the back-dispersion layer), the system on the
-    other nodes. Returns (C (m, n1), NewtonResult)."""
+    other nodes. Returns (C (m, n1), NewtonResult).
+    """
     m, n1 = src.shape
     lo, dg, up, wts = line.lower, line.diag, line.upper, line.weights
     if fixed is not None:  # drop the last node: its flux into the previous node is a source
@@ -163,8 +171,11 @@ def _newton_line(kin: Kinetics, line: _Line, tau, src, C0, *, tol, unit, fixed=N
 
 
 def _linear_start(kin, line, tau, feed):
-    """The first-order solution on ``line`` (the linear mill's solvers on the same nodes), the
-    overflow zero: the start of Newton on the first grid."""
+    """The first-order solution on ``line``: the start of Newton on the first grid.
+
+    The first-order solution on ``line`` (the linear mill's solvers on the same nodes), the
+    overflow zero: the start of Newton on the first grid.
+    """
     v, w = line.v[:-1], line.w[:-1]
     if line.open:
         m = line.out_node - line.feed_node
@@ -176,8 +187,11 @@ def _linear_start(kin, line, tau, feed):
 
 
 def _solve_line_steady(kin, line, tau, feed, C0=None, unit=None):
-    """The steady node concentrations (m, n1) on ``line`` by Newton (from ``C0`` or the
-    first-order solution); returns C, or (C, NewtonResult) when ``unit`` is given."""
+    """The steady node concentrations on ``line`` by Newton.
+
+    The steady node concentrations (m, n1) on ``line`` by Newton (from ``C0`` or the
+    first-order solution); returns C, or (C, NewtonResult) when ``unit`` is given.
+    """
     n1 = kin.n + 1
     if C0 is None:
         C0 = _linear_start(kin, line, tau, feed)
@@ -189,9 +203,12 @@ def _solve_line_steady(kin, line, tau, feed, C0=None, unit=None):
 
 
 def back_layer(kin, line, tau, C):
-    """tau int_(-inf)^1 c^ dz of the open vessel's sampled discharge: c^ solves the
+    """Hold-up of the open vessel's back-dispersion layer.
+
+    tau int_(-inf)^1 c^ dz of the open vessel's sampled discharge: c^ solves the
     source-free node balances upstream of z = 1 with c^(1) = c(1) (Newton), plus the half
-    volume at z = 1 (:mod:`millflow.mill.axial_open`); (n1,) [s]."""
+    volume at z = 1 (:mod:`millflow.mill.axial_open`); (n1,) [s].
+    """
     k1 = line.out_node
     n1 = C.shape[1]
     if k1 == 0:
@@ -204,8 +221,11 @@ def back_layer(kin, line, tau, C):
 
 
 def _grid_solver(kin: Kinetics, feed, tau, pe, v, w, open_vessel: bool, discharge: str, tol: float):
-    """solve(M) -> (z, C, reported vector, extras) for :func:`refine_grids`; grids solved in
-    increasing M start from the previous grid's solution (grid sequencing)."""
+    """The solver of one grid for :func:`refine_grids`, with grid sequencing.
+
+    solve(M) -> (z, C, reported vector, extras) for :func:`refine_grids`; grids solved in
+    increasing M start from the previous grid's solution (grid sequencing).
+    """
     n1 = kin.n + 1
     last = {}
     y_feed = np.append(feed, 0.0)
@@ -300,13 +320,16 @@ def _solve(kin, feed, tau, pe, v, w, open_vessel, discharge, tol, m_cells, m_sta
 def axial_dispersion(kin: Kinetics, feed, tau: float, pe: float, d=None, *, dispersion=None, tol: float = 1e-8,
                      m_cells: int | None = None, m_start: int = 16, m_max: int = M_MAX,
                      positions=None) -> NonlinearSteady:
-    """Closed-vessel axial-dispersion mill (Peclet ``pe``) with non-linear kinetics (module
+    """Closed-vessel axial-dispersion mill with non-linear kinetics.
+
+    Closed-vessel axial-dispersion mill (Peclet ``pe``) with non-linear kinetics (module
     docstring): ``d`` (N,) the relative axial velocity d_i* (classification along the
     axis), ``dispersion`` (N,) the relative dispersion (default 1). Grids refined until
     the error estimate of product, overflow and hold-up / tau is below ``tol`` (relative
     to the feed), or one grid of ``m_cells`` volumes checked against half of it.
     ``info``: ``holdup`` [s], ``z`` and ``density`` (tau c, finest grid), ``profile`` at
-    ``positions``."""
+    ``positions``.
+    """
     start = time.perf_counter()
     feed, tau, pe, dx, v, w = _check_axial(kin, feed, tau, pe, d, dispersion, m_cells)
     w = np.ones(kin.n + 1) if w is None else w
@@ -326,13 +349,16 @@ def axial_dispersion(kin: Kinetics, feed, tau: float, pe: float, d=None, *, disp
 def axial_open(kin: Kinetics, feed, tau: float, pe: float, d=None, *, dispersion=None, discharge: str = "sampled",
                tol: float = 1e-8, m_cells: int | None = None, m_start: int = 16, m_max: int = M_MAX,
                positions=None) -> NonlinearSteady:
-    """Open-vessel axial-dispersion mill with non-linear kinetics (the whole line, feed at
+    """Open-vessel axial-dispersion mill with non-linear kinetics.
+
+    Open-vessel axial-dispersion mill with non-linear kinetics (the whole line, feed at
     z = 0, discharge at z = 1, :mod:`millflow.mill.axial_open`): ``discharge`` "sampled"
     (p = v c(1); needs one Peclet number Pe d*/dispersion for all classes; hold-up with the
     back-dispersion layer of c(1), solved by Newton on the source-free equations upstream
     of z = 1) or "flux" (the net flux through z = 1, p = f + tau int_(-inf)^1 R(c) dz,
     hold-up tau int_(-inf)^1 c dz). Default dispersion = d (one Peclet number). Grids and
-    estimate as :func:`axial_dispersion`."""
+    estimate as :func:`axial_dispersion`.
+    """
     start = time.perf_counter()
     feed, tau, pe, dx, v, w = _check_axial(kin, feed, tau, pe, d, dispersion, m_cells)
     w = v.copy() if w is None else w

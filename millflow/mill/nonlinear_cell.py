@@ -1,5 +1,6 @@
-"""The non-linear steady mill's common parts and its one cell: the result
-(:class:`NonlinearSteady`), the input checks, Newton's scaled criterion
+"""The non-linear steady mill's common parts and its one cell.
+
+The result (:class:`NonlinearSteady`), the input checks, Newton's scaled criterion
 (:func:`residual_scale`, :data:`NEWTON_RTOL`), the Newton solve of one well-mixed cell with
 classification (``_solve_cell``: 0 = y_in - d* y + tau R(y)), its first-order start, and the
 perfectly mixed mill (:func:`well_mixed`). :mod:`millflow.mill.nonlinear` (cells, chains,
@@ -56,9 +57,12 @@ class _SplitError:
 
 @dataclass(frozen=True)
 class NonlinearSteady(_SplitError):
-    """Steady product (mass flows per unit feed rate, sum = sum(feed) - overflow) with the
+    """Steady product of a non-linear mill with the diagnostics of the solve.
+
+    Steady product (mass flows per unit feed rate, sum = sum(feed) - overflow) with the
     diagnostics of the solve: ``residual`` max |F| at the answer, ``error_estimate`` the
-    size of the next Newton step (or the ODE's estimate), ``iterations``."""
+    size of the next Newton step (or the ODE's estimate), ``iterations``.
+    """
 
     product: np.ndarray
     overflow_mass: float
@@ -88,11 +92,14 @@ def _no_age(kin: Kinetics, where: str):
 
 
 def residual_scale(kin: Kinetics, y_in, y, tau, d=None) -> float:
-    """The size of the terms the steady residual F = y_in - d* y + tau R(y) is made of:
+    """The size of the terms of the steady residual (Newton's scale).
+
+    The size of the terms the steady residual F = y_in - d* y + tau R(y) is made of:
     s = max(sum|y_in|, max|y|, max|d* y|, tau sum_i S_i[M] M_i) (the feed, the state, the breakage
     flux through the cell). Rounding alone leaves |F| ~ N eps s, so the convergence test
     is relative to s: a residual of 1e-11 on a state of order 1 with tau S ~ 10 is
-    converged, whatever units the feed rate is given in."""
+    converged, whatever units the feed rate is given in.
+    """
     M = y[:-1]
     try:
         flux = float(np.abs(kin.rates(M) * M).sum())
@@ -108,8 +115,11 @@ NEWTON_RTOL = 1e-11
 
 def _solve_cell(kin: Kinetics, y_in, tau, y0, *, tol, max_iter, ptc_iter, unit, phases=("newton",
                 "pseudo-transient", "newton"), d=None, warm=None):
-    """Newton on F(y) = y_in - d* y + tau R(y) (``d`` the (N + 1,) normalised discharge, None
-    for ones): a :class:`~millflow.mill.newton.NewtonResult`."""
+    """Newton on one cell's steady balance.
+
+    Newton on F(y) = y_in - d* y + tau R(y) (``d`` the (N + 1,) normalised discharge, None
+    for ones): a :class:`~millflow.mill.newton.NewtonResult`.
+    """
     dd = np.ones(y_in.size) if d is None else np.asarray(d, float)
     diag = np.arange(y_in.size)
 
@@ -134,25 +144,30 @@ def _solve_cell(kin: Kinetics, y_in, tau, y0, *, tol, max_iter, ptc_iter, unit, 
 @limit_blas_threads  # small dense Newton systems: one BLAS thread (millflow.threads)
 def _newton_cell(kin: Kinetics, y_in, tau, y0, *, tol, max_iter, unit,
                  phases=("newton", "pseudo-transient", "newton"), d=None, ptc_iter: int = PTC_ITER):
-    """Solve F(y) = y_in - d* y + tau R(y) = 0 (``d`` the (N + 1,) normalised discharge,
+    """Solve one cell's steady balance F(y) = 0.
+
+    Solve F(y) = y_in - d* y + tau R(y) = 0 (``d`` the (N + 1,) normalised discharge,
     None for ones); returns (y, residual, error estimate of y, iterations, how).
 
     Stated criterion: converged when max|F| <= tol * s, s = :func:`residual_scale` (the
     feed, the state and the breakage flux), or, when the line search can no longer
     reduce max|F| (the rounding floor), when the full Newton step is itself below
     tol * s. ``phases``: Newton, then (if it stalls) pseudo-transient continuation to
-    residual 1e-6 s (its own budget ``ptc_iter``), then Newton again."""
+    residual 1e-6 s (its own budget ``ptc_iter``), then Newton again.
+    """
     r = _solve_cell(kin, y_in, tau, y0, tol=tol, max_iter=max_iter, ptc_iter=ptc_iter, unit=unit, phases=phases,
                     d=d)
     return r.y, r.residual, r.step, r.iterations, r.how
 
 
 def _discharge(kin: Kinetics, d):
-    """(N + 1,) normalised discharge d* of the state, or None for no classification. The
-    aggregation overflow (mass above the top class) leaves unclassified (d* = 1): the
+    """(N + 1,) normalised discharge d* of the state, or None for no classification.
+
+    The aggregation overflow (mass above the top class) leaves unclassified (d* = 1): the
     kinetics do not break it, so a grate holding it back (d* -> 0) would accumulate it
-    without bound and leave no steady state; it is a grid artefact (``overflow_mass``,
-    kept small by a grid top above the aggregates), not a class the mill can retain."""
+    without bound and leave no steady state; it is a grid artefact (``overflow_mass``, kept
+    small by a grid top above the aggregates), not a class the mill can retain.
+    """
     if d is None:
         return None
     d = checks.class_vector(d, kin.n, "d", "normalised discharge rate")
@@ -162,10 +177,13 @@ def _discharge(kin: Kinetics, d):
 
 
 class _FirstOrder:
-    """Eq. 3 for one cell with given rates, (diag(1 + s) - b diag(s)) x = f, s = tau S / d*, by
+    """Eq. 3 for one cell with given rates by one triangular solve on a kept matrix.
+
+    Eq. 3 for one cell with given rates, (diag(1 + s) - b diag(s)) x = f, s = tau S / d*, by
     one triangular solve on a kept matrix: with q = s' x (s' = s, or 1 where s = 0) it is
     (diag((1 + s) / s') - b Z) q = f, Z zeroing the columns of s = 0, so only the diagonal
-    changes from one solve to the next (a guess for Newton; no full matrix built per solve)."""
+    changes from one solve to the next (a guess for Newton; no full matrix built per solve).
+    """
 
     def __init__(self, b):
         from scipy.linalg.lapack import dtrtrs
@@ -186,12 +204,15 @@ class _FirstOrder:
 
 
 def _cell_guess(kin: Kinetics, y_in, tau, dk, state=None, passes: int = 2, first=None):
-    """Start of a cell's Newton: the first-order cell (eq. 3, one triangular solve) with the
+    """Start of a cell's Newton: the first-order cell with frozen rates.
+
+    Start of a cell's Newton: the first-order cell (eq. 3, one triangular solve) with the
     rates S_i[M] frozen at ``state`` (the previous cell's content; without one the
     first-order cell's), repeated ``passes`` times with the rates at the last answer
     (Picard steps, each a triangular solve, that carry the population and fines terms:
     measured ~8x closer per pass, which saves the Newton iterations that cost a rate
-    evaluation each); the overflow passes through. ``first``: a kept :class:`_FirstOrder`."""
+    evaluation each); the overflow passes through. ``first``: a kept :class:`_FirstOrder`.
+    """
     first = _FirstOrder(kin.b) if first is None else first
     d = None if dk is None else dk[:-1]
 
@@ -225,7 +246,8 @@ def well_mixed(kin: Kinetics, feed, tau: float, d=None, *, tol: float = NEWTON_R
     feed's where coarse classes are retained (d* < 1). ``info["holdup"]`` is m.
     Error estimate: the product's change under the next (chord) step, d* dy / (1 - rho)
     (:mod:`millflow.mill.newton`).
-    ``max_iter`` Newton iterations per Newton phase, ``ptc_iter`` pseudo-transient steps."""
+    ``max_iter`` Newton iterations per Newton phase, ``ptc_iter`` pseudo-transient steps.
+    """
     feed, tau = _check(kin, feed, tau)
     _no_age(kin, unit)
     dx = _discharge(kin, d)

@@ -21,6 +21,13 @@ virtual pivot one (last) ratio above it, v_0 = v_1^2 / v_2; what goes to v_0, an
 product coarser than v_0, is **overflow**: mass that left the top of the grid. It is an
 explicit extra component of the state (``overflow_mass`` in every result), never lost
 and never silently put back into class 1; refine or extend the grid upwards if it matters.
+
+References
+----------
+S. Kumar and D. Ramkrishna, On the solution of population balance equations by
+discretization - I. A fixed pivot technique, Chem. Eng. Sci. 51 (1996) 1311-1332;
+M. von Smoluchowski, Versuch einer mathematischen Theorie der Koagulationskinetik
+kolloider Lösungen, Z. phys. Chem. 92 (1917) 129-168.
 """
 from __future__ import annotations
 
@@ -38,8 +45,11 @@ __all__ = ["pivot_volumes", "Aggregation", "AggregationOperator"]
 
 
 def pivot_volumes(grid, x_ref_m: float) -> np.ndarray:
-    """Pivot volumes of the classes of ``grid`` (SizeGrid or upper edges [m]) in units of
-    x_ref^3: the geometric centre in volume of each class (decreasing, class 1 first)."""
+    """Pivot volumes of the classes in units of x_ref^3.
+
+    Pivot volumes of the classes of ``grid`` (SizeGrid or upper edges [m]) in units of
+    x_ref^3: the geometric centre in volume of each class (decreasing, class 1 first).
+    """
     x = as_sizes(grid)
     if x.size < 2:
         raise GridError("aggregation needs a grid of at least 2 classes")
@@ -51,13 +61,13 @@ def pivot_volumes(grid, x_ref_m: float) -> np.ndarray:
 
 @dataclass(frozen=True)
 class Aggregation:
-    """Aggregation with ``kernel`` (volumes in units of x_ref_m^3); :meth:`on` builds the
-    operator on a grid."""
+    """Aggregation with ``kernel`` (volumes in units of x_ref_m^3); :meth:`on` builds the operator on a grid."""
 
     kernel: Kernel
     x_ref_m: float
 
     def on(self, grid) -> "AggregationOperator":
+        """The aggregation operator on ``grid``."""
         return AggregationOperator.build(pivot_volumes(grid, self.x_ref_m), self.kernel)
 
 
@@ -80,6 +90,7 @@ class AggregationOperator:
 
     @classmethod
     def build(cls, v, kernel: Kernel) -> "AggregationOperator":
+        """The operator for pivot volumes ``v`` (decreasing) and a kernel."""
         v = np.asarray(v, float)
         if v.ndim != 1 or v.size < 2 or not np.all(np.isfinite(v)) or np.any(v <= 0) or np.any(np.diff(v) >= 0):
             raise GridError("pivot volumes: expected a 1-D array of >= 2 finite volumes > 0, strictly decreasing")
@@ -119,6 +130,7 @@ class AggregationOperator:
 
     @property
     def n(self) -> int:
+        """Number of classes."""
         return self.v.size
 
     def rate(self, M) -> np.ndarray:
@@ -129,9 +141,12 @@ class AggregationOperator:
         return birth
 
     def chunk(self) -> int:
-        """States per vectorised evaluation: the temporaries of (N + 1) N per state stay below
-        ~120 kB (larger arrays are fresh memory from the system at every call, and touching
-        them costs more than the arithmetic saved)."""
+        """States per vectorised evaluation.
+
+        The temporaries of (N + 1) N per state stay below ~120 kB (larger arrays are fresh
+        memory from the system at every call, and touching them costs more than the arithmetic
+        saved).
+        """
         return max(1, 15000 // ((self.n + 1) * self.n))
 
     def rate_many(self, M) -> np.ndarray:
@@ -165,8 +180,11 @@ class AggregationOperator:
         return Jm
 
     def jacobian(self, M, out=None, add=None) -> np.ndarray:
-        """d(rate)/dM, (N + 1, N) dense [1/s] (written into ``out`` if given, with ``add`` (N, N)
-        added to its first N rows: the caller's breakage Jacobian, in the same pass)."""
+        """The Jacobian d(rate)/dM, (N + 1, N) dense [1/s].
+
+        d(rate)/dM, (N + 1, N) dense [1/s] (written into ``out`` if given, with ``add`` (N, N)
+        added to its first N rows: the caller's breakage Jacobian, in the same pass).
+        """
         n = self.n
         N = M / self.v
         G2, beta_v = self._scaled()
@@ -182,8 +200,11 @@ class AggregationOperator:
         return Jm
 
     def _scaled(self):
-        """(2 G with row (t, j) divided by v_j, beta_jk / v_k): the Jacobian's operators with the
-        conversion from numbers to masses folded in (built once, kept on the operator)."""
+        """The Jacobian's operators with the conversion from numbers to masses folded in.
+
+        (2 G with row (t, j) divided by v_j, beta_jk / v_k): the Jacobian's operators with the
+        conversion from numbers to masses folded in (built once, kept on the operator).
+        """
         kept = self.__dict__.get("_scaled_ops")
         if kept is None:
             import scipy.sparse

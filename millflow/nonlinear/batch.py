@@ -57,8 +57,11 @@ METHODS = ("LSODA", "BDF", "Radau")
 
 @dataclass(frozen=True)
 class NonlinearBatchResult(BatchResult):
-    """:class:`~millflow.batch.BatchResult` plus ``overflow_mass`` (T,): the mass that
-    aggregation moved above the top class (0 without aggregation)."""
+    """A batch result with the mass aggregation moved above the top class.
+
+    :class:`~millflow.batch.BatchResult` plus ``overflow_mass`` (T,): the mass that
+    aggregation moved above the top class (0 without aggregation).
+    """
 
     overflow_mass: np.ndarray | None = None
 

@@ -1,5 +1,7 @@
-"""Aggregation kernels beta(u, v) of Smoluchowski's equation, as functions of two particle
-volumes u, v in units of a reference volume v_ref = x_ref^3 (dimensionless).
+"""Aggregation kernels beta(u, v) of Smoluchowski's equation.
+
+As functions of two particle volumes u, v in units of a reference volume v_ref = x_ref^3
+(dimensionless).
 
 With the state in mass fractions M_i and the number per class N_i = M_i / v_i (v_i the
 pivot volume of class i in units of v_ref), beta [1/s] is the collision-and-stick rate of a
@@ -12,6 +14,21 @@ dN/dt = -beta0/2 at t = 0 under the constant kernel.
 - shear:           beta = beta0 (u^(1/3) + v^(1/3))^3        (orthokinetic, Smoluchowski)
 - user:            beta = f(u, v), vectorised over arrays, checked non-negative, finite
                    and symmetric on the pivots where it is evaluated.
+
+References
+----------
+M. von Smoluchowski, Versuch einer mathematischen Theorie der Koagulationskinetik
+kolloider Lösungen, Z. phys. Chem. 92 (1917) 129-168; A. M. Golovin, The solution of
+the coagulation equation for cloud droplets in a rising air current, Izv. Akad. Nauk
+SSSR, Ser. Geofiz. (1963).
+
+Examples
+--------
+>>> import numpy as np
+>>> k = sum_kernel(2.0)
+>>> k.matrix(np.array([2.0, 1.0]))  # beta0 (u + v) on the pivots [1/s]
+array([[8., 6.],
+       [6., 4.]])
 """
 from __future__ import annotations
 
@@ -33,8 +50,11 @@ class KernelError(InputError):
 
 @dataclass(frozen=True)
 class Kernel:
-    """An aggregation kernel: ``name``, rate constant ``beta0`` [1/s], and ``func(u, v)``
-    (dimensionless shape, multiplied by beta0). Call :meth:`matrix` on pivot volumes."""
+    """An aggregation kernel: name, rate constant and shape.
+
+    An aggregation kernel: ``name``, rate constant ``beta0`` [1/s], and ``func(u, v)``
+    (dimensionless shape, multiplied by beta0). Call :meth:`matrix` on pivot volumes.
+    """
 
     name: str
     beta0: float
@@ -72,7 +92,7 @@ class Kernel:
 
 
 def constant_kernel(beta0: float) -> Kernel:
-    """beta = beta0 [1/s]."""
+    """The constant kernel, beta = beta0 [1/s]."""
     return Kernel("constant", beta0, lambda u, v: np.ones(np.broadcast(u, v).shape))
 
 
@@ -82,7 +102,7 @@ def sum_kernel(beta0: float) -> Kernel:
 
 
 def product_kernel(beta0: float) -> Kernel:
-    """beta = beta0 u v."""
+    """The product kernel, beta = beta0 u v."""
     return Kernel("product", beta0, lambda u, v: u * v)
 
 

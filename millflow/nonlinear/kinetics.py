@@ -1,4 +1,6 @@
-"""Non-linear grinding kinetics: breakage with rates that depend on the population or slow
+"""Non-linear grinding kinetics as one right-hand side with its analytic Jacobian.
+
+Non-linear grinding kinetics: breakage with rates that depend on the population or slow
 down with time, plus aggregation, as one right-hand side with its analytic Jacobian.
 
     dM/dt = R(M) = (b - I) diag(S[M]) M  +  A(M)            (eq. 4 with non-linear terms)
@@ -56,6 +58,7 @@ class PopulationRate:
 
     @classmethod
     def make(cls, w, lam, n: int) -> "PopulationRate":
+        """Checked population-dependent rates: interaction matrix ``w`` (n, n), exponent ``lam``."""
         if not (isinstance(lam, (int, float)) and math.isfinite(lam)):
             raise InputError(f"lambda = {lam!r}: expected a finite exponent")
         w = np.asarray(w, float)
@@ -80,8 +83,11 @@ class PopulationRate:
 
 
 def _rank_one(w):
-    """(u, v) with w == outer(u, v) exactly (a rank-one interaction matrix, e.g. the same
-    fines cushioning every class), else None."""
+    """The factors (u, v) of a rank-one interaction matrix, else None.
+
+    (u, v) with w == outer(u, v) exactly (a rank-one interaction matrix, e.g. the same
+    fines cushioning every class), else None.
+    """
     if not w.any():
         return None
     i0, j0 = np.unravel_index(np.argmax(np.abs(w)), w.shape)
@@ -91,15 +97,19 @@ def _rank_one(w):
 
 @dataclass(frozen=True, eq=False)
 class FinesSlowing:
-    """Austin's slowing-down as a function of the fines: S_i = S_i0 kappa(F), F = sum_j
-    mask_j M_j the mass fraction of the fines (mask 1 on the fine classes), ``kappa`` a
-    callable of F (>= 0, finite) and ``dkappa`` its derivative (the analytic Jacobian)."""
+    """Austin's slowing-down as a function of the fines.
+
+    S_i = S_i0 kappa(F), F = sum_j mask_j M_j the mass fraction of the fines (mask 1 on the
+    fine classes), ``kappa`` a callable of F (>= 0, finite) and ``dkappa`` its derivative
+    (the analytic Jacobian).
+    """
 
     mask: np.ndarray
     kappa: Callable
     dkappa: Callable
 
     def values(self, M) -> tuple[float, float]:
+        """Kappa and its derivative at the fines fraction of the state ``M``."""
         F = float(self.mask @ M)
         k, dk = float(self.kappa(F)), float(self.dkappa(F))
         if not (math.isfinite(k) and k >= 0 and math.isfinite(dk)):
@@ -115,13 +125,16 @@ class FinesSlowing:
 
 @dataclass(frozen=True, eq=False)
 class AgeSlowing:
-    """Austin's slowing-down in time, S_i = S_i0 kappa(t) with t the age of the material
+    """Austin's slowing-down in the age of the material.
+
+    Austin's slowing-down in time, S_i = S_i0 kappa(t) with t the age of the material
     (its time in the mill): ``kappa`` a callable of t [s] (>= 0), or ``theta`` the
     transformed time theta(t) = int_0^t kappa [s] in closed form (a callable; then
     ``kappa`` may be None). A batch grind is the linear solution at theta(t)
     (:func:`slowing_down`); a continuous mill averages it over the exit ages
     (segregated flow, exact without classification: each particle breaks at the rate of
-    its own age, independently of the others)."""
+    its own age, independently of the others).
+    """
 
     kappa: Callable | None
     theta: Callable | None = None
@@ -153,6 +166,7 @@ class Kinetics:
 
     @property
     def n(self) -> int:
+        """Number of classes."""
         return self.S.size
 
     @property
@@ -166,6 +180,7 @@ class Kinetics:
         return self.population is not None or self.aggregation is not None or self.fines is not None
 
     def describe(self) -> str:
+        """What these kinetics hold, in words."""
         parts = ["breakage"]
         if self.population is not None:
             parts.append(f"population-dependent rates (lambda {self.population.lam:g})")
@@ -218,9 +233,12 @@ class Kinetics:
         return out
 
     def _rate_terms(self, M):
-        """(S[M] (m, N), terms, full): the state-dependent rates and dS_i/dM_m as a sum of
+        """The state-dependent rates and their derivatives as rank-one terms.
+
+        (S[M] (m, N), terms, full): the state-dependent rates and dS_i/dM_m as a sum of
         rank-one terms c_i r_m (``terms``: [(c (m, N), r (N,))]) plus ``full`` (m, N, N)
-        for a general w (else None)."""
+        for a general w (else None).
+        """
         m = M.shape[0]
         S = np.broadcast_to(self.S, (m, self.n)).copy()
         terms, full = [], None
@@ -245,9 +263,12 @@ class Kinetics:
         return S, terms, full
 
     def jacobian_chunks(self, Y):
-        """dR/dy at the rows of Y (m, N + 1), in chunks: yields (first row, (c, N + 1, N + 1)),
+        """The Jacobian dR/dy at the rows of Y, in chunks.
+
+        dR/dy at the rows of Y (m, N + 1), in chunks: yields (first row, (c, N + 1, N + 1)),
         each chunk below ~120 kB (larger temporaries are fresh memory from the system at
-        every call, which costs more than the vectorisation saves)."""
+        every call, which costs more than the vectorisation saves).
+        """
         c = max(1, 15000 // (self.n + 1) ** 2)
         for s0 in range(0, Y.shape[0], c):
             yield s0, (self.jacobian(Y[s0])[None] if c == 1 else self._jacobian_block(Y[s0:s0 + c]))
@@ -311,7 +332,9 @@ class Kinetics:
 
 def kinetics(S, b, *, w=None, lam: float = 0.0, aggregation=None, grid=None, fines_mask=None, kappa=None,
              dkappa=None, kappa_t=None, theta_t=None) -> Kinetics:
-    """Checked :class:`Kinetics`: rates S [1/s] (N,), b (N, N) as eq. 4 (None with S = 0: no
+    """Checked :class:`Kinetics` from rates, breakage and the non-linear terms.
+
+    Checked :class:`Kinetics`: rates S [1/s] (N,), b (N, N) as eq. 4 (None with S = 0: no
     breakage); ``w``, ``lam`` of the
     population-dependent rates (None: first order); ``aggregation`` an
     :class:`~.aggregation.Aggregation` (needs ``grid``) or an operator on N pivots;
@@ -320,7 +343,8 @@ def kinetics(S, b, *, w=None, lam: float = 0.0, aggregation=None, grid=None, fin
     fraction F): slowing-down S_i0 kappa(F) (:class:`FinesSlowing`); ``kappa_t`` (a
     callable of the age t [s]) or ``theta_t`` (theta(t) = int_0^t kappa in closed form):
     slowing-down in the material's age (:class:`AgeSlowing`; alone, without the other
-    non-linear terms)."""
+    non-linear terms).
+    """
     if b is None:  # pure aggregation: no breakage; a placeholder b that S = 0 never uses
         S = np.asarray(S, float)
         if S.ndim != 1 or np.any(S != 0):
@@ -363,14 +387,17 @@ def kinetics(S, b, *, w=None, lam: float = 0.0, aggregation=None, grid=None, fin
 
 
 def fines_fraction(grid, fines_m: float) -> np.ndarray:
-    """The share of each class (N,) below ``fines_m`` [m]: 1 for a class whose upper size is
+    """The share of each class below ``fines_m`` [m].
+
+    The share of each class (N,) below ``fines_m`` [m]: 1 for a class whose upper size is
     at or below it, 0 for one whose lower size is at or above it, and for the class that
     straddles it its share in ln x, (ln fines - ln x_lower) / (ln x_upper - ln x_lower)
     (the sink's lower edge taken one grid ratio below its upper edge, as for the pivots).
     A size at a grid edge (to 1e-9 relative: sieves and edges computed by different
     products of one ratio differ in the last digits) gives 0/1 exactly; the weights vary
     continuously with ``fines_m`` in between, so a result does not jump when the fines
-    size crosses an edge."""
+    size crosses an edge.
+    """
     from millflow.grid import as_sizes
 
     x = as_sizes(grid)

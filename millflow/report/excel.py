@@ -1,4 +1,6 @@
-"""``results.xlsx``: the mass balance as a plant engineer exports it from JKSimMet or
+"""The ``results.xlsx`` workbook: the mass balance as a plant engineer exports it.
+
+``results.xlsx``: the mass balance as a plant engineer exports it from JKSimMet or
 Moly-Cop Tools, from the summary (the dict of ``summary.json``).
 
 Sheets:

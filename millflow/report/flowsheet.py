@@ -1,4 +1,6 @@
-"""``report.html`` of a solved flowsheet, made from its summary (the dict written to
+"""The ``report.html`` of a solved flowsheet, made from its summary.
+
+``report.html`` of a solved flowsheet, made from its summary (the dict written to
 ``summary.json``), so every number on the page is one of summary.json.
 
 :func:`flowsheet_report` needs only that dict (streams with ``from``/``to``, solids and
@@ -24,14 +26,16 @@ def _unit_of(port: str) -> str:
 
 
 def unit_lines(name: str, kind: str) -> list:
-    """The lines of a unit's box: its name (bold; a long one on two lines, shortened
-    beyond) and its type."""
+    """The lines of a unit's box: its name (bold; a long one on two lines, shortened beyond) and its type."""
     return [Strong(esc(t)) for t in name_lines(name, 170.0)] + [esc(kind)]
 
 
 def flowsheet_layout_of(summary: dict, label_text: dict | None = None, *, layers_per_row: int = LAYERS_PER_ROW):
-    """The drawing's layout for a summary's units and streams (see :mod:`millflow.report.layout`),
-    each label box sized to its text (``label_text``: stream -> lines; default :func:`stream_label`)."""
+    """The drawing's layout for a summary's units and streams.
+
+    The drawing's layout for a summary's units and streams (see :mod:`millflow.report.layout`),
+    each label box sized to its text (``label_text``: stream -> lines; default :func:`stream_label`).
+    """
     units = {u: r.get("type", "") for u, r in summary["units"].items()}
     streams = {n: (_unit_of(s["from"]), s["to"]) for n, s in summary["streams"].items()}
     if label_text is None:
@@ -42,8 +46,11 @@ def flowsheet_layout_of(summary: dict, label_text: dict | None = None, *, layers
 
 def drawing(summary: dict, label_text: dict | None = None, *, layers_per_row: int = LAYERS_PER_ROW,
             standalone: bool = False) -> str:
-    """The flowsheet drawing (SVG) of a summary: units, routes and each stream's label
-    (``label_text``: stream -> lines; default :func:`stream_label`)."""
+    """The flowsheet drawing (SVG) of a summary.
+
+    Units, routes and each stream's label (``label_text``: stream -> lines; default
+    :func:`stream_label`).
+    """
     if label_text is None:
         label_text = {n: stream_label(n, s) for n, s in summary["streams"].items()}
     lay = flowsheet_layout_of(summary, label_text, layers_per_row=layers_per_row)
@@ -53,9 +60,12 @@ def drawing(summary: dict, label_text: dict | None = None, *, layers_per_row: in
 
 
 def stream_label(name: str, s: dict) -> list[str]:
-    """The lines of a stream's label: name (a long one on two lines, shortened beyond,
-    :func:`~millflow.report.textsize.name_lines`); solids t/h; water t/h and % solids
-    (wet); P80."""
+    """The lines of a stream's label.
+
+    Name (a long one on two lines, shortened beyond,
+    :func:`~millflow.report.textsize.name_lines`); solids t/h; water t/h and % solids (wet);
+    P80.
+    """
     lines = [Strong(esc(t)) for t in name_lines(name)] + [f"{fmt(s.get('solids_tph'))} t/h solids"]
     if s.get("water_tph") is not None:
         lines.append(f"{fmt(s.get('water_tph'))} t/h water, {fmt(s.get('solids_content_pct'))} % solids")
@@ -64,9 +74,12 @@ def stream_label(name: str, s: dict) -> list[str]:
 
 
 def partition_curves(sol) -> dict:
-    """Partition curves of a :class:`~millflow.flowsheet.solve.FlowsheetSolution`: label ->
+    """Partition curves of a solved flowsheet's classifiers and mill screens.
+
+    Partition curves of a :class:`~millflow.flowsheet.solve.FlowsheetSolution`: label ->
     (sizes [um], fraction to the coarse stream), for classifiers (the curve the solve used)
-    and mill discharge screens."""
+    and mill discharge screens.
+    """
     fs = sol.flowsheet
     x = list(fs.grid.x * 1e6)
     out = {}
@@ -80,8 +93,11 @@ def partition_curves(sol) -> dict:
 
 
 def _stream_rows(summary: dict, wet: bool, prefix: str = "") -> tuple[list, list]:
-    """Head and rows of the stream table; ``prefix``: where the summary sits in the page's
-    JSON (``summaries.a.`` in compare.json, ``circuit.`` in scaleup.json)."""
+    """Head and rows of the stream table.
+
+    ``prefix``: where the summary sits in the page's JSON (``summaries.a.`` in compare.json,
+    ``circuit.`` in scaleup.json).
+    """
     streams = summary["streams"]
     sizes = list(next(iter(streams.values())).get("passing_pct", {})) if streams else []
     head = ["stream", "from", "to", "solids t/h"] + (["water t/h", "% solids"] if wet else []) \
@@ -208,8 +224,11 @@ def flowsheet_report(summary: dict, *, partition: dict | None = None, input_text
 
 def write_report(path, summary: dict, *, input_path=None, partition: dict | None = None,
                  command: str = "millflow run") -> Path:
-    """Write :func:`flowsheet_report` to ``path`` (with the input file's text when
-    ``input_path`` is given); returns the path."""
+    """Write the flowsheet report to ``path``.
+
+    Write :func:`flowsheet_report` to ``path`` (with the input file's text when
+    ``input_path`` is given); returns the path.
+    """
     text, name = read_input(input_path)
     path = Path(path)
     path.write_text(flowsheet_report(summary, partition=partition, input_text=text, input_name=name,

@@ -216,8 +216,11 @@ def _layout(units, streams, lsize, usize, per_row, spread) -> FlowsheetLayout:
 
 
 def crossings(boxes: dict, routes: dict, streams: dict) -> list[tuple[str, str]]:
-    """(stream, unit) pairs where a stream's route passes through a unit box other than its
-    own source and target (boxes shrunk by 2 px on each side)."""
+    """Pairs (stream, unit) where a stream's route passes through another unit's box.
+
+    (stream, unit) pairs where a stream's route passes through a unit box other than its
+    own source and target (boxes shrunk by 2 px on each side).
+    """
     out = []
     for n, route in routes.items():
         ends = set(streams[n])
@@ -233,10 +236,13 @@ def _route_hits(route, b: Box) -> bool:
 
 
 def _detour(boxes: dict, routes: dict, streams: dict, back: dict, dx: float = DX) -> None:
-    """Reroute a stream whose route crosses another unit's box through the free corridors
+    """Reroute a stream whose route crosses another unit's box.
+
+    Reroute a stream whose route crosses another unit's box through the free corridors
     beside the columns (between layer columns no unit stands): out of the source's side,
     along the corridor, into the target's side; a recycle keeps its lane below the row and
-    moves only the legs down to it and up from it. Each detour takes its own track."""
+    moves only the legs down to it and up from it. Each detour takes its own track.
+    """
     used: dict = {}
 
     def corridor(box, sign):
@@ -293,8 +299,7 @@ def _segment_hits(p, q, b: Box) -> bool:
 
 
 def _label_segment(route: list, recycle: bool) -> list:
-    """The part of a route its label sits on: a recycle's lane (its lowest horizontal
-    segment), else the whole route."""
+    """The part of a route its label sits on: a recycle's lane (its lowest horizontal segment), else the whole route."""
     if not recycle:
         return route
     flat = [(p, q) for p, q in zip(route[:-1], route[1:]) if abs(p[1] - q[1]) < 1e-9 and p[0] != q[0]]
@@ -318,10 +323,13 @@ def _area(c: tuple, boxes: list) -> float:
 
 
 def _place_labels(boxes: dict, routes: dict, back: dict, sizes: dict, pad: float = 4.0) -> dict:
-    """Each label at the first candidate point along its route (the middle first, then
+    """Place each label along its route where it overlaps nothing.
+
+    Each label at the first candidate point along its route (the middle first, then
     outwards, then stepped off the route) whose box, grown by ``pad``, overlaps no unit box
     and no label placed before; among those, the one crossing the fewest other routes.
-    When none is free, the least-overlapping candidate."""
+    When none is free, the least-overlapping candidate.
+    """
     placed: dict = {}
 
     def edges(b):

@@ -1,4 +1,6 @@
-"""``report.html`` of the studies: a breakage fit (``millflow fit``), a scale-up
+"""The ``report.html`` of the studies: fit, scale-up, compare and sweep.
+
+``report.html`` of the studies: a breakage fit (``millflow fit``), a scale-up
 (``millflow scaleup``), two flowsheets side by side (``millflow compare``) and a sweep
 (``millflow sweep``).
 
@@ -22,9 +24,12 @@ __all__ = ["fit_report", "scaleup_report", "compare_report", "sweep_report", "wr
 
 
 def input_rows(inputs: list, command: str, extra: list = ()) -> tuple[list, list]:
-    """Rows of the page's header table: each input file (``inputs``: (what, path) pairs)
+    """Rows of the page's header table and the sections showing the input files.
+
+    Rows of the page's header table: each input file (``inputs``: (what, path) pairs)
     with its SHA-256, the version and the command; and the (heading, html) sections
-    showing the input files' text (folded)."""
+    showing the input files' text (folded).
+    """
     from millflow import __version__
 
     rows, sections = [], []
@@ -56,9 +61,12 @@ def write_page(path, html: str) -> Path:
 
 # ---------------------------------------------------------------------------------- fit
 def fit_curves(result) -> dict:
-    """The fit's plots as numbers: per measured group (condition, and time or location)
-    the measured cumulative passing at the sieves and the model's on the grid [%, um], and
-    the parity pairs (measured, model) [%]."""
+    """The fit's plots as numbers.
+
+    Per measured group (condition, and time or location) the measured cumulative passing at
+    the sieves and the model's on the grid [%, um], and the parity pairs (measured, model)
+    [%].
+    """
     import numpy as np
 
     m = result.model
@@ -97,9 +105,12 @@ def _fit_plots(curves: dict) -> str:
 
 
 def fit_report(out: dict, *, input_path=None, data_files=(), curves: dict | None = None) -> str:
-    """The page of a breakage fit: ``out`` is fit.json (the dict ``millflow fit --json``
-    prints), ``data_files`` the data files the config reads, ``curves`` the fit's plots as
-    numbers (:func:`fit_curves`), drawn as SVG."""
+    """The page of a breakage fit.
+
+    ``out`` is fit.json (the dict ``millflow fit --json`` prints), ``data_files`` the data
+    files the config reads, ``curves`` the fit's plots as numbers (:func:`fit_curves`),
+    drawn as SVG.
+    """
     meta, inputs = input_rows([("config file", input_path)] + [("data file", p) for p in data_files],
                               "millflow fit", [["model", out.get("model", "")],
                                                ["covariance", out.get("covariance_kind", "")]])
@@ -150,9 +161,12 @@ def _contribution_rows(mf: dict) -> tuple[list, list]:
 
 
 def scaleup_report(s: dict, ds, *, input_path=None, fit_path=None) -> str:
-    """The page of a scale-up: ``s`` is scaleup.json (the summary ``millflow scaleup
-    --json`` prints; its ``circuit`` the plant circuit's streams and units at the
-    estimate) and ``ds`` the scale-up Dataset (product passing with its bands)."""
+    """The page of a scale-up.
+
+    ``s`` is scaleup.json (the summary ``millflow scaleup --json`` prints; its ``circuit``
+    the plant circuit's streams and units at the estimate) and ``ds`` the scale-up Dataset
+    (product passing with its bands).
+    """
     from millflow.report.flowsheet import drawing, stream_and_unit_sections
 
     meta, inputs = input_rows([("lab fit", fit_path), ("plant file", input_path)], "millflow scaleup",
@@ -203,8 +217,11 @@ COMPARE_COLUMNS = [("solids t/h", "solids_tph"), ("water t/h", "water_tph"), ("%
 
 
 def compare_report(result: dict, *, inputs=None) -> str:
-    """The page of ``millflow compare``: ``result`` is compare.json (the JSON it prints,
-    with both flowsheets' summaries under ``summaries``); ``inputs``: the two files."""
+    """The page of ``millflow compare``.
+
+    ``result`` is compare.json (the JSON it prints, with both flowsheets' summaries under
+    ``summaries``); ``inputs``: the two files.
+    """
     from millflow.report.flowsheet import drawing, stream_and_unit_sections
 
     sa, sb = result["summaries"]["a"], result["summaries"]["b"]
@@ -262,8 +279,11 @@ SWEEP_OUTPUTS = [("p80_um", "P80 [um]", 1.0), ("p50_um", "P50 [um]", 1.0),
 
 
 def sweep_plots(ds, keys: list) -> str:
-    """SVG plots of each output against each varied key: on a grid, one line per value of
-    the other keys (at most 10; points beyond), in a Latin hypercube the cases as points."""
+    """SVG plots of each output against each varied key.
+
+    On a grid, one line per value of the other keys (at most 10; points beyond), in a Latin
+    hypercube the cases as points.
+    """
     import numpy as np
 
     out = []
@@ -298,9 +318,12 @@ def sweep_plots(ds, keys: list) -> str:
 
 
 def sweep_report(summary: dict, ds=None, *, input_path=None) -> str:
-    """The page of ``millflow sweep``: ``summary`` is its summary.json (``cases`` the number
-    of cases; ``columns`` and ``rows``: the first :data:`SWEEP_ROWS` rows of sweep.csv);
-    ``ds`` the sweep's Dataset, drawn as SVG plots of each output against each varied key."""
+    """The page of ``millflow sweep``.
+
+    ``summary`` is its summary.json (``cases`` the number of cases; ``columns`` and
+    ``rows``: the first :data:`SWEEP_ROWS` rows of sweep.csv); ``ds`` the sweep's Dataset,
+    drawn as SVG plots of each output against each varied key.
+    """
     meta, inputs = input_rows([("flowsheet file", input_path)], "millflow sweep",
                               [["design", summary.get("design", "")], ["varied", summary.get("varied", "")]])
     cols, cases = summary.get("columns") or [], summary.get("rows") or []

@@ -40,8 +40,11 @@ class Strong(str):
 
 
 def text_width(text: str, font_px: float = FONT_PX, *, bold: bool = False, escaped: bool = True) -> float:
-    """Width [px] of one line of ``text`` in the drawing's font at ``font_px``
-    (``escaped``: the text holds HTML entities, measured as shown)."""
+    """Width [px] of one line of text in the drawing's font.
+
+    Width [px] of one line of ``text`` in the drawing's font at ``font_px``
+    (``escaped``: the text holds HTML entities, measured as shown).
+    """
     if escaped:
         text = html.unescape(text)
     table = _BOLD if bold else _REGULAR
@@ -51,9 +54,12 @@ def text_width(text: str, font_px: float = FONT_PX, *, bold: bool = False, escap
 
 def box_size(lines, font_px: float = FONT_PX, *, pad_x: float = 8.0, pad_y: float = 3.0,
              min_w: float = 0.0, min_h: float = 0.0) -> tuple[float, float]:
-    """(width, height) [px] of a box holding ``lines`` (text, or (text, key) pairs; the
+    """Width and height [px] of a box holding lines of text.
+
+    (width, height) [px] of a box holding ``lines`` (text, or (text, key) pairs; the
     first line and :class:`Strong` lines bold), with ``pad_x`` and ``pad_y`` of room on
-    each side."""
+    each side.
+    """
     texts = [line[0] if isinstance(line, tuple) else line for line in lines]
     w = max((text_width(t, font_px, bold=k == 0 or isinstance(t, Strong)) for k, t in enumerate(texts)),
             default=0.0) + 2 * pad_x
@@ -62,10 +68,13 @@ def box_size(lines, font_px: float = FONT_PX, *, pad_x: float = 8.0, pad_y: floa
 
 
 def name_lines(name: str, max_px: float = 190.0, font_px: float = FONT_PX, max_lines: int = 2) -> list[str]:
-    """``name`` (plain text) as at most ``max_lines`` lines of at most ``max_px`` in bold:
+    """A name broken into at most ``max_lines`` lines of at most ``max_px``.
+
+    ``name`` (plain text) as at most ``max_lines`` lines of at most ``max_px`` in bold:
     broken after ``_``, ``-``, ``.``, ``/`` or a space where it can be, inside a word where
     it cannot, and the last line ended with an ellipsis when the name is longer still
-    (the drawing then gives the whole name as the box's tooltip)."""
+    (the drawing then gives the whole name as the box's tooltip).
+    """
     def fits(s):
         return text_width(s, font_px, bold=True, escaped=False) <= max_px
 

@@ -23,9 +23,12 @@ __all__ = ["ScaleupResult", "predict_plant"]
 
 @dataclass(frozen=True)
 class ScaleupResult:
-    """``dataset``: product band over ``size`` and the scalar predictions with bands
+    """The result of a scale-up: a Dataset with bands and its summary.
+
+    ``dataset``: product band over ``size`` and the scalar predictions with bands
     (variables ``<q>``, ``<q>_lo``, ``<q>_hi`` per method on dim ``estimator``); ``summary``:
-    the same as plain numbers (JSON-able); ``scale``: the factors, powers, hold-ups."""
+    the same as plain numbers (JSON-able); ``scale``: the factors, powers, hold-ups.
+    """
 
     dataset: xr.Dataset
     summary: dict
@@ -33,9 +36,12 @@ class ScaleupResult:
 
 
 def _quantities(su, target):
-    """g(theta_varying) -> [P(x_1..x_N), p80, (feed_tph, E)], the same for many vectors at
+    """The predicted quantities as a function of the varying parameters.
+
+    g(theta_varying) -> [P(x_1..x_N), p80, (feed_tph, E)], the same for many vectors at
     once (g_pop: (M, V) -> (M, Q), NaN rows where a member's solve fails) and the names of
-    the scalars."""
+    the scalars.
+    """
     names = ["p80_um"] + (["throughput_tph", "specific_energy_kWh_t"] if target is not None else [])
 
     def g(v):
@@ -61,10 +67,13 @@ def _quantities(su, target):
 
 
 def lab_energy_range(fit, su) -> list:
-    """[lowest, highest] specific energy [kWh/t] of the fitted lab tests: P_lab t / H_lab over
+    """Lowest and highest specific energy [kWh/t] of the fitted lab tests.
+
+    [lowest, highest] specific energy [kWh/t] of the fitted lab tests: P_lab t / H_lab over
     the fit's grinding times t (batch times or mean residence times, ``grinding_time_range_s``
     of the fit JSON) with the lab mill's net power and hold-up; [] when the fit does not
-    record its times."""
+    record its times.
+    """
     t = fit.spec.get("grinding_time_range_s") or []
     if len(t) != 2:
         return []
@@ -74,11 +83,13 @@ def lab_energy_range(fit, su) -> list:
 
 
 def calibrated_range_notes(fit, su, p80_m: float, target_p80_m=None, energies=None) -> list[str]:
-    """Where the prediction leaves what the lab data calibrated: a P80 (predicted or
-    target) outside the measured sieve range, an eq. 10 process value outside the range of
-    the fitted conditions, a plant specific energy per pass through the mill, P / F_mill
-    (``energies``: what -> kWh/t; P tau / H, what a batch test's P t / H calibrates), outside
-    the lab tests' range (:func:`lab_energy_range`)."""
+    """Where the prediction leaves what the lab data calibrated.
+
+    A P80 (predicted or target) outside the measured sieve range, an eq. 10 process value
+    outside the range of the fitted conditions, a plant specific energy per pass through the
+    mill, P / F_mill (``energies``: what -> kWh/t; P tau / H, what a batch test's P t / H
+    calibrates), outside the lab tests' range (:func:`lab_energy_range`).
+    """
     notes = []
     lo_hi = fit.spec.get("measured_size_range_m") or []
     if len(lo_hi) == 2:

@@ -89,6 +89,7 @@ class FittedBreakage:
 
     @property
     def se(self) -> np.ndarray:
+        """Standard errors of the parameters."""
         return np.sqrt(np.diag(self.cov))
 
     def full(self, varying_values) -> np.ndarray:
@@ -115,6 +116,7 @@ class FittedBreakage:
 
     # ---------------------------------------------------------------- evaluation
     def check_process(self, process: dict, where: str) -> dict:
+        """The process values of eq. 10, checked against the fit's columns and range."""
         cols = self.spec.get("rate_process", [])
         missing = [c for c in cols if c not in process]
         if missing:
@@ -131,9 +133,12 @@ class FittedBreakage:
         return {c: float(process[c]) for c in self.spec.get("rate_process", [])}
 
     def rates(self, theta, x, process: dict, A_factor: float = 1.0, mu_factor: float = 1.0) -> np.ndarray:
-        """S [1/s] at sizes x [m] (last class the sink, S = 0) for parameter vector(s)
+        """Rates S [1/s] at sizes x [m] for parameter vector(s) theta.
+
+        S [1/s] at sizes x [m] (last class the sink, S = 0) for parameter vector(s)
         theta (..., P): eq. 5 or eq. 7 (Lambda, mu) with A by eq. 10 at ``process``, A
-        and mu multiplied by the given scale-up factors."""
+        and mu multiplied by the given scale-up factors.
+        """
         tr = self.translator
         p = tr.unpack(theta)
         S = tr.rate_at(p, self._process(process), 1, np.asarray(x, float), A_factor, mu_factor)[:, 0]
@@ -141,15 +146,21 @@ class FittedBreakage:
         return S if np.ndim(theta) > 1 else S[0]
 
     def frac_b(self, theta, x) -> np.ndarray:
-        """Fractional b (..., N, N) of eq. 6 at the upper edges x [m] (Austin's discrete form;
-        :meth:`on_grid` gives the class averages)."""
+        """Fractional b of eq. 6 at the upper edges.
+
+        Fractional b (..., N, N) of eq. 6 at the upper edges x [m] (Austin's discrete form;
+        :meth:`on_grid` gives the class averages).
+        """
         tr = self.translator
         b = tr.edge_b(tr.unpack(theta), {}, 1, np.asarray(x, float))[:, 0]
         return b if np.ndim(theta) > 1 else b[0]
 
     def on_grid(self, theta, grid, process: dict, A_factor: float = 1.0, mu_factor: float = 1.0):
-        """(S (..., N) [1/s], b (..., N, N)) on ``grid`` (class averages on the default scheme)
-        for parameter vector(s) theta, at ``process`` with the scale-up factors."""
+        """S [1/s] and b on ``grid`` for parameter vector(s) theta.
+
+        (S (..., N) [1/s], b (..., N, N)) on ``grid`` (class averages on the default scheme)
+        for parameter vector(s) theta, at ``process`` with the scale-up factors.
+        """
         tr = self.translator
         p = tr.unpack(theta)
         S, b = tr.breakage_on_grid(p, self._process(process), 1, grid, A_factor, mu_factor)
@@ -157,8 +168,11 @@ class FittedBreakage:
         return (S, b) if np.ndim(theta) > 1 else (S[0], b[0])
 
     def cumulative(self, theta, x, y, top=None) -> np.ndarray:
-        """Continuous B(x; y) [-] of eq. 6 at sizes x, y [m] (broadcasting) for one parameter
-        vector theta (:func:`millflow.breakage.distributions.continuous_B`)."""
+        """Continuous B(x; y) [-] of eq. 6 for one parameter vector.
+
+        Continuous B(x; y) [-] of eq. 6 at sizes x, y [m] (broadcasting) for one parameter
+        vector theta (:func:`millflow.breakage.distributions.continuous_B`).
+        """
         return self.translator.cumulative(theta, x, y, top)
 
     def rate_model(self, theta=None, process: dict | None = None, A_factor: float = 1.0,
@@ -174,8 +188,11 @@ class FittedBreakage:
 
 @dataclass(frozen=True, eq=False)
 class FittedRate:
-    """S(x) [1/s] of a fitted breakage model at given process values, times scale-up factors
-    on A and mu: a continuous rate model (callable of the sizes [m])."""
+    """The rate S(x) [1/s] of a fitted breakage model at given process values.
+
+    S(x) [1/s] of a fitted breakage model at given process values, times scale-up factors
+    on A and mu: a continuous rate model (callable of the sizes [m]).
+    """
 
     fitted: FittedBreakage
     theta: np.ndarray
@@ -184,6 +201,7 @@ class FittedRate:
     mu_factor: float = 1.0
 
     def __call__(self, x):
+        """Rates S [1/s] at sizes x [m]."""
         return self.fitted.rates(self.theta, np.asarray(x, float), self.process, self.A_factor, self.mu_factor)
 
     def __repr__(self):
@@ -193,18 +211,19 @@ class FittedRate:
 
 @dataclass(frozen=True, eq=False)
 class FittedDistribution:
-    """B(x; y) of a fitted breakage model (eq. 6): ``cumulative`` for class averages, ``b``
-    for Austin's upper edges."""
+    """B(x; y) of a fitted breakage model (eq. 6): ``cumulative`` for class averages, ``b`` for Austin's upper edges."""
 
     fitted: FittedBreakage
     theta: np.ndarray
 
     def b(self, x):
+        """Fractional b at the upper edges x [m]."""
         return self.fitted.frac_b(self.theta, np.asarray(x, float))
 
     __call__ = b
 
     def cumulative(self, x, y, top=None):
+        """Continuous B(x; y) [-] at sizes x, y [m]."""
         return self.fitted.cumulative(self.theta, x, y, top)
 
     def __repr__(self):

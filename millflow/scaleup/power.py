@@ -41,9 +41,12 @@ def _positive(value, name):
 
 
 def check_operation(critical_speed_fraction=None, ball_filling=None, powder_filling=None, where="mill"):
-    """Validate the operating fractions: 0 < phi_c < 1, 0 < J < 0.5 (balls above the axis
+    """Validate the operating fractions of a ball mill.
+
+    Validate the operating fractions: 0 < phi_c < 1, 0 < J < 0.5 (balls above the axis
     no longer form a cascading charge; every correlation here is fitted for J <= 0.45),
-    0 <= U <= 2 (U = powder volume / ball-bed voids; above ~1.5 the mill is overfilled)."""
+    0 <= U <= 2 (U = powder volume / ball-bed voids; above ~1.5 the mill is overfilled).
+    """
     if critical_speed_fraction is not None:
         v = float(critical_speed_fraction)
         if not (0 < v < 1):
@@ -62,9 +65,12 @@ def check_operation(critical_speed_fraction=None, ball_filling=None, powder_fill
 
 
 def critical_speed(diameter_m, ball_size_m=0.0):
-    """Critical speed N_c [rev/s] = sqrt(2 g / (D - d)) / (2 pi): the speed at which a ball
+    """Critical speed N_c [rev/s] of a ball mill.
+
+    Critical speed N_c [rev/s] = sqrt(2 g / (D - d)) / (2 pi): the speed at which a ball
     of diameter d [m] at the shell of a mill of diameter D [m] (inside liners) centrifuges.
-    In rpm with g = 9.81 this is the familiar 42.3 / sqrt(D - d)."""
+    In rpm with g = 9.81 this is the familiar 42.3 / sqrt(D - d).
+    """
     D = _positive(diameter_m, "diameter_m")
     d = float(ball_size_m)
     if not (0 <= d < D):
@@ -73,9 +79,12 @@ def critical_speed(diameter_m, ball_size_m=0.0):
 
 
 def ball_charge_mass(diameter_m, length_m, ball_filling, ball_density_kg_m3=7800.0, bed_porosity=0.4):
-    """Mass of balls [kg] = J V rho_b (1 - eps): V = pi D^2 L / 4 [m^3] inside liners, J the
+    """Mass of the ball charge [kg].
+
+    Mass of balls [kg] = J V rho_b (1 - eps): V = pi D^2 L / 4 [m^3] inside liners, J the
     fraction of the mill volume filled by the ball bed, eps its porosity (0.4 for a
-    random bed of balls: Austin, Klimpel & Luckie 1984)."""
+    random bed of balls: Austin, Klimpel & Luckie 1984).
+    """
     D, L = _positive(diameter_m, "diameter_m"), _positive(length_m, "length_m")
     check_operation(ball_filling=ball_filling)
     eps = float(bed_porosity)
@@ -98,12 +107,42 @@ def bond_rowland_power(diameter_m, length_m, ball_filling, critical_speed_fracti
     Validity: wet overflow-discharge ball mills (Rowland: multiply by 1.16 for wet
     grate discharge, 1.08 for dry), 0.35 <= J <= 0.5 as fitted by Bond, phi_c 0.6-0.8.
 
-    Sources: F. C. Bond, Crushing and grinding calculations, Br. Chem. Eng. 6 (1961);
-    C. A. Rowland, in Design and Installation of Comminution Circuits (SME 1982) ch. 23.
+    Parameters
+    ----------
+    diameter_m, length_m : float
+        Mill diameter D and length L inside liners [m].
+    ball_filling : float
+        Fraction J of the mill volume filled by the ball bed (voids included) [-], 0 < J < 0.5.
+    critical_speed_fraction : float
+        Fraction phi_c of the critical speed [-], 0 < phi_c < 1.
+    ball_size_mm : float
+        Ball size B [mm] (the ball-size factor of mills above 3.3 m).
+    ball_density_kg_m3 : float
+        Density of the balls [kg/m3] (7800 for steel).
+    bed_porosity : float
+        Porosity of the ball bed [-] (0.4 for a random bed).
 
     Returns
     -------
-    dict: kw_per_t_balls, ball_mass_t, net_kW.
+    dict
+        ``kw_per_t_balls`` [kW/t], ``ball_mass_t`` [t], ``net_kW`` [kW].
+
+    Raises
+    ------
+    InputError
+        Dimensions not > 0, or operating fractions outside their range
+        (:func:`check_operation`).
+
+    References
+    ----------
+    F. C. Bond, Crushing and grinding calculations, Br. Chem. Eng. 6 (1961);
+    C. A. Rowland, in Design and Installation of Comminution Circuits (SME, 1982), ch. 23.
+
+    Examples
+    --------
+    >>> r = bond_rowland_power(4.0, 6.0, 0.35, 0.75, ball_size_mm=50.0)
+    >>> round(r["net_kW"]), round(r["ball_mass_t"], 1)
+    (1421, 123.5)
     """
     D = _positive(diameter_m, "diameter_m")
     check_operation(critical_speed_fraction, ball_filling)
@@ -118,9 +157,11 @@ def bond_rowland_power(diameter_m, length_m, ball_filling, critical_speed_fracti
 
 def austin_power(diameter_m, length_m, ball_filling, critical_speed_fraction, ball_density_t_m3=7.8,
                  K=7.33, A=0.937, bed_porosity=0.4):
-    """Austin's ball-mill power equation (net) [kW]:
+    """Austin's ball-mill power equation (net) [kW].
 
-    m_p = K J phi_c (1 - A J) (1 - 0.1 / 2^(9 - 10 phi_c)) rho_b L D^2.3 [(1 - eps) / 0.6]
+    The net power is::
+
+        m_p = K J phi_c (1 - A J) (1 - 0.1 / 2^(9 - 10 phi_c)) rho_b L D^2.3 [(1 - eps) / 0.6]
 
     D, L [m] inside liners, rho_b [t/m^3] the density of the balls (7.8 for steel), J the
     ball filling (bed, voids included), phi_c the fraction of critical speed; K = 7.33,
@@ -135,12 +176,43 @@ def austin_power(diameter_m, length_m, ball_filling, critical_speed_fraction, ba
 
     Validity: ball mills, J <= 0.45, phi_c 0.5-0.9.
 
-    Source: L. G. Austin, R. R. Klimpel & P. T. Luckie, Process Engineering of Size
-    Reduction: Ball Milling (SME 1984), ch. 10.
+    Parameters
+    ----------
+    diameter_m, length_m : float
+        Mill diameter D and length L inside liners [m].
+    ball_filling : float
+        Fraction J of the mill volume filled by the ball bed (voids included) [-], 0 < J < 0.5.
+    critical_speed_fraction : float
+        Fraction phi_c of the critical speed [-], 0 < phi_c < 1.
+    ball_density_t_m3 : float
+        Density of the balls rho_b [t/m3] (7.8 for steel).
+    K, A : float
+        Constants of the equation (7.33 and 0.937 for wet overflow ball mills).
+    bed_porosity : float
+        Porosity eps of the ball bed [-] (0.4 for a random bed).
 
     Returns
     -------
-    dict: net_kW, ball_mass_t, kw_per_t_balls.
+    dict
+        ``net_kW`` [kW], ``ball_mass_t`` [t], ``kw_per_t_balls`` [kW/t].
+
+    Raises
+    ------
+    InputError
+        Dimensions not > 0, a porosity outside (0, 1), or operating fractions outside
+        their range (:func:`check_operation`).
+
+    References
+    ----------
+    L. G. Austin, R. R. Klimpel and P. T. Luckie, Process Engineering of Size Reduction:
+    Ball Milling (SME-AIME, New York, 1984), ch. 10.
+
+    Examples
+    --------
+    A 4 m x 6 m mill, 35 % ball filling, 75 % of critical speed (Bond-Rowland gives 1421 kW):
+
+    >>> round(austin_power(4.0, 6.0, 0.35, 0.75)["net_kW"])
+    1416
     """
     D, L = _positive(diameter_m, "diameter_m"), _positive(length_m, "length_m")
     check_operation(critical_speed_fraction, ball_filling)
@@ -155,10 +227,13 @@ def austin_power(diameter_m, length_m, ball_filling, critical_speed_fraction, ba
 
 
 def charge_arm(ball_filling, radius_m):
-    """Distance d_c [m] from the mill axis to the centre of mass of a charge that fills
+    """Distance d_c [m] from the mill axis to the charge's centre of mass.
+
+    Distance d_c [m] from the mill axis to the centre of mass of a charge that fills
     the fraction J of the circular section: a circular segment of half-angle theta with
     (2 theta - sin 2 theta) / (2 pi) = J, and d_c = 4 R sin^3(theta) / (3 (2 theta - sin 2 theta)).
-    Exact geometry (a half-full mill gives 4 R / (3 pi))."""
+    Exact geometry (a half-full mill gives 4 R / (3 pi)).
+    """
     from scipy.optimize import brentq
 
     J = float(ball_filling)
@@ -181,12 +256,42 @@ def hogg_fuerstenau_power(diameter_m, length_m, ball_filling, critical_speed_fra
     Validity: cascading charge (phi_c below ~0.85, no cataracting mass), charge shape a
     flat-surfaced segment; it ignores the powder's contribution (add it via M_c).
 
-    Source: R. Hogg, D. W. Fuerstenau, Power relationships for tumbling mills, Trans.
-    SME-AIME 252 (1972) 418-423.
+    Parameters
+    ----------
+    diameter_m, length_m : float
+        Mill diameter D and length L inside liners [m].
+    ball_filling : float
+        Fraction J of the mill volume filled by the ball bed (voids included) [-], 0 < J < 0.5.
+    critical_speed_fraction : float
+        Fraction phi_c of the critical speed [-], 0 < phi_c < 1.
+    ball_size_mm : float
+        Ball size d [mm] in the critical speed sqrt(2 g / (D - d)) / (2 pi) (0: at the shell).
+    ball_density_kg_m3 : float
+        Density of the balls [kg/m3].
+    bed_porosity : float
+        Porosity of the ball bed [-].
+    repose_angle_deg : float
+        Dynamic angle of repose alpha of the charge [deg].
 
     Returns
     -------
-    dict: net_kW, ball_mass_t, kw_per_t_balls.
+    dict
+        ``net_kW`` [kW], ``ball_mass_t`` [t], ``kw_per_t_balls`` [kW/t].
+
+    Raises
+    ------
+    InputError
+        Dimensions not > 0, or operating fractions outside their range.
+
+    References
+    ----------
+    R. Hogg and D. W. Fuerstenau, Power relationships for tumbling mills, Trans.
+    SME-AIME 252 (1972) 418-423.
+
+    Examples
+    --------
+    >>> round(hogg_fuerstenau_power(4.0, 6.0, 0.35, 0.75)["net_kW"])
+    1282
     """
     D = _positive(diameter_m, "diameter_m")
     check_operation(critical_speed_fraction, ball_filling)

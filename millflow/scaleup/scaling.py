@@ -5,7 +5,8 @@
   the material, so the product depends on the specific energy E = P t / H alone.
   B (normalised) is carried unchanged.
   Source: J. A. Herbst, D. W. Fuerstenau, Scale-up procedure for continuous grinding mill
-  design using population balance models, Int. J. Miner. Process. 7 (1980) 1-31.
+  design using population balance models, Int. J. Miner. Process. 7 (1980) 1-31,
+  doi:10.1016/0301-7516(80)90034-4.
   Validity: same material, same breakage mechanism (ball size and speed in the range
   where S^E was found constant; Herbst & Fuerstenau report it for ball mills of 0.25 to
   ~1 m and pilot scale).
@@ -57,8 +58,11 @@ AUSTIN_DEFAULTS = {
 
 
 def _diameter_term(D, D_ref, N1, Delta, D_large):
-    """(D/D_ref)^N1 up to D_large, with the exponent reduced by Delta above it (AKL: large
-    mills break less per unit power than the D^0.5 trend of small mills)."""
+    """The diameter factor (D/D_ref)^N1, with a reduced exponent above D_large.
+
+    (D/D_ref)^N1 up to D_large, with the exponent reduced by Delta above it (AKL: large
+    mills break less per unit power than the D^0.5 trend of small mills).
+    """
     def g(x):
         return x ** N1 if x <= D_large else D_large ** N1 * (x / D_large) ** (N1 - Delta)
     return g(D) / g(D_ref)

@@ -55,6 +55,7 @@ class PlantStudy:
 
     @property
     def closed(self) -> bool:
+        """True for a closed circuit (a classifier after the mill)."""
         return self.circuit.classifier is not None
 
     def flowsheet(self, rate, breakage, fresh_kg_s: float = 1.0):
@@ -81,8 +82,11 @@ class PlantStudy:
 
     # ----------------------------------------------------------- one member
     def at_mill_flow(self, fs, F_m: float) -> dict:
-        """The circuit at mill solids throughput F_m [kg/s]: product (mass fractions), fresh_kg_s,
-        tau_s, circulating_load (recycle / fresh), mass_balance, relative_residual."""
+        """The circuit at mill solids throughput F_m [kg/s].
+
+        Product (mass fractions), fresh_kg_s, tau_s, circulating_load (recycle / fresh),
+        mass_balance, relative_residual.
+        """
         from millflow.flowsheet.solve import solve_at
 
         flows, info = solve_at(fs, {MILL: {"throughput": float(F_m)}})
@@ -133,10 +137,13 @@ class PlantStudy:
 
     # ------------------------------------------------------- a population
     def population_at_mill_flow(self, fs, S, b, F_m) -> dict:
-        """The circuit for P members at once (S (P, N), b (P, N, N) of the mill on the grid,
+        """The circuit for P parameter sets at once.
+
+        The circuit for P members at once (S (P, N), b (P, N, N) of the mill on the grid,
         F_m (P,) mill flows [kg/s]): arrays product (P, N), fresh_kg_s, circulating_load; None
         when the flowsheet is not of the kind :func:`~millflow.flowsheet.population.
-        solve_population` solves (then member by member)."""
+        solve_population` solves (then member by member).
+        """
         from millflow.flowsheet.population import solve_population
 
         F_m = np.asarray(F_m, float)

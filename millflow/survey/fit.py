@@ -70,8 +70,11 @@ class _Data:
 
 
 class CircuitModel:
-    """A forward model for :func:`millflow.fitting.estimate.fit`: flowsheet parameters -> whitened
-    predictions of the reconciled measurements (rows ``rows`` of the balance)."""
+    """A forward model for :func:`millflow.fitting.estimate.fit` from a survey.
+
+    A forward model for :func:`millflow.fitting.estimate.fit`: flowsheet parameters -> whitened
+    predictions of the reconciled measurements (rows ``rows`` of the balance).
+    """
 
     def __init__(self, balance, names, rows=None):
         st = balance.structure
@@ -109,19 +112,24 @@ class CircuitModel:
     # ---------------------------------------------------------------- fit's interface
     @property
     def param_names(self):
+        """Names of the circuit parameters, in the order of theta."""
         return tuple(self.names)
 
     @property
     def n_data(self) -> int:
+        """Number of reconciled measurements fitted."""
         return int(self.y.size)
 
     def sample_ids(self):
+        """None: the whitened measurements are independent."""
         return None
 
     def describe(self) -> dict:
+        """The parameters and the rows of the balance fitted, as JSON-able data."""
         return {"parameters": self.names, "rows": self.rows.tolist()}
 
     def predict(self, theta):
+        """Whitened predictions (P, n_data) for parameter vector(s) theta (NaN where a solve fails)."""
         th = np.atleast_2d(theta)
         out = np.empty((th.shape[0], self.y.size))
         for k, row in enumerate(th):
@@ -133,9 +141,12 @@ class CircuitModel:
 
     # ------------------------------------------------------------------- the circuit
     def _feeds_from_survey(self) -> None:
-        """Set the feeds (solids, sieve analysis at the sieves the survey determines, water) and the
+        """Set the feeds and water additions to their reconciled values.
+
+        Set the feeds (solids, sieve analysis at the sieves the survey determines, water) and the
         measured water additions to their reconciled values; record them as the model's inputs
-        (``input_values`` [SI], ``input_grads`` d input / dz) for :meth:`input_covariance`."""
+        (``input_values`` [SI], ``input_grads`` d input / dz) for :meth:`input_covariance`.
+        """
         bal = self.balance
         fs = bal.survey.flowsheet
         st = bal.structure
@@ -243,12 +254,14 @@ class CircuitModel:
         return D @ Cuu @ D.T
 
     def document(self, theta) -> dict:
+        """The flowsheet document with the parameters set to ``theta``."""
         doc = copy.deepcopy(self.doc)
         for n, v in zip(self.names, theta):
             _set(doc, n, v)
         return doc
 
     def solve(self, theta, doc=None):
+        """The flowsheet solved at ``theta`` (or for the document ``doc``)."""
         from millflow.flowsheet import from_dict, solve
 
         fs = from_dict(self.document(theta) if doc is None else doc, source="<fitted circuit>",
@@ -325,17 +338,23 @@ class CircuitFit:
 
     @property
     def cov_scale(self) -> float:
-        """Factor on the eq. 9 covariance: the residuals are whitened by the stated covariance, so
-        SER^2 = 1 is known; eq. 9 rescales by the observed SER^2. The larger of the two is used
-        (a reported SE is never below either estimate)."""
+        """Factor on the eq. 9 covariance.
+
+        The residuals are whitened by the stated covariance, so SER^2 = 1 is known; eq. 9 rescales
+        by the observed SER^2. The larger of the two is used (a reported SE is never below either
+        estimate).
+        """
         ser2 = float(self.result.ser) ** 2
         return max(1.0, 1.0 / ser2) if ser2 > 0 and math.isfinite(ser2) else 1.0
 
     @property
     def covariance(self) -> np.ndarray:
-        """Parameter covariance: eq. 9's (scaled as :attr:`cov_scale` says) plus the part the
+        """Parameter covariance, with the part the reconciled feeds' errors add.
+
+        Parameter covariance: eq. 9's (scaled as :attr:`cov_scale` says) plus the part the
         errors of the reconciled feeds add through the model (:meth:`CircuitModel.input_covariance`,
-        propagated as A M A^T with A = (J^T J)^+ J^T of the whitened Jacobian)."""
+        propagated as A M A^T with A = (J^T J)^+ J^T of the whitened Jacobian).
+        """
         base = np.asarray(self.result.stats["covariance"]) * self.cov_scale
         return base if self.input_cov is None else base + self.input_cov
 
@@ -344,11 +363,15 @@ class CircuitFit:
         return {n: self.result.params[n].value for n in self.model.names}
 
     def document(self) -> dict:
+        """The flowsheet document with the parameters set to ``theta``."""
         return self.model.document([self.values[n] for n in self.model.names])
 
     def prediction_band(self, edit, quantity, step: float = 1e-4) -> tuple[float, float]:
-        """(value, SD) of ``quantity(solution)`` at an operating point ``edit(document)`` (in place),
-        the SD propagated from the parameter covariance (eq. 9) by central differences."""
+        """Value and SD of a quantity at an operating point.
+
+        (value, SD) of ``quantity(solution)`` at an operating point ``edit(document)`` (in place),
+        the SD propagated from the parameter covariance (eq. 9) by central differences.
+        """
         th = np.array([self.values[n] for n in self.model.names])
 
         def q(t):
@@ -454,8 +477,11 @@ def _input_cov(model: CircuitModel, res):
 
 
 def leave_one_stream_out(balance, names, params, res) -> dict:
-    """Refit without each measured stream in turn and predict it: per stream the RMS of the
-    whitened prediction error (about 1 when the model predicts it within its errors)."""
+    """Refit without each measured stream in turn and predict it.
+
+    Per stream the RMS of the whitened prediction error (about 1 when the model predicts it
+    within its errors).
+    """
     from millflow.fitting.estimate import fit
 
     full = CircuitModel(balance, names)

@@ -67,9 +67,12 @@ class ErrorModel:
 
 @dataclass(frozen=True)
 class PSDMeasurement:
-    """A sieve analysis: sieve sizes [m] (descending) and cumulative passing [-] at each,
+    """A sieve analysis with the SD of each class mass fraction.
+
+    A sieve analysis: sieve sizes [m] (descending) and cumulative passing [-] at each,
     with the SD of each class mass fraction (classes: above the coarsest sieve, between
-    sieves, the pan; ``len(sizes) + 1``)."""
+    sieves, the pan; ``len(sizes) + 1``).
+    """
 
     sizes: np.ndarray
     passing: np.ndarray
@@ -78,6 +81,7 @@ class PSDMeasurement:
 
     @property
     def fractions(self) -> np.ndarray:
+        """Class mass fractions (above the top sieve, between sieves, pan)."""
         return class_fractions(self.passing)
 
 
@@ -105,8 +109,11 @@ class StreamMeasurement:
 
 @dataclass(frozen=True, eq=False)
 class Survey:
-    """A survey: the flowsheet it samples, measurements per stream, water additions
-    (unit -> (value [kg/s] or None, SD)), the error model and where it came from."""
+    """A survey: the flowsheet, measurements per stream, water additions and error model.
+
+    A survey: the flowsheet it samples, measurements per stream, water additions
+    (unit -> (value [kg/s] or None, SD)), the error model and where it came from.
+    """
 
     flowsheet: object
     streams: dict
@@ -227,8 +234,11 @@ def _stream(name: str, t, errors: ErrorModel, base: Path) -> StreamMeasurement:
 
 
 def _only(t: dict, base: str, dim: str) -> dict:
-    """The keys of ``t`` that spell ``base`` (solids_tph, not solids_content_pct or solids_sd_tph);
-    check_keys has already refused every other spelling."""
+    """The keys of ``t`` that spell ``base``.
+
+    The keys of ``t`` that spell ``base`` (solids_tph, not solids_content_pct or solids_sd_tph);
+    check_keys has already refused every other spelling.
+    """
     return {k: v for k, v in t.items() if k == base or k in unit_keys(base, dim)}
 
 

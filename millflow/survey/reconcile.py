@@ -58,8 +58,11 @@ OBSERVABLE_RTOL = 1e-6
 
 
 def test_power(k, redundancy, threshold: float):
-    """P(|N(k sqrt(r), 1)| > threshold): the power of the measurement test for a gross error of
-    ``k`` SD in a measurement of redundancy ``r`` (linearised reconciliation)."""
+    """Power of the measurement test for a gross error of ``k`` SD.
+
+    P(|N(k sqrt(r), 1)| > threshold): the power of the measurement test for a gross error of
+    ``k`` SD in a measurement of redundancy ``r`` (linearised reconciliation).
+    """
     m = np.asarray(k, float) * np.sqrt(np.clip(redundancy, 0.0, 1.0))
     return stats.norm.sf(threshold - m) + stats.norm.cdf(-threshold - m)
 
@@ -96,18 +99,22 @@ class Balance:
     # ------------------------------------------------------------------ measurements
     @property
     def measured(self) -> np.ndarray:
+        """The measured values."""
         return self.structure.y
 
     @property
     def sd(self) -> np.ndarray:
+        """The standard deviations of the measurements."""
         return self.structure.sd
 
     @property
     def adjustment(self) -> np.ndarray:
+        """Adjusted minus measured values."""
         return self.adjusted - self.structure.y
 
     @property
     def redundant(self) -> np.ndarray:
+        """Mask of the redundant measurements."""
         return 1.0 - self.leverage > 1e-8
 
     @property
@@ -120,26 +127,35 @@ class Balance:
 
     @property
     def redundancy(self) -> np.ndarray:
-        """r_i = 1 - H_ii of each measurement: the share of an error in it that shows in its own
+        """Redundancy r_i = 1 - H_ii of each measurement.
+
+        r_i = 1 - H_ii of each measurement: the share of an error in it that shows in its own
         adjustment (0: not redundant, 1: fully redundant). A gross error of k SD shifts the
-        normalised adjustment by k sqrt(r_i) (linearised)."""
+        normalised adjustment by k sqrt(r_i) (linearised).
+        """
         return np.where(self.redundant, np.clip(1.0 - self.leverage, 0.0, 1.0), 0.0)
 
     def detection_power(self, k: float = 10.0) -> np.ndarray:
-        """Probability that a gross error of ``k`` SD in each measurement alone (the others with
+        """Probability that a gross error of ``k`` SD in each measurement is detected.
+
+        Probability that a gross error of ``k`` SD in each measurement alone (the others with
         their stated errors) takes its normalised adjustment past the threshold: the power of the
-        measurement test, P(|N(k sqrt(r_i), 1)| > threshold) in the linearised reconciliation."""
+        measurement test, P(|N(k sqrt(r_i), 1)| > threshold) in the linearised reconciliation.
+        """
         return np.where(self.redundant, test_power(k, self.redundancy, self.threshold), 0.0)
 
     def detectable_sd(self, power: float = 0.9) -> np.ndarray:
-        """The gross error, in SDs of each measurement, detected with probability ``power``:
-        (threshold + z_power) / sqrt(r_i) (the far tail neglected; inf where not redundant)."""
+        """The gross error, in SDs of each measurement, detected with probability ``power``.
+
+        (threshold + z_power) / sqrt(r_i) (the far tail neglected; inf where not redundant).
+        """
         with np.errstate(divide="ignore"):
             k = (self.threshold + stats.norm.ppf(power)) / np.sqrt(self.redundancy)
         return np.where(self.redundant, k, np.inf)
 
     @property
     def gross_errors(self) -> list:
+        """The measurements whose normalised adjustment exceeds the threshold, largest first."""
         n = self.normalised
         order = [int(i) for i in np.argsort(-np.nan_to_num(np.abs(n), nan=-1.0)) if np.isfinite(n[i])]
         return [self._describe(i) for i in order if abs(n[i]) > self.threshold]
@@ -151,6 +167,7 @@ class Balance:
         return [self._describe(i) for i in order[:count]]
 
     def label(self, i: int) -> str:
+        """The name of measurement ``i``."""
         r = self.structure.rows[i]
         return r["key"] + (f" {r['label']}" if "label" in r else "")
 
@@ -161,16 +178,18 @@ class Balance:
                 "not_separable_from": [self.label(j) for j in self.inseparable(i)]}
 
     def adjustment_correlation(self) -> np.ndarray:
-        """Correlation of the normalised adjustments (linearised): rho_ik = P_ik / sqrt(P_ii P_kk)
-        with P = I - H the projector onto the redundancy space of the whitened Jacobian; rows and
-        columns of measurements that are not redundant are 0.
+        """Correlation of the normalised adjustments (linearised).
+
+        rho_ik = P_ik / sqrt(P_ii P_kk) with P = I - H the projector onto the redundancy space of
+        the whitened Jacobian; rows and columns of measurements that are not redundant are 0.
 
         A gross error of k SD in measurement i shifts the normalised adjustment of measurement j
         by k sqrt(r_i) rho_ji, so measurements with |rho| near 1 respond to it almost alike and
         the measurement test cannot tell them apart: in a node whose size class is measured in
         every stream, an error in one stream's class moves the others' as much (an *equivalent
         set* of the gross-error literature). The one that is named first among them is then
-        decided by the noise: P(j before i) = Phi(-k sqrt(r_i) sqrt((1 - |rho_ij|) / 2))."""
+        decided by the noise: P(j before i) = Phi(-k sqrt(r_i) sqrt((1 - |rho_ij|) / 2)).
+        """
         if "rho" not in self.meta:
             J = self.meta["J"]
             if J.size == 0:
@@ -187,8 +206,11 @@ class Balance:
         return self.meta["rho"]
 
     def inseparable(self, i: int, rho_min: float = INSEPARABLE_RHO) -> list[int]:
-        """The other measurements whose normalised adjustments correlate with measurement i's by
-        |rho| >= ``rho_min``: a gross error in any of them looks like one in i to the test."""
+        """The measurements whose adjustments a gross error in measurement i resembles.
+
+        The other measurements whose normalised adjustments correlate with measurement i's by
+        |rho| >= ``rho_min``: a gross error in any of them looks like one in i to the test.
+        """
         C = self.adjustment_correlation()
         row = np.abs(C[i]).copy()
         row[i] = 0.0
@@ -207,11 +229,13 @@ class Balance:
         return float(value), float(math.sqrt(max(gt @ self.cov_t @ gt, 0.0))), True
 
     def solids(self, stream: str) -> tuple[float, float, bool]:
+        """Reconciled solids flow of ``stream`` [kg/s], its SD, and whether it is observable."""
         s = self.structure.streams.index(stream)
         g = self.structure.solids_gradient(s)
         return self.derived(g, float(g @ self.z))
 
     def water(self, stream: str) -> tuple[float, float, bool]:
+        """Reconciled water flow of ``stream`` [kg/s], its SD, and whether it is observable."""
         st = self.structure
         if not st.wet:
             return math.nan, math.nan, False
@@ -220,6 +244,7 @@ class Balance:
         return self.derived(g, float(self.z[st.w_index(st.streams.index(stream))]))
 
     def addition(self, unit: str) -> tuple[float, float, bool]:
+        """Reconciled water addition of ``unit`` [kg/s], its SD, and whether it is observable."""
         st = self.structure
         g = np.zeros(st.n_z)
         g[st.a_index(st.additions.index(unit))] = 1.0
@@ -301,9 +326,12 @@ def _particular(st: Structure, source: str = "survey") -> tuple[np.ndarray, np.n
 
 
 def _solve(st: Structure, z_p, N, t_start, max_iter: int, source: str, tol: float = 1e-6):
-    """Gauss-Newton on the balance-eliminated problem, each step the minimum-norm least-squares
-    solution of the linearised problem (LAPACK, so directions the data leave undetermined are
-    not moved), halved until the SSR does not rise; (t, evaluations)."""
+    """Gauss-Newton on the balance-eliminated problem.
+
+    Each step the minimum-norm least-squares solution of the linearised problem (LAPACK, so
+    directions the data leave undetermined are not moved), halved until the SSR does not rise;
+    (t, evaluations).
+    """
     w = 1.0 / st.sd
 
     def resid(t):
@@ -440,10 +468,12 @@ def _absurd(bal) -> bool:
 
 
 def unphysical(bal) -> list[str]:
-    """What makes a reconciled solution impossible: a stream whose solids flow is not positive,
-    a water flow or water addition negative by more than 3 of its SDs (or negative and
-    unobservable). Small negatives within the errors are not refused; :func:`negatives`
-    reports them."""
+    """What makes a reconciled solution impossible.
+
+    A stream whose solids flow is not positive, a water flow or water addition negative by more
+    than 3 of its SDs (or negative and unobservable). Small negatives within the errors are not
+    refused; :func:`negatives` reports them.
+    """
     st = bal.structure
     out = []
     scale = float(np.max(np.abs(bal.z[: st.S * st.K]).reshape(st.S, st.K).sum(axis=1), initial=0.0)) or 1.0
@@ -468,9 +498,11 @@ def unphysical(bal) -> list[str]:
 
 
 def negatives(bal) -> list[dict]:
-    """Reconciled values outside their physical range but within their errors, reported rather
-    than clipped: a size class's solids flow below 0 (its adjusted fraction negative, the
-    passing above it over 100 %), a stream's water or a water addition below 0."""
+    """Reconciled values outside their physical range but within their errors.
+
+    Reported rather than clipped: a size class's solids flow below 0 (its adjusted fraction
+    negative, the passing above it over 100 %), a stream's water or a water addition below 0.
+    """
     st = bal.structure
     out = []
     for s, n in enumerate(st.streams):

@@ -16,8 +16,11 @@ _VARY = re.compile(r"^\s*([A-Za-z_][\w.]*)\s*=\s*([^:]+):([^:]+):([^:]+)\s*$")
 
 @dataclass(frozen=True)
 class Axis:
-    """A varied key (dotted path into the flowsheet's tables) from ``start`` to ``stop``
-    in ``n`` values (grid), or uniformly between them (Latin hypercube)."""
+    """A varied key of the flowsheet and its range.
+
+    A varied key (dotted path into the flowsheet's tables) from ``start`` to ``stop``
+    in ``n`` values (grid), or uniformly between them (Latin hypercube).
+    """
 
     key: str
     start: float
@@ -26,11 +29,34 @@ class Axis:
 
     @property
     def values(self) -> np.ndarray:
+        """The grid's values of this key."""
         return np.linspace(self.start, self.stop, self.n)
 
 
 def parse_vary(text: str) -> Axis:
-    """``KEY=START:STOP:N`` -> Axis; a one-line InputError names what is wrong."""
+    """The :class:`Axis` of a ``--vary KEY=START:STOP:N`` argument.
+
+    Parameters
+    ----------
+    text : str
+        ``KEY=START:STOP:N``: a dotted key of the flowsheet (its unit is the key's own,
+        ``tau_min`` in minutes), two finite numbers and a whole number >= 1.
+
+    Returns
+    -------
+    Axis
+
+    Raises
+    ------
+    InputError
+        Anything else, in one line naming the argument.
+
+    Examples
+    --------
+    >>> ax = parse_vary("units.ball_mill.tau_min=2:6:5")
+    >>> ax.key, ax.values.tolist()
+    ('units.ball_mill.tau_min', [2.0, 3.0, 4.0, 5.0, 6.0])
+    """
     m = _VARY.match(text)
     if not m:
         raise InputError(f"--vary {text!r}: expected KEY=START:STOP:N, e.g. units.ball_mill.tau_min=2:6:5")
@@ -47,8 +73,11 @@ def parse_vary(text: str) -> Axis:
 
 
 def set_key(data: dict, key: str, value: float) -> None:
-    """Set ``data[a][b][c] = value`` for key "a.b.c"; the path must exist (a misspelt key
-    is refused, not added as a new setting)."""
+    """Set a numeric key of a flowsheet document by its dotted path.
+
+    Set ``data[a][b][c] = value`` for key "a.b.c"; the path must exist (a misspelt key
+    is refused, not added as a new setting).
+    """
     parts = key.split(".")
     node = data
     for k, part in enumerate(parts[:-1]):
@@ -64,14 +93,30 @@ def set_key(data: dict, key: str, value: float) -> None:
 
 
 def grid_cases(axes: list[Axis]) -> list[dict]:
-    """Every combination of the axes' values (the first key varies slowest)."""
+    """Every combination of the axes' values (the first key varies slowest).
+
+    Examples
+    --------
+    >>> grid_cases([Axis("a", 1, 2, 2), Axis("b", 0, 10, 2)])
+    [{'a': 1.0, 'b': 0.0}, {'a': 1.0, 'b': 10.0}, {'a': 2.0, 'b': 0.0}, {'a': 2.0, 'b': 10.0}]
+    """
     grids = np.meshgrid(*[a.values for a in axes], indexing="ij")
     flat = [g.ravel() for g in grids]
     return [{a.key: float(f[i]) for a, f in zip(axes, flat)} for i in range(flat[0].size)]
 
 
 def latin_hypercube_cases(axes: list[Axis], samples: int, seed: int = 0) -> list[dict]:
-    """``samples`` cases, each key uniform on [start, stop], stratified (scipy's LHS)."""
+    """``samples`` cases, each key uniform on [start, stop], stratified (scipy's LHS).
+
+    Each key's range is cut into ``samples`` equal strata and every stratum holds one case
+    (McKay, Beckman and Conover, Technometrics 21 (1979) 239-245).
+
+    Examples
+    --------
+    >>> cases = latin_hypercube_cases([Axis("a", 0, 1, 1)], samples=4, seed=0)
+    >>> sorted(int(c["a"] * 4) for c in cases)  # one case in each quarter
+    [0, 1, 2, 3]
+    """
     from scipy.stats import qmc
 
     if samples < 1:

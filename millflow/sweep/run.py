@@ -28,14 +28,17 @@ def _products(data: dict) -> list[str]:
 
 
 class CaseSolver:
-    """Solves cases of one flowsheet document: the base flowsheet is built once; a case
+    """Solves cases of one flowsheet document, rebuilding only the units a case changes.
+
+    Solves cases of one flowsheet document: the base flowsheet is built once; a case
     that changes keys of units (``units.<unit>.<key>``) rebuilds those units only
     (:func:`millflow.flowsheet.io.with_units`: a mill keeps its class-averaged breakage),
     each unit variant once (units are stateless: the cases of a grid that share a unit's
     values share the unit); any other key (grid, materials, streams) builds the case's
     whole flowsheet again.
     Each case is summarised by :func:`millflow.flowsheet.results.key_figures` (the product
-    streams' P80 and P50, circulating loads, kWh/t, mass balance)."""
+    streams' P80 and P50, circulating loads, kWh/t, mass balance).
+    """
 
     def __init__(self, data: dict, source: str = "<sweep>"):
         from millflow.flowsheet import from_dict, solve
@@ -87,9 +90,12 @@ class CaseSolver:
         return with_units(self.base, tables, built)
 
     def solve(self, case: dict) -> dict:
-        """One case solved: ``{"p80_um": {stream: v}, "p50_um": {...}, "circulating_load":
+        """One case solved, reduced to the figures a sweep keeps.
+
+        One case solved: ``{"p80_um": {stream: v}, "p50_um": {...}, "circulating_load":
         {recycle stream: v}, "specific_energy_kWh_per_t", "mass_balance_error", "runtime_s",
-        "reason"}``; a case that cannot be built or solved returns NaNs and its one-line reason."""
+        "reason"}``; a case that cannot be built or solved returns NaNs and its one-line reason.
+        """
         from millflow.flowsheet import solve
         from millflow.flowsheet.results import key_figures
 
@@ -107,8 +113,11 @@ _UNITS_KEPT = 4096
 
 
 def _set_copied(tables: dict, key: str, value: float) -> None:
-    """:func:`set_key` on copies of the tables along the key's path (the document the
-    sweep shares between its cases is never written)."""
+    """Set a key on copies of the tables along its path.
+
+    :func:`set_key` on copies of the tables along the key's path (the document the
+    sweep shares between its cases is never written).
+    """
     node = tables
     for part in key.split(".")[:-1]:
         if not isinstance(node, dict) or not isinstance(node.get(part), dict):
@@ -119,9 +128,12 @@ def _set_copied(tables: dict, key: str, value: float) -> None:
 
 
 def solve_case(data: dict, case: dict, source: str = "<sweep>") -> dict:
-    """One case on its own: the flowsheet dict with the case's values set, built whole,
+    """One case solved on its own.
+
+    One case on its own: the flowsheet dict with the case's values set, built whole,
     solved and reduced to the figures :meth:`CaseSolver.solve` returns (a sweep keeps one
-    CaseSolver for all its cases instead)."""
+    CaseSolver for all its cases instead).
+    """
     from millflow.flowsheet import from_dict, solve
     from millflow.flowsheet.results import key_figures
 
@@ -148,8 +160,11 @@ def _num(v) -> float:
 
 def run_sweep(path, vary: list[Axis], *, samples: int | None = None, seed: int = 0, scheduler: str = "local",
               workers: int | None = None, chunk: int | None = None, progress: bool = True) -> xr.Dataset:
-    """Solve the flowsheet file ``path`` for every case of ``vary`` (a grid, or
-    ``samples`` Latin-hypercube cases); see the package docstring for the Dataset."""
+    """Solve the flowsheet file ``path`` for every case of ``vary``.
+
+    Solve the flowsheet file ``path`` for every case of ``vary`` (a grid, or
+    ``samples`` Latin-hypercube cases); see the package docstring for the Dataset.
+    """
     from millflow.flowsheet import from_dict
     from millflow.inputs import read_toml
 
@@ -211,8 +226,11 @@ _ADDRESS = re.compile(r"^(?:[a-z][a-z0-9+]*://)?[\w.\-\[\]:]+:\d+$")
 
 
 def _check_design(vary, samples, seed, scheduler) -> None:
-    """Refuse, before anything is built, a sweep that cannot run: too many cases, a seed
-    numpy does not take, a scheduler that is neither a name nor an address."""
+    """Refuse, before anything is built, a sweep that cannot run.
+
+    Too many cases, a seed numpy does not take, a scheduler that is neither a name nor an
+    address.
+    """
     n = samples if samples is not None else math.prod(a.n for a in vary)
     if samples is not None and samples < 1:
         raise InputError(f"--samples {samples}: expected a whole number >= 1")

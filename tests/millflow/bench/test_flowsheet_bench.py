@@ -1,19 +1,5 @@
 """The flowsheet benchmark suite runs and its target case agrees with the substitution baseline."""
-import tomllib
-
 from millflow.bench import flowsheet as bench
-from tests import paths
-from tests.closed_circuit import per_time_text
-
-FLOWSHEETS = paths.FLOWSHEETS
-
-
-def test_bench_case_matches_example_file():
-    # the embedded benchmark circuit is the example file with another grid and 10 cells
-    a = tomllib.loads(bench.CLOSED_CIRCUIT_TOML)
-    b = tomllib.loads(per_time_text())  # the example in its per-time form
-    b["units"]["ball_mill"]["transport"]["n"] = 10
-    assert a["units"] == b["units"] and a["streams"] == b["streams"] and a["materials"] == b["materials"]
 
 
 def test_bench_rows():
@@ -43,3 +29,10 @@ def test_growth_rows_cover_both_forms_and_fit_exponents():
                                    and r["method"].startswith("prebuilt class-by-class"))
     assert any(r["method"].startswith("energy + hold-up: tear") for r in sized)
     assert "fitted exponents" in g["method"] and "N^" in bench.format_table(rows)
+
+
+def test_growth_exponent_recovers_a_power_law():
+    import pytest
+
+    ns = [100, 200, 400, 800]
+    assert bench.growth_exponent(ns, [3e-6 * n ** 1.37 for n in ns]) == pytest.approx(1.37, rel=1e-12)

@@ -131,3 +131,70 @@ def test_assumed_kinetics_params_need_units(tmp_path):
            "assumed": {"mode": "batch", "kinetics": "aggregation", "kinetics_params": {"x_ref": 22}}}
     with pytest.raises(InputError, match="x_ref: units of measure missing"):
         parse_config(raw)
+
+
+def _parsed(text):
+    import tomllib
+    return parse_config(tomllib.loads(text), "c.toml")
+
+
+@pytest.mark.parametrize("edit", [
+    ("tau_s = [30, 120, 480]", "tau_min = [0.5, 2, 8]"),
+    ("tau_s = [30, 120, 480]", "tau_h = [0.008333333333333333, 0.03333333333333333, 0.13333333333333333]"),
+])
+def test_design_times_in_any_unit_are_the_same_design(edit):
+    """tau_min and tau_h read through millflow.inputs: the same residence times in s as tau_s
+    (rtol 1e-12: the unit factors are exact, the decimal hours are rounded to 16 digits)."""
+    import numpy as np
+    ref = dict(_parsed(BASE).design.process)["tau_s"]
+    got = dict(_parsed(BASE.replace(*edit)).design.process)["tau_s"]
+    np.testing.assert_allclose(got, ref, rtol=1e-12)
+    assert ref == (30.0, 120.0, 480.0)
+
+
+def test_top_size_in_any_length_unit():
+    """top_size_mm = 2 and top_size_um = 2000 give the same sieve stack (the top sieve 2 mm)."""
+    import numpy as np
+    a = _parsed(BASE.replace("n_sieves = 8", "n_sieves = 8\ntop_size_mm = 2")).design
+    b = _parsed(BASE.replace("n_sieves = 8", "n_sieves = 8\ntop_size_um = 2000")).design
+    np.testing.assert_allclose(a.sieves_m, b.sieves_m, rtol=1e-12)
+    assert abs(a.sieves_m[0] - 2e-3) < 1e-15
+
+
+def test_batch_times_in_minutes():
+    text = BASE.replace("tau_s = [30, 120, 480]", "times_min = [0.5, 2, 8]").replace(
+        "mode = \"well_mixed\"", "mode = \"batch\"").replace("type = \"tanks_in_series\"", "type = \"slowing_down\"")
+    assert _parsed(text).design.times_s == (30.0, 120.0, 480.0)
+
+
+@pytest.mark.parametrize("edit, match", [
+    (("tau_s = [30, 120, 480]", "tau = [30, 120, 480]"), r"c\.toml: design\.tau: units of measure missing; write "
+                                                           r"tau_<unit> with one of _s, _min, _h"),
+    (("tau_s = [30, 120, 480]", "tau_fortnight = [1, 2]"), r"design\.tau_fortnight: unknown unit 'fortnight' for "
+                                                            r"tau \(time\)"),
+    (("n_sieves = 8", "n_sieves = 8\ntop_size = 4"), r"design\.top_size: units of measure missing"),
+    (("n_sieves = 8", "n_sieves = 8\ntop_size_cm = 4"), r"design\.top_size_cm: unknown unit 'cm'"),
+    (("n_sieves = 8", "n_sieves = 8\ntop_size_mm = -4"), r"design\.top_size_mm = -4: expected a value > 0"),
+    (("tau_s = [30, 120, 480]", "tau_s = [30, 120, 480]\ntau_min = [1]"), r"tau_s, tau_min give 'tau' twice"),
+    (("tau_s = [30, 120, 480]", "tau_s = []"), r"design\.tau_s = \[\]: expected a non-empty list"),
+    (("tau_s = [30, 120, 480]", "tau_s = 30"), r"design\.tau_s = 30: expected a non-empty list"),
+    (("tau_s = [30, 120, 480]", "tau_s = [30, 0]"), r"design\.tau_s = \[30, 0\]: expected a value > 0"),
+    (("tau_s = [30, 120, 480]", "times_s = [30]\ntau_s = [30]"), r"exactly one of times_<unit>"),
+    (("type = \"tanks_in_series\"", "type = \"tanks_in_series\"\nx_ref = 22"), r"truth\.x_ref: units of measure"),
+    (("type = \"tanks_in_series\"", "type = \"tanks_in_series\"\nfines_mm = 0.2"),
+     r"truth\.fines_mm is only for truth\.type = 'population'"),
+])
+def test_unit_keys_are_read_through_inputs(edit, match):
+    """A dimensional key without its unit, with an unknown unit, or twice: one line naming it."""
+    with pytest.raises(InputError, match=match) as err:
+        _parsed(BASE.replace(*edit))
+    assert "\n" not in str(err.value)
+
+
+def test_population_fines_in_mm_is_the_fines_size_in_m():
+    import tomllib
+    raw = tomllib.loads(BASE)
+    raw["truth"] = {"type": "population", "strengths": [0, 1], "fines_mm": 0.25}
+    raw["assumed"]["mode"] = "well_mixed"
+    cfg = parse_config(raw, "c.toml")
+    assert abs(cfg.truth(1.0).fines_m - 2.5e-4) < 1e-18

@@ -73,7 +73,7 @@ def test_tail_rule_spreads_the_fines_below_the_finest_sieve(tmp_path, tail):
 
 
 @pytest.mark.parametrize("csv, match", [
-    ("size,passing_pct\n100,100\n50,20\n", "size column with its unit"),
+    ("size,passing_pct\n100,100\n50,20\n", "column .size.: units of measure missing"),
     ("size_um,passing\n100,100\n50,20\n", "one of passing_pct"),
     ("size_um,retained_pct\n100,0\n50,60\n0,30\n", "sums to 90"),
     ("size_um,passing_pct\n100,100\n50,abc\n", "row 3, column passing_pct"),

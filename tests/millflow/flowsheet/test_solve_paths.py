@@ -4,10 +4,10 @@ import dataclasses
 import numpy as np
 import pytest
 
-from millflow.bench.flowsheet import growth_exponent, shipped_circuit_case
 from millflow.breakage.averaged import breakage_on_grid
 from millflow.flowsheet import solve
 from millflow.grid import SizeGrid
+from millflow.synthetic import CLOSED_CIRCUIT_TOML, closed_circuit_case, shipped_circuit_case
 
 
 def test_mill_keeps_its_forms_per_grid_read_only():
@@ -48,11 +48,6 @@ def test_torn_solve_with_kept_forms_equals_a_fresh_unit_each_iteration():
     assert kept.solver["tear"]["iterations"] == again.solver["tear"]["iterations"] > 1
 
 
-def test_growth_exponent_recovers_a_power_law():
-    ns = [100, 200, 400, 800]
-    assert growth_exponent(ns, [3e-6 * n ** 1.37 for n in ns]) == pytest.approx(1.37, rel=1e-12)
-
-
 
 def _sparse(fs):
     from millflow.flowsheet.solve import _linear_solve, _unit_blocks
@@ -63,7 +58,6 @@ def _sparse(fs):
 
 @pytest.mark.parametrize("n,cells", [(2, 1), (25, 1), (60, 3), (100, 10), (37, 7)])
 def test_class_by_class_solve_equals_sparse_lu(n, cells):
-    from millflow.bench.flowsheet import closed_circuit_case
     from millflow.flowsheet.structured import structured_solve
 
     fs = closed_circuit_case(n, cells)
@@ -82,7 +76,6 @@ def test_class_by_class_solve_equals_sparse_lu(n, cells):
 
 
 def test_two_mills_in_series_and_parallel_equal_sparse_lu():
-    from millflow.bench.flowsheet import CLOSED_CIRCUIT_TOML
     from millflow.flowsheet import from_dict
     from millflow.flowsheet.structured import structured_solve
     import tomllib
@@ -101,7 +94,6 @@ def test_two_mills_in_series_and_parallel_equal_sparse_lu():
 
 
 def test_classified_or_other_mills_take_the_sparse_path():
-    from millflow.bench.flowsheet import CLOSED_CIRCUIT_TOML
     from millflow.flowsheet import from_dict
     from millflow.flowsheet.structured import structured_solve
     import tomllib

@@ -5,7 +5,7 @@ import numpy as np
 import pytest
 
 from millflow import compiled
-from millflow.bench.flowsheet import CLOSED_CIRCUIT_TOML, closed_circuit_case
+from millflow.synthetic import CLOSED_CIRCUIT_TOML, closed_circuit_case
 from millflow.flowsheet import from_dict
 from millflow.flowsheet.structured import cell_circuit, structured_solve
 
