@@ -254,4 +254,7 @@ def screen_power_discharge(x, n, x_ref) -> np.ndarray:
     x_ref = np.asarray(x_ref, dtype=float)[..., np.newaxis]
     with np.errstate(invalid="ignore", divide="ignore"):
         z = n * (np.log(xs) - np.log(x_ref))
-    return np.exp(-np.clip(z, -600.0, 600.0))
+    np.maximum(z, -600.0, out=z)  # clipped in place (a fit's population: one array, no copies)
+    np.minimum(z, 600.0, out=z)
+    np.negative(z, out=z)
+    return np.exp(z, out=z)

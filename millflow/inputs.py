@@ -217,17 +217,20 @@ def quantity(table: dict, base: str, dim: str, where: str, default=..., *, posit
     ``array``), a negative (or zero) value where ``positive``. ``used`` collects the key
     read (for tables that refuse unread keys).
     """
-    at = f"{where}.{base}" if where else base
-    found = [k for k in table if k.startswith(base + "_") and k[len(base) + 1:] in UNITS[dim]]
+    units = UNITS[dim]
+    prefix = base + "_"
+    cut = len(prefix)
+    found = [k for k in table if k.startswith(prefix) and k[cut:] in units]
     if base in table:
+        at = f"{where}.{base}" if where else base
         raise InputError(f"{at}: units of measure missing; write {base}_<unit> with one of {suffixes(dim)} "
-                         f"(e.g. {base}_{next(iter(UNITS[dim]))})")
+                         f"(e.g. {base}_{next(iter(units))})")
     if len(found) > 1:
         raise InputError(f"{where or 'top level'}: {', '.join(found)} give {base!r} twice; keep one")
     if not found:
-        wrong = [k for k in table if k.startswith(base + "_")]
+        wrong = [k for k in table if k.startswith(prefix)]
         if wrong:
-            raise InputError(f"{where + '.' if where else ''}{wrong[0]}: unknown unit {wrong[0][len(base) + 1:]!r} "
+            raise InputError(f"{where + '.' if where else ''}{wrong[0]}: unknown unit {wrong[0][cut:]!r} "
                              f"for {base} ({dim}); expected one of {suffixes(dim)}")
         if default is ...:
             raise InputError(f"{where or 'top level'}: missing parameter {base}_<unit> ({dim}: {suffixes(dim)})")
@@ -236,10 +239,24 @@ def quantity(table: dict, base: str, dim: str, where: str, default=..., *, posit
     if used is not None:
         used.add(key)
     v = table[key]
-    ok_scalar = isinstance(v, (int, float)) and not isinstance(v, bool)
+    if isinstance(v, (int, float)) and not isinstance(v, bool):
+        # a single number (the common case) in Python floats: the same checks and the same
+        # IEEE product as the array path below, without numpy's per-call overhead
+        x = float(v)
+        bad = None
+        if not math.isfinite(x):
+            bad = "expected finite numbers"
+        elif positive and (x < 0 or (not allow_zero and x == 0)):
+            bad = f"expected a value {'>= 0' if allow_zero else '> 0'}"
+        else:
+            out = x * units[key[cut:]]
+            if math.isfinite(out) and (out != 0 or x == 0):
+                return out
+            bad = f"out of range (in SI units it {'overflows' if not math.isfinite(out) else 'underflows to 0'})"
+        raise InputError(f"{where + '.' if where else ''}{key} = {_show(v)}: {bad}")
     ok_list = array and isinstance(v, list) and all(isinstance(e, (int, float)) and not isinstance(e, bool)
                                                     for e in v)
-    if not (ok_scalar or ok_list):
+    if not ok_list:
         raise InputError(f"{where + '.' if where else ''}{key} = {_show(v)}: expected a number"
                          + (" or a list of numbers" if array else ""))
     arr = np.asarray(v, dtype=float)
@@ -249,7 +266,7 @@ def quantity(table: dict, base: str, dim: str, where: str, default=..., *, posit
         raise InputError(f"{where + '.' if where else ''}{key} = {_show(v)}: expected a value "
                          f"{'>= 0' if allow_zero else '> 0'}")
     with np.errstate(over="ignore", under="ignore"):
-        out = arr * UNITS[dim][key[len(base) + 1:]]
+        out = arr * units[key[cut:]]
     lost = ~np.isfinite(out) | ((out == 0) & (arr != 0))
     if np.any(lost):  # the unit conversion overflowed (1e306 t) or underflowed to 0
         raise InputError(f"{where + '.' if where else ''}{key} = {_show(v)}: out of range (in SI units it "

@@ -136,7 +136,9 @@ def power_law_rates_population(x, A, alpha, x0=X0_DEFAULT) -> np.ndarray:
     A, alpha, x0 = (np.asarray(v, dtype=float)[..., np.newaxis] for v in (A, alpha, x0))
     with np.errstate(over="ignore", invalid="ignore"):
         S = A * (xs / x0) ** alpha
-    S = np.where((A >= 0) & np.isfinite(alpha) & (x0 > 0), S, np.nan)
+    ok = (A >= 0) & np.isfinite(alpha) & (x0 > 0)
+    if not ok.all():  # (a pass over S only where some member is outside the domain)
+        S = np.where(ok, S, np.nan)
     S[..., -1] = 0.0  # the sink does not break
     return S
 

@@ -264,12 +264,15 @@ class _Problem:
 
 
 def check_problem(model: ForwardModel, params: dict) -> _Problem:
-    """The checks made before any optimisation (see module docstring). A model with
+    """Check a problem before any optimisation (see module docstring).
+
+    A model with
     non-linear kinetics whose steady or batch solve fails at some corners (e.g. Newton's
     iteration cap where the parameters make the mill extreme) is not refused for it: the
     fit goes on, those points count as infeasible, and ``prob.notes`` says so; the box
     centre or the start values must be solvable, and non-finite values without a failed
-    solve (the model undefined there) are refused as for any model."""
+    solve (the model undefined there) are refused as for any model.
+    """
     prob = _Problem(model, params)
     p, n = prob.idx.size, model.n_data
     if p == 0:

@@ -17,13 +17,16 @@ from __future__ import annotations
 
 import json
 import math
+from bisect import bisect_right
+from itertools import accumulate, repeat
+from operator import neg, truediv
 from pathlib import Path
 
 import numpy as np
 
 from millflow.errors import GridError
 from millflow.flowsheet.water import slurry_properties
-from millflow.psd import _fix_sum, _percentiles_of_cum, cum_passing, cum_passing_at
+from millflow.psd import _crossing, _fix_sum, _percentiles_of_cum, cum_passing, cum_passing_at
 
 __all__ = ["stream_properties", "circulating_loads", "mass_balance", "to_dataset", "summary", "key_figures",
            "error_report", "stream_table", "unit_table", "psd_table", "save"]
@@ -422,28 +425,127 @@ def key_figures(sol, streams=None) -> dict:
     arithmetic), without the rest of the summary: ``p80_um`` and ``p50_um`` of ``streams``
     (default: every stream), ``circulating_load``, ``specific_energy_kWh_per_t`` and
     ``mass_balance_error``.
+
+    A sweep calls it once per case, so it works in Python floats on the few streams it
+    needs (the kept streams, the products' inlets, the recycle loops' streams), the
+    flowsheet's connections read once per connection pattern (:func:`_figure_plan`); the
+    sums are exact (``math.fsum``) and the P80 / P50 reading is
+    :func:`millflow.psd.percentile_sizes`' own (cumulative passing summed from the fine end,
+    the same interpolating cubic and root).
     """
     fs = sol.flowsheet
-    names = fs.stream_names
-    x = fs.grid.x
-    rows = sol.flows.tolist()  # fsum over Python floats: the same exact sums, without numpy's per-item boxing
-    tot = {n: math.fsum(row) for n, row in zip(names, rows)}
+    plan = _figure_plan(fs)
+    index, flows, x = plan["index"], sol.flows, fs.grid.x
+    rows, tot = {}, {}
+    for n in plan["summed"] if streams is None else (*plan["summed"], *streams):
+        if n not in tot:
+            rows[n] = row = flows[index[n]].tolist()
+            tot[n] = math.fsum(row)
     p80, p50 = {}, {}
-    for n in (names if streams is None else streams):
+    lx = None
+    for n in (plan["names"] if streams is None else streams):
+        if n not in tot:
+            rows[n] = row = flows[index[n]].tolist()
+            tot[n] = math.fsum(row)
         if tot[n] > 0:  # as stream_properties: rounding-level negatives cut, the sum's residual placed
-            g = np.maximum(sol.flows[names.index(n)], 0.0)
-            a, b = _p80_p50(x, cum_passing(_fix_sum(g / math.fsum(g.tolist()))))
+            if lx is None:
+                lx = _log_sizes(x)
+            a, b = _p80_p50_floats(x, lx, rows[n], tot[n])
         else:
             a = b = float("nan")
         p80[n], p50[n] = _finite(a * 1e6), _finite(b * 1e6)
     feed = math.fsum(u.solids for u in fs.units.values() if u.type == "feed")
-    prod = math.fsum(tot[st.name] for st in fs.streams.values() if fs.units[st.target].type == "product")
+    prod = math.fsum(tot[n] for n in plan["product_inlets"])
     power = [u.power for u in fs.units.values() if u.type == "mill" and u.power is not None]
     energy = None if not power else ((math.fsum(power) / 1e3) / (prod * TPH) if prod > 0 else float("nan"))
-    return {"p80_um": p80, "p50_um": p50,
-            "circulating_load": {k: _finite(v) for k, v in _circulating(fs, tot).items()},
+    loads = {}
+    for n in plan["recycles"]:  # as _circulating: the stream over its loop's new feed
+        fresh = math.fsum(tot[s] for s in plan["new_feed"][n]) if plan["new_feed"][n] else 0.0
+        loads[n] = _finite(tot[n] / fresh if fresh > 0 else float("nan"))
+    return {"p80_um": p80, "p50_um": p50, "circulating_load": loads,
             "specific_energy_kWh_per_t": None if energy is None else _finite(energy),  # as _specific_energy
             "mass_balance_error": _finite(abs(prod - feed) / feed if feed > 0 else 0.0)}  # as mass_balance
+
+
+def _figure_plan(fs) -> dict:
+    """What :func:`key_figures` reads of the flowsheet's connections.
+
+    Read once per connection
+    pattern (kept with :func:`_loops`' result): stream indices, the streams entering
+    product units, the recycle streams and, per recycle stream, the streams that bring its
+    loop's new feed.
+    """
+    got = _PLANS.get(id(fs.streams))
+    types = tuple(u.type for u in fs.units.values())
+    if got is None or got[0] is not fs.streams or got[1] != tuple(fs.units) or got[2] != types:
+        lab, recycles = _loops(fs)
+        entering = {}
+        for n, st in fs.streams.items():
+            if lab[st.source] != lab[st.target]:
+                entering.setdefault(lab[st.target], []).append(n)
+        names = fs.stream_names
+        product_inlets = tuple(n for n, st in fs.streams.items() if fs.units[st.target].type == "product")
+        new_feed = {n: tuple(entering.get(lab[fs.streams[n].source], ())) for n in recycles}
+        summed = (*product_inlets, *recycles, *(s for v in new_feed.values() for s in v))
+        plan = {"index": {n: k for k, n in enumerate(names)}, "names": tuple(names),
+                "product_inlets": product_inlets, "recycles": recycles, "new_feed": new_feed,
+                "summed": tuple(dict.fromkeys(summed))}
+        got = (fs.streams, tuple(fs.units), types, plan)
+        if len(_PLANS) >= 64:
+            _PLANS.pop(next(iter(_PLANS)))
+        _PLANS[id(fs.streams)] = got  # holds the streams: their id is not reused while kept
+    return got[3]
+
+
+_PLANS: dict = {}
+
+
+def _log_sizes(x) -> list:
+    """Ln x of a grid's edges as Python floats (kept for the last grid asked)."""
+    kept = _LOG_X
+    if kept and kept[0] is x:
+        return kept[1]
+    lx = np.log(x).tolist()
+    _LOG_X[:] = [x, lx]
+    return lx
+
+
+_LOG_X: list = []
+
+
+def _p80_p50_floats(x, lx: list, row: list, total: float) -> tuple[float, float]:
+    """P80 and P50 of the flows ``row`` as :func:`_p80_p50` reads them, in Python floats.
+
+    ``total`` is the rows' exact sum (> 0). The same arithmetic as
+    ``_p80_p50(x, cum_passing(_fix_sum(g / fsum(g))))`` with g the flows cut at 0: the
+    fractions summed from the fine end (numpy's cumsum is that sequential sum), the
+    crossing edge found by bisection on the non-increasing cumulative passing, the
+    crossing by :func:`millflow.psd._crossing`.
+    """
+    if min(row) >= 0.0:
+        g, s = row, total
+    else:
+        g = [v if v >= 0.0 else 0.0 for v in row]
+        s = math.fsum(g)
+    if not math.isfinite(s):
+        return _p80_p50(x, cum_passing(_fix_sum(np.array(g) / s)))
+    f = list(map(truediv, g, repeat(s, len(g))))
+    k = f.index(max(f))
+    f[k] += 1.0 - math.fsum(f)
+    P = list(accumulate(reversed(f)))
+    P.reverse()
+    P[0] = 1.0
+    out = []
+    for q in (0.8, 0.5):
+        if P[-1] >= q:  # as _percentiles_of_cum's GridError: P50 (or both) in the sink
+            out.append(float("nan"))
+            continue
+        # the last edge with P >= q (the crossing lies below it): P[1:] sums non-negative
+        # fractions, so P >= q holds on a leading run of edges (P[0] = 1 >= q, also where
+        # P[1] rounds above 1) and bisection finds that run's end, as numpy's searchsorted
+        j = bisect_right(P, -q, key=neg) - 1
+        out.append(float(x[j]) if P[j] == q else math.exp(_crossing(lx, P, j, q)))
+    return out[0], out[1]
 
 
 def _finite(v) -> float | None:

@@ -173,10 +173,13 @@ def well_mixed_population_separable(S, feed, w1, c1, w2, c2, tau=1.0, d=None) ->
     lead = shape or (1,)
 
     def classes_first(v):
-        return np.ascontiguousarray(np.moveaxis(np.broadcast_to(v, lead + (n,)), -1, 0))
+        # (N, *v's own leading shape), contiguous per class: broadcast against lead where used
+        # (a feed shared by all members is not copied for each)
+        v = np.asarray(v, dtype=float)
+        return np.ascontiguousarray(np.moveaxis(np.broadcast_to(v, v.shape[:-1] + (n,)), -1, 0))
 
     with np.errstate(over="ignore", invalid="ignore"):
-        sT, fT, tT = classes_first(s), classes_first(f), classes_first(np.broadcast_to(t_d, s.shape))
+        sT, fT, tT = classes_first(s), classes_first(f), classes_first(t_d)
         w1T, w2T = classes_first(w1), classes_first(w2)
         c1, c2 = np.broadcast_to(c1, lead), np.broadcast_to(c2, lead)
         e1, e2 = 1.0 - c1, 1.0 - c2

@@ -100,11 +100,14 @@ def _order(seg) -> int:
 
 
 def _step_differences(sol, y0, f0) -> np.ndarray:
-    """d_n = P_n(t_n) - P_{n-1}(t_n) for every step n of ``sol`` (steps, N + 1); P_0 the
+    """Step differences of a dense output.
+
+    d_n = P_n(t_n) - P_{n-1}(t_n) for every step n of ``sol`` (steps, N + 1); P_0 the
     explicit Euler extrapolation y0 + (t - t_0) f(y0). Where the order rises, the previous
     step's dense output lacks the column the integrator added for its prediction (scipy
     keeps the order of the step taken), so that d_n would mostly be the new column, not
-    an error: such a step takes the difference of the next step whose order did not rise."""
+    an error: such a step takes the difference of the next step whose order did not rise.
+    """
     segs, ts = sol.sol.interpolants, sol.sol.ts
     h = np.diff(ts)
     ends = ts[1:]
@@ -136,9 +139,12 @@ def _step_differences(sol, y0, f0) -> np.ndarray:
 
 
 def propagated_error(kin: Kinetics, sol, y0, t) -> np.ndarray:
-    """Estimate of max |y(t) - u(t)| over the components (classes and overflow) at each
+    """Estimate the solve's error at the output times.
+
+    Estimate of max |y(t) - u(t)| over the components (classes and overflow) at each
     output time, (T,), of the solve ``sol`` (``dense_output=True``) from y0; see the
-    module docstring."""
+    module docstring.
+    """
     from millflow.linalg import SpectralBlocks
 
     n = kin.n

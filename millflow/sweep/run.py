@@ -37,57 +37,87 @@ class CaseSolver:
     values share the unit); any other key (grid, materials, streams) builds the case's
     whole flowsheet again.
     Each case is summarised by :func:`millflow.flowsheet.results.key_figures` (the product
-    streams' P80 and P50, circulating loads, kWh/t, mass balance).
+    streams' P80 and P50, circulating loads, kWh/t, mass balance). :meth:`solve_all` solves
+    a chunk of cases inside one single-threaded BLAS context
+    (:func:`millflow.threads.single_threaded_blas`, which each :func:`~millflow.flowsheet.solve`
+    would otherwise enter and leave).
     """
 
     def __init__(self, data: dict, source: str = "<sweep>"):
-        from millflow.flowsheet import from_dict, solve
+        from millflow.flowsheet import from_dict
 
         self.data, self.source = data, source
         self.products = _products(data)  # the streams whose P80 and P50 a sweep keeps
-        self._units = {}  # (unit, its varied values) -> (unit, water added): units are stateless
+        self._units = {}  # (unit, its varied values) -> (unit, water added, table): units are stateless
+        self._plans = {}  # the keys of a case -> which unit each key changes (None: build whole)
         try:
             self.base = from_dict(copy.deepcopy(data), source=source)
         except MillflowError:
             self.base = None  # every case is built whole (and says why it fails)
         else:
-            try:
-                solve(self.base)  # its mills' class averages, kept by the cases' rebuilt mills
-            except MillflowError:
-                pass
+            for unit in self.base.units.values():  # the mills' forms on the grid, kept by the cases' mills
+                if unit.type == "mill":
+                    try:  # (rates per energy then ask for tau and raise: the forms are kept all the same)
+                        unit.breakage_functions(self.base.grid)
+                    except MillflowError:
+                        pass
+
+    def _plan(self, keys: tuple):
+        """Which units a case's keys vary.
+
+        ((unit, (its varied keys, sorted)), ...) of a case's keys when every key is a unit's
+        (``units.<unit>.<key>...``), else None; once per set of keys (a sweep's cases share them).
+        """
+        plan = self._plans.get(keys, ...)
+        if plan is ...:
+            units = {}
+            for key in keys:
+                parts = key.split(".")
+                if parts[0] != "units" or len(parts) < 3 or self.base is None:
+                    units = None
+                    break
+                units.setdefault(parts[1], []).append(key)
+            plan = None if units is None else tuple((u, tuple(sorted(k))) for u, k in units.items())
+            if len(self._plans) >= 64:
+                self._plans.pop(next(iter(self._plans)))
+            self._plans[keys] = plan
+        return plan
 
     def flowsheet(self, case: dict):
         """The case's flowsheet (raises MillflowError naming what is wrong)."""
-        from millflow.flowsheet import from_dict
-        from millflow.flowsheet.io import unit_from_table, with_units
+        plan = self._plan(tuple(case))
+        if plan is None:
+            from millflow.flowsheet import from_dict
 
-        units = {}
-        for key, value in case.items():
-            parts = key.split(".")
-            if parts[0] != "units" or len(parts) < 3 or self.base is None:
-                units = None
-                break
-            units.setdefault(parts[1], []).append((key, value))
-        if units is None:
             d = copy.deepcopy(self.data)
             for key, value in case.items():
                 set_key(d, key, value)
             return from_dict(d, source=self.source)
-        source = self.data.get("units", {})
-        wrap = {"units": {u: source[u] for u in units if u in source}}
-        for key, value in case.items():
-            _set_copied(wrap, key, value)  # copies along the key's path: the document is shared
-        tables, built = wrap["units"], {}
-        for uname, values in units.items():
-            memo = (uname, tuple(sorted(values)))
-            unit = self._units.get(memo)
-            if unit is None:  # a grid repeats each unit's values in many cases: built once each
-                unit = unit_from_table(self.base, uname, tables[uname])
+        from millflow.flowsheet.io import with_units
+
+        tables, built = {}, {}
+        for uname, keys in plan:
+            memo = (uname, tuple([case[k] for k in keys]))
+            got = self._units.get(memo)
+            if got is None:  # a grid repeats each unit's values in many cases: built once each
+                got = self._build_unit(uname, keys, case)
                 if len(self._units) >= _UNITS_KEPT:
                     self._units.pop(next(iter(self._units)))
-                self._units[memo] = unit
-            built[uname] = unit
+                self._units[memo] = got
+            built[uname], tables[uname] = got[:2], got[2]
         return with_units(self.base, tables, built)
+
+    def _build_unit(self, uname: str, keys: tuple, case: dict) -> tuple:
+        """(unit, water added, its table) of unit ``uname`` with the case's values of ``keys``."""
+        from millflow.flowsheet.io import unit_from_table
+
+        source = self.data.get("units", {})
+        wrap = {"units": {uname: source[uname]} if uname in source else {}}
+        for key in keys:
+            _set_copied(wrap, key, case[key])  # copies along the key's path: the document is shared
+        table = wrap["units"][uname]
+        unit, added = unit_from_table(self.base, uname, table)
+        return unit, added, table
 
     def solve(self, case: dict) -> dict:
         """One case solved, reduced to the figures a sweep keeps.
@@ -96,17 +126,47 @@ class CaseSolver:
         {recycle stream: v}, "specific_energy_kWh_per_t", "mass_balance_error", "runtime_s",
         "reason"}``; a case that cannot be built or solved returns NaNs and its one-line reason.
         """
+        return self.solve_all([case])[0]
+
+    def solve_all(self, cases) -> list[dict]:
+        """Solve cases in order.
+
+        :meth:`solve` of each case, in order, inside one single-threaded BLAS context
+        (:func:`millflow.threads.single_threaded_blas`), in blocks of :data:`BLOCK` cases:
+        a block's flowsheets are built, then solved, then reduced to their key figures. The
+        work is that of case after case; a step repeated over a block runs with its code and
+        data in the processor's caches, which the other steps would evict (measured ~5 %
+        of a case).
+        """
         from millflow.flowsheet import solve
         from millflow.flowsheet.results import key_figures
+        from millflow.threads import single_threaded_blas
 
-        t0 = time.perf_counter()
-        try:
-            out = key_figures(solve(self.flowsheet(case)), self.products)
-        except MillflowError as exc:
-            return {"reason": " ".join(str(exc).split()), "runtime_s": time.perf_counter() - t0}
-        out.update(runtime_s=time.perf_counter() - t0, reason="")
+        clock, out = time.perf_counter, []
+        with single_threaded_blas():
+            for start in range(0, len(cases), BLOCK):
+                block = [[case, 0.0] for case in cases[start:start + BLOCK]]  # [what it has become, seconds]
+                for step in (self.flowsheet, solve, lambda sol: key_figures(sol, self.products)):
+                    for item in block:
+                        if isinstance(item[0], MillflowError):
+                            continue
+                        t0 = clock()
+                        try:
+                            item[0] = step(item[0])
+                        except MillflowError as exc:
+                            item[0] = exc
+                        item[1] += clock() - t0
+                for result, seconds in block:
+                    if isinstance(result, MillflowError):
+                        out.append({"reason": " ".join(str(result).split()), "runtime_s": seconds})
+                    else:
+                        result.update(runtime_s=seconds, reason="")
+                        out.append(result)
         return out
 
+
+#: Cases a CaseSolver builds, then solves, then reduces together (see :meth:`CaseSolver.solve_all`).
+BLOCK = 32
 
 #: Unit variants a CaseSolver keeps (a grid of 100 x 100 cases has 200 of them).
 _UNITS_KEPT = 4096
@@ -150,8 +210,7 @@ def solve_case(data: dict, case: dict, source: str = "<sweep>") -> dict:
 
 
 def _solve_chunk(data: dict, cases: list[dict], source: str) -> list[dict]:
-    solver = CaseSolver(data, source)
-    return [solver.solve(c) for c in cases]
+    return CaseSolver(data, source).solve_all(cases)
 
 
 def _num(v) -> float:
@@ -252,8 +311,9 @@ def _execute(data, cases, source, scheduler, workers, chunk, progress) -> list[d
     if scheduler == "serial":
         out = []
         bar = _bar(len(cases), progress)
+        solver = CaseSolver(data, source)  # one base flowsheet and one set of unit variants for every chunk
         for c in chunks:
-            out += _solve_chunk(data, c, source)
+            out += solver.solve_all(c)
             bar.update(len(c))
         bar.close()
         return out
