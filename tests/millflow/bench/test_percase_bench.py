@@ -8,7 +8,7 @@ from millflow.bench import percase
 def test_percase_rows_and_same_numbers(monkeypatch):
     monkeypatch.setattr(percase, "_sweep_case_row", lambda rounds, load: {
         "case": "sweep", "method": "solve_case", "runtime_s": 1.0, "baseline": "solve", "ratio_vs_baseline": 1.0,
-        "target_ratio": 1.2, "met": True, "load_average": load})
+        "target_ratio": 1.2, "met": True, "load_average": load, "ratio_vs_solve_work": 1.0, "max_rel_diff": 0.0})
     rows = percase.run(quick=True)
     by = {r["method"]: r for r in rows}
     assert by["percentile_sizes"]["max_rel_diff"] < 1e-11  # the same reading built plainly (roots to ~1e-14)
