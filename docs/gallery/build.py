@@ -119,6 +119,7 @@ def run_jobs(tmp: Path) -> dict:
 def solve_examples(tmp: Path) -> list:
     from millflow.commands.output import write_extras
     from millflow.flowsheet import load, save, solve, summary
+    from millflow.flowsheet.gridcheck import grid_check
     from millflow.flowsheet.results import stream_properties
     from millflow.report.flowsheet import drawing
 
@@ -131,9 +132,10 @@ def solve_examples(tmp: Path) -> list:
         out = tmp / toml.stem
         sol = solve(load(toml))
         props = stream_properties(sol)
-        s = summary(sol, props)
+        check = grid_check(sol, props)  # as millflow run: the grid error is part of what the page says
+        s = summary(sol, props, grid_check=check)
         s["source_file"] = f"flowsheets/{toml.name}"  # not this machine's path in the published page
-        save(sol, out, plots=True, props=props)
+        save(sol, out, plots=True, props=props, grid_check=check)
         write_extras(sol, s, out, input_path=toml)
         shutil.copyfile(out / "psd.png", img / f"{toml.stem}-psd.png")
         # the drawing of report.html, narrow enough to read at the width the site shows it
@@ -156,6 +158,10 @@ def _caption(s: dict) -> str:
     if s.get("specific_energy_kWh_per_t") is not None:
         parts.append(f"{s['specific_energy_kWh_per_t']:.3g} kWh/t of product")
     parts.append(f"mass balance error {s['mass_balance_error']:.1e}")
+    gc = s.get("grid_check") or {}
+    if gc.get("worst") is not None:  # the run's grid error: against the extrapolated (converged) value
+        parts.append(f"grid error of P80, P50 and circulating loads at most {100 * gc['worst']:.2g} % "
+                     f"({gc['worst_at']}; threshold {100 * gc['threshold']:.2g} %: {gc['status']})")
     return "; ".join(parts)
 
 
