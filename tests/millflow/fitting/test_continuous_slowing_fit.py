@@ -196,7 +196,8 @@ def test_cli_fits_slowing_down_in_recirculating_cells(tmp_path, capsys):
     assert par["s_slow"]["se"] < 0.5  # s is determined by three residence times, not only bounded
 
 
-@pytest.mark.slow  # minutes: a 6-parameter global search, every member one exit-age quadrature per condition
+@pytest.mark.slow  # ~5.5 min on a loaded 2-core machine: a 6-parameter global search, one exit-age
+# quadrature per member and condition (5 conditions)
 def test_cli_global_fit_recovers_slowing_down_in_tanks_in_series(tmp_path, capsys):
     _, make = TRANSPORTS["tanks_3"]
     design, M = _truth(make, taus=[60.0, 120.0, 240.0, 480.0, 960.0])
