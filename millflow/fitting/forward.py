@@ -138,12 +138,28 @@ class ForwardModel:
         #: non-linear kinetics: see millflow.fitting.kinetics)
         self.fd_noise = float(np.finfo(float).eps)
         if spec.kinetics:
-            from millflow.fitting.kinetics import ODE_RTOL, CompiledKinetics
+            from millflow.fitting.kinetics import AGE_TOL, ODE_RTOL, CompiledKinetics
             t_max = max([g[2] for g in self.groups] + [0.0])
-            self._nonlinear = CompiledKinetics.build(spec.kinetics, dict(spec.kinetics_params), self.grid, data, t_max)
+            # continuous: t_ref defaults to the longest tau of all the data's conditions (not
+            # only these: a subset, e.g. a validation fold, keeps the meaning of s_slow)
+            tau_max = None
+            if spec.mode != "batch":
+                tau_max = (float(data.process[spec.tau_column].to_numpy(float).max()) * self._factor[spec.tau_column]
+                           if spec.tau_column else 1.0)
+            self._nonlinear = CompiledKinetics.build(spec.kinetics, dict(spec.kinetics_params), self.grid, data, t_max,
+                                                     tau_max)
             if any(f != "slowing_down" for f in spec.kinetics):
                 self.fd_noise = ODE_RTOL
-            if spec.mode == "mill":
+            elif spec.mode != "batch":  # the exit-age quadrature (millflow.mill.nonlinear.age_slowing)
+                self.fd_noise = AGE_TOL
+            if "slowing_down" in spec.kinetics and spec.mode != "batch":
+                bad = sorted({g[1] for g in self.groups if g[1] not in ("product", "holdup")})
+                if bad:
+                    raise InputError(f"{data.source}: locations {bad}: a continuous mill with kinetics "
+                                     "'slowing_down' (kappa(t) in the particle's age) is fitted to 'product' and "
+                                     "'holdup' samples (segregated flow over the exit ages has no cell or axial "
+                                     "contents)")
+            elif spec.mode == "mill":
                 cells_ok = spec.transport in _NONLINEAR_CLASSIFIED
                 bad = sorted({g[1] for g in self.groups if g[1] != "product" and not (
                     cells_ok and (g[1] == "holdup" or g[1].startswith("cell:")))})
@@ -158,6 +174,9 @@ class ForwardModel:
         to the predictions, beside the grid (:meth:`grid_order`).
         """
         if self._nonlinear is not None and self.fd_noise > float(np.finfo(float).eps):
+            if self.spec.kinetics == ("slowing_down",):
+                return self.fd_noise, ("slowing-down in the particle's age: exit-age quadrature at its tolerance "
+                                       "(millflow.mill.nonlinear.age_slowing)")
             return self.fd_noise, "non-linear kinetics: stiff ODE / Newton solves at their relative tolerance"
         if self.spec.mode == "mill" and self._chain_cells() is None and not (
                 self.spec.transport == "recirculating_cells" or self.spec.transport == "plug_flow"):
@@ -532,6 +551,7 @@ class ForwardModel:
         d_all = self.discharge(p, n_pop) if (spec.classification and mode != "batch") else None
         axis = spec.transport in _AXIAL_TRANSPORTS + ("axial_dispersion_open",)
         where = (spec.where or ("axis" if axis else "discharge")) if mode == "mill" else "cells"
+        age = "slowing_down" in spec.kinetics
         for c in range(len(self.conditions)):
             gsel = [g for g, grp in enumerate(self.groups) if grp[0] == c]
             if mode == "batch":  # the whole population in one stacked solve
@@ -539,12 +559,21 @@ class ForwardModel:
                 out[:, gsel] = nl.solve_batch_population(S[:, c], b[:, c] if b.ndim == 4 else b,
                                                          self._feeds[c], t, p)
                 continue
+            locs = [self.groups[g][1] for g in gsel]
             for k in range(S.shape[0]):
                 bk = b[k, c] if b.ndim == 4 else b[k]
                 if not (np.isfinite(S[k, c]).all() and np.isfinite(bk).all()):
                     out[k, gsel] = np.nan
                     continue
-
+                if age:  # kappa(t) in the particle's age: segregated flow over the exit ages of the transport
+                    try:
+                        model = self._age_transport(float(tau_pc[k, c]) if mode == "mill" else float(tau[c]),
+                                                    extra if mode == "mill" else {}, k)
+                    except InputError:  # outside rtd's domain (e.g. r < 0): this member only
+                        out[k, gsel] = np.nan
+                        continue
+                    out[k, gsel] = nl.solve_age(S[k, c], bk, self._feeds[c], model, p, k, locations=locs)
+                    continue
                 if mode == "mill":
                     tr = spec.transport
                     kw = {"transport": "plug_flow" if tr == "plug_flow" else
@@ -565,10 +594,26 @@ class ForwardModel:
                     tc = float(tau[c])
                 if d_all is not None:
                     kw["d"], kw["where"] = d_all[k, c], where
-                locs = [self.groups[g][1] for g in gsel]
-                if mode == "mill" and any(loc != "product" for loc in locs):
+                if any(loc != "product" for loc in locs):
                     kw["locations"] = locs  # hold-up and cell samples of well-mixed cells
                 out[k, gsel] = nl.solve_steady(S[k, c], bk, self._feeds[c], tc, p, k, **kw)
+
+    def _age_transport(self, tau: float, extra: dict, k: int):
+        """The rtd model of this model's transport at mean residence time ``tau`` [s], member k.
+
+        The rtd model whose exit-age density :func:`millflow.mill.nonlinear.age_slowing`
+        averages over: mode "mill" its transport (fitted transport parameters of member
+        k), mode "plug_flow" plug flow, mode "well_mixed" perfect mixing or ``n_tanks``
+        equal tanks in series.
+        """
+        import rtd
+        mode = self.spec.mode
+        if mode == "mill":
+            return self._transport(tau, extra, k)
+        if mode == "plug_flow":
+            return rtd.PlugFlow(tau)
+        n = int(self.spec.n_tanks)
+        return rtd.PerfectMixing(tau) if n == 1 else rtd.TanksInSeries(tau, n)
 
     def _chain_cells(self):
         """Number of equal well-mixed cells in a row, or None.

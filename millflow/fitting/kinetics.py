@@ -6,9 +6,20 @@ Forms (``[model] kinetics``, one name or a list; constants in ``[model.kinetics_
 - ``slowing_down``: S_i(t) = S_i0 kappa(t) (Austin), parameter ``s_slow`` >= 0,
   kappa = 1/(1 + s t/t_ref) (``kappa = "hyperbolic"``, the default) or exp(-s t/t_ref)
   (``"exponential"``); t_ref (``t_ref_s``/``t_ref_min``) defaults to the last sampling
-  time. Solved exactly as the linear solution at theta(t) = int_0^t kappa
-  (theta = (t_ref/s) ln(1 + s t/t_ref), resp. (t_ref/s)(1 - exp(-s t/t_ref))). Batch only:
-  in a continuous mill kappa would act on each particle's age, not on the clock.
+  time (batch), or in a continuous mill, whose samples have no time, to the longest mean
+  residence time tau of the data's conditions (1 without a tau column: tau = 1, A is
+  tau A; a fitted tau needs t_ref given). Batch: solved exactly as the linear solution at
+  theta(t) = int_0^t kappa (theta = (t_ref/s) ln(1 + s t/t_ref), resp.
+  (t_ref/s)(1 - exp(-s t/t_ref))). Continuous: kappa acts on each particle's age t (its
+  time in the mill), and the product is segregated flow over the exit ages,
+  int E(t) exp(K theta(t)) f dt (:func:`millflow.mill.nonlinear.age_slowing`, by adaptive
+  quadrature to :data:`AGE_TOL` of the feed), exact for any micromixing since each
+  particle breaks at the rate of its own age; plug flow is the batch grind at theta(tau).
+  Any transport with an exit-age density; ``product`` and ``holdup`` samples (the
+  hold-up is int (1 - F(t)) exp(K theta(t)) f dt). Refused: classification (a particle's
+  exit then depends on the class it is in, which changes as it breaks: an age-structured
+  population balance would be needed, which millflow does not solve) and cell or axial
+  samples (segregated flow over exit ages says nothing about where a particle is).
 - ``population`` (fines cushioning / nipping, Bilgili-Scarlett type): S_i[M] =
   S_i (1 + w F(M))^lambda, F the mass fraction finer than ``fines_um`` (default the
   middle measured sieve), ``w`` (default 1) fixed, parameter ``lam_pop`` (< 0: fines
@@ -31,8 +42,9 @@ smooth in the parameters (the step sequence changes), so a difference quotient c
 noise ~ rtol / h; the step h = rtol^(1/3) x scale balances it against the O(h^2)
 truncation (both ~2e-5 relative at rtol 1e-7), far below the data's resolution. Forward
 sensitivities would remove the noise but double the state per parameter; at this noise
-level they buy nothing the statistics can see. ``slowing_down`` is exact (no ODE): its
-differences are as accurate as the linear model's.
+level they buy nothing the statistics can see. ``slowing_down`` in batch is exact (no
+ODE): its differences are as accurate as the linear model's; in a continuous mill its
+quadrature is refined to :data:`AGE_TOL`, and the differences step over that noise.
 """
 from __future__ import annotations
 
@@ -45,7 +57,7 @@ import numpy as np
 from millflow.batch import batch_grind_population
 from millflow.errors import InputError, MillflowError
 
-__all__ = ["fines_mask", "KINETICS_FORMS", "KINETICS_CONSTANTS", "KINETICS_DEFAULTS", "ODE_RTOL", "ODE_ATOL",
+__all__ = ["fines_mask", "KINETICS_FORMS", "KINETICS_CONSTANTS", "KINETICS_DEFAULTS", "ODE_RTOL", "ODE_ATOL", "AGE_TOL",
            "CompiledKinetics", "StackedKinetics", "stacked_batch", "check_kinetics", "theta_slowing"]
 
 #: Form -> fitted parameter names.
@@ -63,6 +75,11 @@ AXIAL_CELLS = 64
 #: finite-difference noise (rtol / h, h = rtol^(1/3) x scale) near 2e-5 relative, the
 #: model error 1e5 times below 1 % measurement noise.
 ODE_RTOL, ODE_ATOL = 1e-7, 1e-10
+#: Tolerance of the exit-age quadrature of slowing-down in a continuous mill (relative to
+#: the feed; :func:`millflow.mill.nonlinear.age_slowing`'s default): as fast as 1e-7 on
+#: the fits' grids (~15 ms a solve, the quadrature converges fast on smooth densities),
+#: and its error (~1e-13 measured) is far below the finite-difference steps.
+AGE_TOL = 1e-10
 #: Failure messages a :class:`CompiledKinetics` keeps.
 FAILURES_KEPT = 20
 
@@ -88,9 +105,6 @@ def check_kinetics(forms, constants: dict, mode: str) -> tuple[tuple, tuple]:
     if "slowing_down" in forms and len(forms) > 1:
         raise InputError("model.kinetics: slowing_down (kappa(t)) combines with no other form; "
                          "expected 'slowing_down' alone, or population and/or aggregation")
-    if "slowing_down" in forms and mode != "batch":
-        raise InputError(f"model.kinetics = 'slowing_down' needs mode = 'batch' (mode is {mode!r}): in a continuous "
-                         "mill kappa(t) would act on each particle's age; fit population or aggregation instead")
     allowed = {k for f in forms for k in KINETICS_CONSTANTS[f]}
     consts = dict(constants or {})
     unknown = sorted(set(consts) - allowed)
@@ -147,7 +161,13 @@ class CompiledKinetics:
         del self.failures[:-FAILURES_KEPT]
 
     @classmethod
-    def build(cls, forms, constants: dict, grid, data, t_max: float):
+    def build(cls, forms, constants: dict, grid, data, t_max: float, tau_max: float | None = None):
+        """Compile ``forms`` with their ``constants`` on ``grid`` for ``data``.
+
+        ``t_max`` the last sampling time [s] (batch; 0 for continuous samples), ``tau_max``
+        the longest mean residence time of the data's conditions [s] (continuous): the
+        default t_ref of ``slowing_down`` is ``t_max``, else ``tau_max``.
+        """
         sieves = np.sort(np.unique(data.table.size_m[data.table.size_m > 0].to_numpy(float)))[::-1]
         w = None
         if "population" in forms:
@@ -164,14 +184,23 @@ class CompiledKinetics:
             from millflow.nonlinear import KERNELS, Aggregation
             x_ref = constants.get("x_ref_m", float(sieves[-1]))
             op = Aggregation(KERNELS[constants.get("kernel", "constant")](1.0), x_ref).on(grid)
-        t_ref = constants.get("t_ref_s", t_max)
+        t_ref = constants.get("t_ref_s", t_max if t_max > 0 else (tau_max or 0.0))
         if "slowing_down" in forms and not t_ref > 0:
-            raise InputError("model.kinetics = 'slowing_down': the data have no sampling time > 0; "
-                             "give kinetics_params.t_ref_s")
+            raise InputError("model.kinetics = 'slowing_down': the data have no sampling time > 0 and no mean "
+                             "residence time; give model.kinetics_params.t_ref_s (or t_ref_min)")
         return cls(forms, constants.get("kappa", "hyperbolic"), float(t_ref), w, op)
 
     def _kin(self, S, b, p, k):
         from millflow.nonlinear import kinetics
+        if "slowing_down" in self.forms:  # kappa(t) in the particle's age, theta(t) in closed form
+            s, t_ref, hyperbolic = float(p["s_slow"][k]), self.t_ref, self.kappa == "hyperbolic"
+
+            def theta(t):  # theta_slowing for one age, in scalars (the quadrature calls it ~500 times)
+                u = s * t / t_ref
+                if u <= 1e-8:
+                    return t * (1 - u / 2)
+                return t * (math.log1p(u) if hyperbolic else -math.expm1(-u)) / u
+            return kinetics(S, b, theta_t=theta)
         lam = float(p["lam_pop"][k]) if "lam_pop" in p else 0.0
         beta0 = float(p["beta0"][k]) if "beta0" in p else 0.0
         op = None
@@ -230,8 +259,12 @@ class CompiledKinetics:
         :func:`millflow.mill.nonlinear.solve_transport`. Axial grids are fixed
         (:data:`AXIAL_CELLS` volumes: the forward model stays smooth in the parameters).
         ``locations`` (well-mixed cells): a list of "product", "holdup", "cell:K" gives
-        (L, N) mass fractions of those samples (hold-up with its overflow in class 1)."""
+        (L, N) mass fractions of those samples (hold-up with its overflow in class 1).
+        ``slowing_down`` needs ``model`` (the rtd model of the transport, any with an
+        exit-age density) and no ``d``: :meth:`solve_age`."""
         from millflow.mill import nonlinear as nl
+        if "slowing_down" in self.forms:
+            return self.solve_age(S, b, feed, model, p, k, d=d, locations=locations)
         kin = self._kin(S, b, p, k)
         try:
             if model is not None:
@@ -269,6 +302,39 @@ class CompiledKinetics:
             m = (cells.sum(axis=0) if loc == "holdup" else cells[int(loc[5:]) - 1]).copy()
             m[0] += over.sum() if loc == "holdup" else over[int(loc[5:]) - 1]
             rows.append(m / m.sum())
+        return np.array(rows)
+
+
+    def solve_age(self, S, b, feed, model, p, k, *, d=None, locations=None):
+        """Slowing-down in the particle's age in a continuous mill, member k.
+
+        Segregated flow over the exit ages of ``model`` (an rtd model with pdf and cdf;
+        plug flow: the batch grind at theta(tau)), by
+        :func:`millflow.mill.nonlinear.age_slowing` to :data:`AGE_TOL`: (N,) product per
+        unit feed, or with ``locations`` ("product", "holdup") (L, N) mass fractions;
+        NaN on failure. Classification (``d``) is refused: no one exit-age density
+        applies when a particle's exit depends on the class it is in.
+        """
+        from millflow.mill import nonlinear as nl
+        if d is not None:
+            raise InputError(nl._AGE_CLASSIFIED)
+        locs = ["product"] if locations is None else list(locations)
+        bad = sorted({loc for loc in locs if loc not in ("product", "holdup")})
+        if bad:
+            raise InputError(f"locations {bad}: a continuous mill with slowing_down (kappa(t)) predicts 'product' and "
+                             "'holdup' samples (segregated flow over the exit ages has no cell or axial contents)")
+        hold = "holdup" in locs
+        try:
+            r = nl.age_slowing(self._kin(S, b, p, k), feed, model, tol=AGE_TOL, holdup=hold)
+        except MillflowError as exc:
+            self._failed(exc)
+            return np.full(S.size if locations is None else (len(locs), S.size), np.nan)
+        if locations is None:
+            return r.product.copy()
+        rows = []
+        for loc in locs:
+            m = r.product if loc == "product" else r.info["holdup"]
+            rows.append(m / m.sum() if loc == "holdup" else m.copy())
         return np.array(rows)
 
 

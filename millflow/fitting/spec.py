@@ -167,6 +167,8 @@ class ModelSpec:
         forms, consts = check_kinetics(self.kinetics, dict(kp) if not isinstance(kp, dict) else kp, self.mode)
         object.__setattr__(self, "kinetics", forms)
         object.__setattr__(self, "kinetics_params", consts)
+        if "slowing_down" in forms and self.mode != "batch":
+            self._check_age_slowing(dict(consts))
         if forms and self.mode == "mill" and self.transport not in _NONLINEAR_TRANSPORTS:
             raise InputError(f"model.kinetics with transport {self.transport!r}: non-linear kinetics are fitted with "
                              f"transports {list(_NONLINEAR_TRANSPORTS)}")
@@ -186,6 +188,19 @@ class ModelSpec:
             if name not in allowed:
                 raise InputError(f"model.param_process: {name!r} cannot depend on process parameters here; "
                                  f"expected one of {allowed}")
+
+    def _check_age_slowing(self, consts: dict):
+        """Refuse what slowing-down in the particle's age cannot fit in a continuous mill."""
+        if self.classification is not None:
+            raise InputError(f"model.classification = {self.classification!r} with model.kinetics = 'slowing_down' "
+                             f"(mode {self.mode!r}): with classification a particle's exit depends on the class it "
+                             "is in, which changes as it breaks, so no one exit-age distribution applies (an "
+                             "age-structured population balance would be needed, which millflow does not solve); "
+                             "expected no classification, or kinetics 'population' / 'aggregation'")
+        if "tau" in self.transport_fit and "t_ref_s" not in consts:
+            raise InputError("model.kinetics = 'slowing_down' with model.transport_fit = ['tau']: the default t_ref "
+                             "(the longest tau) would move with the fit; expected model.kinetics_params.t_ref_s "
+                             "(or t_ref_min)")
 
     def _check_transport(self):
         tp = self.transport_params
