@@ -7,6 +7,10 @@ natural one for any sieve data.
 """
 from __future__ import annotations
 
+import multiprocessing as mp
+import os
+from concurrent.futures import ProcessPoolExecutor
+
 import numpy as np
 
 from millflow.errors import InputError
@@ -27,7 +31,7 @@ def condition_rmse(model: ForwardModel, theta) -> dict:
 
 
 def leave_out(model: ForwardModel, params: dict | None, held_out="each", *, progress=None, quiet: bool = False,
-              **fit_kwargs) -> dict:
+              workers: int | None = None, **fit_kwargs) -> dict:
     """Fit without some conditions and predict them.
 
     Parameters
@@ -36,6 +40,11 @@ def leave_out(model: ForwardModel, params: dict | None, held_out="each", *, prog
     params : parameter dict (start values and bounds) or None for defaults.
     held_out : ``"each"`` (leave one condition out at a time), a list of condition
         names (held out together, one fit), or a list of lists (one fit per group).
+    workers : processes that fit folds at the same time (default: the processor count,
+        at most the number of folds; 1 fits them one after the other in this process).
+        The folds are independent fits, so the result is the same either way; the
+        workers are forked, which needs a platform that forks (Linux, macOS): elsewhere
+        the folds run in this process.
     fit_kwargs : passed to :func:`~millflow.fitting.estimate.fit` (each fold runs the
         full search: nothing from the held-out data reaches the fold's fit).
 
@@ -46,16 +55,53 @@ def leave_out(model: ForwardModel, params: dict | None, held_out="each", *, prog
     """
     say = reporter(progress, quiet, "leave_out")
     conds = model.conditions
-    folds, rmse = [], {}
     groups = _groups(conds, held_out)
-    for k, (group, train) in enumerate(groups):
-        say(f"fold {k + 1}/{len(groups)}: predicting {', '.join(group)}")
-        res = fit(model.for_conditions(train), params, grid_check=False, quiet=True, profile=False, **fit_kwargs)
-        pred = condition_rmse(model.for_conditions(group), res.theta)
-        rmse.update(pred)
-        folds.append({"held_out": group, "rmse": pred, "params": {n: p.value for n, p in res.params.items()},
-                      "ssr_train": res.ssr, "spread": res.spread})
-    return {"folds": folds, "rmse": rmse, "mean_rmse": float(np.mean(list(rmse.values())))}
+    if workers is not None and (isinstance(workers, bool) or not isinstance(workers, (int, np.integer))
+                                or workers < 1):
+        raise InputError(f"leave_out: workers = {workers!r}; expected a whole number >= 1")
+    n_workers = min(len(groups), int(workers or os.cpu_count() or 1))
+    job = (model, params, groups, fit_kwargs)
+    if n_workers > 1 and "fork" in mp.get_all_start_methods():
+        _JOB[:] = [job]  # the forked workers inherit it: nothing is pickled but the fold's index and result
+        try:
+            with ProcessPoolExecutor(n_workers, mp_context=mp.get_context("fork")) as pool:
+                futures = [pool.submit(_fold, k) for k in range(len(groups))]
+                for k, fut in enumerate(futures):
+                    say(f"fold {k + 1}/{len(groups)}: predicting {', '.join(groups[k][0])}")
+                    fut.result()
+                results = [fut.result() for fut in futures]
+        finally:
+            _JOB.clear()
+    else:
+        results = []
+        for k, (group, _) in enumerate(groups):
+            say(f"fold {k + 1}/{len(groups)}: predicting {', '.join(group)}")
+            results.append(_run_fold(job, k))
+    rmse = {}
+    for fold in results:
+        rmse.update(fold["rmse"])
+    return {"folds": results, "rmse": rmse, "mean_rmse": float(np.mean(list(rmse.values())))}
+
+
+_JOB: list = []  # (model, params, groups, fit_kwargs) of the leave_out whose forked workers run
+
+
+def _fold(k: int) -> dict:
+    """Fold ``k`` of the job the forked worker inherited."""
+    from millflow.threads import single_threaded_blas
+
+    with single_threaded_blas():  # two processes on two cores: no BLAS threads on top
+        return _run_fold(_JOB[0], k)
+
+
+def _run_fold(job, k: int) -> dict:
+    """Fit fold ``k`` on its training conditions and predict its held-out ones."""
+    model, params, groups, fit_kwargs = job
+    group, train = groups[k]
+    res = fit(model.for_conditions(train), params, grid_check=False, quiet=True, profile=False, **fit_kwargs)
+    pred = condition_rmse(model.for_conditions(group), res.theta)
+    return {"held_out": group, "rmse": pred, "params": {n: p.value for n, p in res.params.items()},
+            "ssr_train": res.ssr, "spread": res.spread}
 
 
 def _groups(conds, held_out) -> list[tuple[list, list]]:
