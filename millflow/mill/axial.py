@@ -243,7 +243,14 @@ def solve_axial(S, b, feed, tau: float, pe: float, d=None, w=None, *, tol: float
         grid, float(ratio.max()) * pe, tol=tol, m_start=m_start, m_max=m_max,
         bytes_per_cell=8.0 * 6 * n_cls * cols)  # c, w c, tau c and three kept grids
     z, c, _ = finest
-    return AxialSolution(both[:n_cls], z, tau * c, tau * both[n_cls:], estimate, order, history)
+    fv = AxialSolution(both[:n_cls], z, tau * c, tau * both[n_cls:], estimate, order, history)
+    if estimate > tol and large_peclet_nodes_valid(pe, v_arr, w_arr, m_max):
+        def at_nodes(pe_j, tol_j):
+            return solve_axial(S, b, feed, tau, pe_j, d, w, tol=tol_j, m_start=m_start, m_max=m_max)
+
+        return better_of_fv_and_limit(
+            fv, lambda: large_peclet_limit(at_nodes, S, b, feed, tau, pe, v_arr, w_arr, tol=tol, m_max=m_max), tol)
+    return fv
 
 
 #: Share of the memory budget (MILLFLOW_MEMORY_BUDGET_GB) the finite-volume grids may hold:
@@ -330,8 +337,29 @@ def large_peclet_applies(pe: float, v, w, m_max: int) -> bool:
     m_max) and every class is in the plug-flow regime at the route's nodes
     (:data:`LARGE_PE_MIN_CLASS_PECLET`), i.e. max(v/w) / min(v/w) <= m_max / (32 x 100)."""
     ratio = np.asarray(v, float) / np.asarray(w, float)
-    pe_lo = m_max / LARGE_PE_NODE_CELLS / float(ratio.max()) / 4.0
-    return pe * float(ratio.max()) > m_max and pe_lo * float(ratio.min()) >= LARGE_PE_MIN_CLASS_PECLET
+    return pe * float(ratio.max()) > m_max and large_peclet_nodes_valid(pe, v, w, m_max)
+
+
+def large_peclet_nodes_valid(pe: float, v, w, m_max: int) -> bool:
+    """Whether every class is in the plug-flow regime at the large-Pe route's nodes and Pe
+    lies below its first node (x = 1/Pe inside the fitted range's end at 0).
+
+    The route is then also a fallback where the finite volumes stop above the tolerance
+    (Pe between the grids' reach and m_max: the grids reach their second-order range
+    only at the finest one)."""
+    ratio = np.asarray(v, float) / np.asarray(w, float)
+    pe_hi = m_max / LARGE_PE_NODE_CELLS / float(ratio.max())
+    return pe > pe_hi and pe_hi / 4.0 * float(ratio.min()) >= LARGE_PE_MIN_CLASS_PECLET
+
+
+def better_of_fv_and_limit(fv: AxialSolution, limit_solve, tol: float) -> AxialSolution:
+    """The finite-volume solution, or the large-Pe route's where the grids stopped above
+    ``tol`` and the route's estimate is smaller (its history then records both)."""
+    lim = limit_solve()
+    if lim.error_estimate < fv.error_estimate:
+        history = [("finite volumes stopped above the tolerance", fv.error_estimate), *lim.history]
+        return AxialSolution(lim.product, lim.z, lim.density, lim.holdup, lim.error_estimate, lim.order, history)
+    return fv
 
 
 def plug_flow_limit(S, b, feed, tau: float, v, positions: int = 65):

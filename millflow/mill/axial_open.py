@@ -55,7 +55,8 @@ import numpy as np
 from scipy.linalg import lapack
 
 from millflow.errors import InputError, SolverError
-from millflow.mill.axial import (AxialSolution, _bernoulli, _gth_factors, large_peclet_applies, large_peclet_limit,
+from millflow.mill.axial import (AxialSolution, _bernoulli, _gth_factors, better_of_fv_and_limit,
+                                 large_peclet_applies, large_peclet_limit, large_peclet_nodes_valid,
                                  refine_grids)
 
 __all__ = ["DISCHARGES", "OpenGrid", "solve_axial_open", "solve_axial_open_grid", "open_nodes", "open_grid",
@@ -330,4 +331,12 @@ def solve_axial_open(S, b, feed, tau: float, pe: float, d=None, w=None, *, disch
         grid, float((v / w_arr).max()) * pe, tol=tol, m_start=m_start, m_max=m_max,
         bytes_per_cell=8.0 * 3 * 8 * n_cls * cols)  # the mill and two tails; c, back layer, kept grids
     z, c, _, _ = finest
-    return AxialSolution(both[:n_cls], z, tau * c, mean * both[n_cls:], estimate, order, history)
+    fv = AxialSolution(both[:n_cls], z, tau * c, mean * both[n_cls:], estimate, order, history)
+    if estimate > tol and large_peclet_nodes_valid(pe, v, w_arr, m_max):
+        def at_nodes(pe_j, tol_j):
+            return solve_axial_open(S, b, feed, tau, pe_j, v, w_arr, discharge=discharge, tol=tol_j,
+                                    m_start=m_start, m_max=m_max)
+
+        return better_of_fv_and_limit(
+            fv, lambda: large_peclet_limit(at_nodes, S, b, feed, tau, pe, v, w_arr, tol=tol, m_max=m_max), tol)
+    return fv

@@ -94,3 +94,19 @@ def test_a_class_retained_by_classification_is_refused_with_the_reason():
     d = np.where(d < 1, 1e-3, 1.0)
     with pytest.raises(SolverError, match="plug-flow limit needs every class's Peclet number"):
         steady_mill(S, b, f, rtd.AxialDispersion(TAU, 1e6), d=d)
+
+
+@pytest.mark.parametrize("pe", [8e3, 1e4, 2e4])
+@pytest.mark.parametrize("bc", ["closed", "open"])
+def test_between_the_grids_reach_and_the_large_peclet_range(bc, pe):
+    # Pe below 16384 (the finite volumes' route) but too large for the grids to reach
+    # their second-order range before the finest: where they stop above the tolerance the
+    # large-Pe route (nodes at Pe 512..2048, x = 1/Pe between 0 and the first node) takes
+    # over when its estimate is smaller. Exact reference as above (v = w = d*).
+    S, b, f, d = _mill()
+    d = np.where(d < 1.0, 0.3, 1.0)  # a strongly retained coarse class
+    ds = steady_mill(S, b, f, rtd.AxialDispersion(TAU, pe, bc=bc), d=d, dispersion=d)
+    ref = steady_mill(S / d, b, f, rtd.AxialDispersion(TAU, pe, bc=bc))
+    err = float(np.abs(ds["product"].values - ref["product"].values).max())
+    assert ds.attrs["error_estimate"] <= 1e-8  # the default tolerance met
+    assert err <= ds.attrs["error_estimate"] + 1e-14  # the estimate bounds the actual error (rounding aside)
