@@ -566,13 +566,16 @@ class ForwardModel:
                     out[k, gsel] = np.nan
                     continue
                 if age:  # kappa(t) in the particle's age: segregated flow over the exit ages of the transport
+                    # (with classification, the age-structured cell balance)
                     try:
                         model = self._age_transport(float(tau_pc[k, c]) if mode == "mill" else float(tau[c]),
                                                     extra if mode == "mill" else {}, k)
                     except InputError:  # outside rtd's domain (e.g. r < 0): this member only
                         out[k, gsel] = np.nan
                         continue
-                    out[k, gsel] = nl.solve_age(S[k, c], bk, self._feeds[c], model, p, k, locations=locs)
+                    dk = None if d_all is None else d_all[k, c]
+                    out[k, gsel] = nl.solve_age(S[k, c], bk, self._feeds[c], model, p, k, d=dk, where=where,
+                                                locations=locs)
                     continue
                 if mode == "mill":
                     tr = spec.transport

@@ -191,12 +191,15 @@ class ModelSpec:
 
     def _check_age_slowing(self, consts: dict):
         """Refuse what slowing-down in the particle's age cannot fit in a continuous mill."""
-        if self.classification is not None:
+        cells = self.mode == "well_mixed" or (self.mode == "mill" and self.transport in _CELL_TRANSPORTS
+                                               and self.where != "axis")
+        if self.classification is not None and not cells:
+            where = self.transport if self.mode == "mill" else self.mode
             raise InputError(f"model.classification = {self.classification!r} with model.kinetics = 'slowing_down' "
-                             f"(mode {self.mode!r}): with classification a particle's exit depends on the class it "
-                             "is in, which changes as it breaks, so no one exit-age distribution applies (an "
-                             "age-structured population balance would be needed, which millflow does not solve); "
-                             "expected no classification, or kinetics 'population' / 'aggregation'")
+                             f"({where}): classification on the axis makes classes travel at different speeds, so "
+                             "a particle's age and its position are not tied (millflow solves the age-structured "
+                             "balance for well-mixed cells only); expected a cell transport (well_mixed, "
+                             f"{', '.join(_CELL_TRANSPORTS)}) or no classification")
         if "tau" in self.transport_fit and "t_ref_s" not in consts:
             raise InputError("model.kinetics = 'slowing_down' with model.transport_fit = ['tau']: the default t_ref "
                              "(the longest tau) would move with the fit; expected model.kinetics_params.t_ref_s "

@@ -25,8 +25,11 @@ the linear mill, with classification d* where the linear mill takes it.
   (:func:`solve_transport`);
 - slowing-down in the material's age (kappa(t), :class:`~millflow.nonlinear.kinetics.AgeSlowing`):
   without classification the product is exactly segregated flow, int E(t) exp(K theta(t)) f dt
-  (:func:`age_slowing`); with classification it is refused (a particle's exit then depends
-  on the class it is in, which changes as it breaks: no one E(t) applies);
+  (:func:`age_slowing`); with classification d* in cells (perfect mixing, tanks in series,
+  recirculating cells, compartment networks) no one E(t) applies (a particle's exit depends
+  on the class it is in, which changes as it breaks) and the age-structured balance of
+  :mod:`millflow.mill.age_cells` is solved, one linear ODE in the age; plug flow and axial
+  dispersion with classification on the axis are refused (age and position are not tied);
 - micromixing limits for any RTD model with ``pdf``/``cdf``: complete segregation,
   int_0^inf E(t) M_batch(t) dt, and maximum mixedness (Zwietering 1959),
   dM/dlambda = -R(M) + h(lambda) (M - f), h = E/(1 - F), integrated from large lambda
@@ -60,6 +63,7 @@ import numpy as np
 from scipy import special
 
 from millflow.errors import InputError, SolverError
+from millflow.mill.age_cells import AXIS_REFUSED, age_structured
 from millflow.mill.newton import MAX_ITER, PTC_ITER, ChainFactor, SparseFactor, newton
 from millflow.mill.nonlinear_axial import axial_dispersion, axial_open
 from millflow.mill.nonlinear_cell import (GRID_NOTE, NEWTON_RTOL, NonlinearSteady, _blas, _cell_guess, _check,  # noqa: F401
@@ -455,13 +459,12 @@ def _rtd():
 
 
 # ---------------------------------------------------------------- slowing-down in age
-_AGE_CLASSIFIED = ("kinetics with kappa(t) (slowing-down in the material's age) and classification d*: a particle's "
-                   "chance to leave then depends on the class it is in, which changes as it breaks, so the product "
-                   "is not one residence time distribution averaged over batch grinds (it needs an age-structured "
-                   "population balance, which millflow does not solve); expected d = None")
+#: The refusal that remains: classification on the axis (cells are solved by :mod:`millflow.mill.age_cells`).
+_AGE_CLASSIFIED = AXIS_REFUSED
 
 
-def age_slowing(kin: Kinetics, feed, transport, *, tol: float = 1e-10, holdup: bool = True) -> NonlinearSteady:
+def age_slowing(kin: Kinetics, feed, transport, d=None, where="discharge", *, tol: float = 1e-10,
+                holdup: bool = True, error_estimate: bool = True) -> NonlinearSteady:
     """A continuous mill with slowing-down in the material's age, S_i = S_i0 kappa(t).
 
     Here t is the time a particle has spent in the mill; without classification, in
@@ -474,10 +477,20 @@ def age_slowing(kin: Kinetics, feed, transport, *, tol: float = 1e-10, holdup: b
     is all that matters). Plug flow: the batch grind at theta(tau). Adaptive quadrature
     (:func:`millflow.mill.segregated.segregated_quadrature`), whose estimate is the error
     estimate.
+
+    With classification ``d`` (N,) normalised discharge d_i*, placed by ``where``
+    ("discharge", "cells", 1-based cell numbers) as the linear cells place it, a cell
+    transport is solved by the age-structured balance
+    (:func:`millflow.mill.age_cells.age_structured`, to ``tol`` of the feed;
+    ``error_estimate=False`` skips its second, tighter solve); plug flow and axial
+    dispersion with classification are refused (age and position are not tied).
     """
     feed, _ = _check(kin, feed, float(getattr(transport, "mean", 1.0)))
     if kin.age is None:
         raise InputError("age_slowing: the kinetics have no kappa(t) (kinetics(..., kappa_t=...))")
+    if d is not None:
+        return age_structured(kin, feed, transport, d, where or "discharge", rtol=max(tol, 1e-13), holdup=holdup,
+                              error_estimate=error_estimate)
     start = time.perf_counter()
     age = kin.age
     rtd = _rtd()
@@ -546,11 +559,11 @@ def solve_transport(kin: Kinetics, feed, transport, d=None, *, where=None, dispe
     sc = _scene(kin.S, kin.b, transport, d, where, dispersion, discharge=discharge)
     feed, _ = _check(kin, feed, 1.0)
     if kin.age is not None:
-        if sc.d is not None or sc.dispersion is not None:
+        if sc.dispersion is not None or (sc.d is not None and sc.kind not in ("perfect_mixing", "network")):
             raise InputError(_AGE_CLASSIFIED)
         if sc.kind in ("series", "parallel"):
             return _composed(kin, feed, transport, tol, holdup)
-        return age_slowing(kin, feed, transport, tol=min(tol, 1e-10), holdup=holdup)
+        return age_slowing(kin, feed, transport, sc.d, sc.where or "discharge", tol=min(tol, 1e-10), holdup=holdup)
     tau = float(transport.mean)
     kind = sc.kind
     if kind == "perfect_mixing":

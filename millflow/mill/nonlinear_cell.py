@@ -88,7 +88,8 @@ def _check(kin: Kinetics, feed, tau):
 def _no_age(kin: Kinetics, where: str):
     if kin.age is not None:
         raise InputError(f"{where}: kinetics with kappa(t) (slowing-down in the material's age) are solved by "
-                         "segregated flow over the exit ages (solve_transport, steady_mill) without classification")
+                         "segregated flow over the exit ages, or with classification in cells by the age-structured "
+                         "balance (solve_transport, steady_mill)")
 
 
 def residual_scale(kin: Kinetics, y_in, y, tau, d=None) -> float:

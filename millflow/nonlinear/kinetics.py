@@ -18,7 +18,8 @@ down with time, plus aggregation, as one right-hand side with its analytic Jacob
 - time-dependent slowing-down S_i(t) = S_i0 kappa(t) (Austin): dM/dt = kappa(t) K M,
   solved exactly as the linear solution at theta(t) = int_0^t kappa (:func:`slowing_down`);
   in a continuous mill kappa acts on each particle's age (:class:`AgeSlowing`, solved by
-  segregated flow in :mod:`millflow.mill.nonlinear`).
+  segregated flow in :mod:`millflow.mill.nonlinear`, or with classification in cells by the
+  age-structured balance of :mod:`millflow.mill.age_cells`).
 
 State vector y = (M_1..M_N, overflow): its sum is conserved. :meth:`Kinetics.rate_many`
 and :meth:`Kinetics.jacobian_many` evaluate R and dR/dy for many states at once (the
@@ -195,8 +196,8 @@ class Kinetics:
     def _no_age(self):
         if self.age is not None:
             raise InputError("kinetics with kappa(t) (slowing-down in the material's age) have no rate R(M) of the "
-                             "state alone; expected a batch grind (slowing_down) or a continuous mill without "
-                             "classification (segregated flow over the exit ages)")
+                             "state alone; expected a batch grind (slowing_down) or a continuous mill (segregated flow "
+                             "over the exit ages, or the age-structured cell balance with classification)")
 
     def rates(self, M) -> np.ndarray:
         """The rates S_i(M) in 1/s for M (N,) or (m, N)."""

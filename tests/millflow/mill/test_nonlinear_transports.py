@@ -210,8 +210,10 @@ def test_kappa_of_age_is_segregated_flow_exactly():
 def test_kappa_of_age_with_classification_is_refused_with_the_reason():
     grid, S, b, feed = _scene()
     kin = kinetics(S, b, kappa_t=lambda t: 1.0 / (1.0 + t / TAU))
-    with pytest.raises(InputError, match="changes as it breaks"):
-        steady_mill(kin, None, feed, rtd.PerfectMixing(TAU), np.full(S.size, 0.5))
+    # cells with classification are solved (the age-structured balance, test_age_classified.py);
+    # classification on the axis is refused: age and position are not tied
+    with pytest.raises(InputError, match="age and position are not tied"):
+        steady_mill(kin, None, feed, rtd.PlugFlow(TAU), np.full(S.size, 0.5))
     with pytest.raises(InputError, match="combines with no other non-linear term"):
         kinetics(S, b, w=np.ones((S.size, S.size)), lam=-1.0, kappa_t=lambda t: 1.0)
     with pytest.raises(InputError, match="no rate R"):
