@@ -37,6 +37,9 @@ from pathlib import Path
 
 repo, work = Path(sys.argv[1]).resolve(), Path.cwd().resolve()
 seen, busy = [], [False]
+# the Python environment itself (a virtual environment may live inside the checkout, as
+# CI's often does): reading installed packages is not reading the repository
+env_roots = {Path(p).resolve() for p in (sys.prefix, sys.exec_prefix, sys.base_prefix)}
 
 
 def hook(event, args):
@@ -48,6 +51,8 @@ def hook(event, args):
     busy[0] = True
     try:
         p = Path(os.fsdecode(path) if path is not None else ".").resolve()
+        if any(p == e or e in p.parents for e in env_roots):
+            return
         if p == work or work in p.parents or p == repo or repo in p.parents:
             seen.append(f"{event} {os.fsdecode(path) if path is not None else '.'}")
     finally:
