@@ -26,14 +26,31 @@ __all__ = ["single_threaded_blas", "blas_threads", "limit_blas_threads"]
 
 _state = threading.local()
 _controller = None
-_controller_modules = -1  # len(sys.modules) when the controller was built
+_controller_modules = None  # _loaded_libraries() when the controller was built
+
+
+#: Parts of the file names of the BLAS libraries threadpoolctl controls (OpenBLAS, MKL,
+#: BLIS, FlexiBLAS; the scipy-openblas wheels' libscipy_openblas).
+_BLAS_NAMES = (b"blas", b"mkl", b"blis")
+
+
+def _loaded_libraries():
+    """What changes when a BLAS library is loaded: the BLAS shared objects mapped into the
+    process (Linux: /proc/self/maps, ~1 ms), else the number of imported modules (a new
+    module may have loaded another BLAS)."""
+    try:
+        with open("/proc/self/maps", "rb") as fh:
+            names = {line.rsplit(None, 1)[-1] for line in fh if b".so" in line}
+    except OSError:
+        return len(sys.modules)
+    return frozenset(n for n in names if any(k in n.rsplit(b"/", 1)[-1].lower() for k in _BLAS_NAMES))
 
 
 def _get_controller():
-    """The cached ThreadpoolController, rebuilt when modules were imported since (a
-    new module may have loaded another BLAS); None without threadpoolctl."""
+    """The cached ThreadpoolController, rebuilt when a shared library was loaded since
+    (it may be another BLAS); None without threadpoolctl."""
     global _controller, _controller_modules
-    if _controller is None or len(sys.modules) != _controller_modules:
+    if _controller is None or _loaded_libraries() != _controller_modules:
         try:
             from threadpoolctl import ThreadpoolController
         except ImportError:
@@ -41,7 +58,7 @@ def _get_controller():
         import scipy.linalg  # noqa: F401  (loads scipy's own BLAS, so that it is limited too)
 
         _controller = ThreadpoolController()
-        _controller_modules = len(sys.modules)
+        _controller_modules = _loaded_libraries()
     return _controller
 
 

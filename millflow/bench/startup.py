@@ -76,9 +76,15 @@ undersize = {from = "screen.undersize", to = "product"}
 
 
 def _env() -> dict:
+    """The timed processes' environment: one BLAS thread, and byte-code written as Python
+    does by default (the untimed warm-up run writes it): with PYTHONDONTWRITEBYTECODE set,
+    an editable checkout's modules would be compiled from source in every timed process
+    while the baselines' libraries load their installed byte-code."""
     from millflow._lazy import import_path_env
 
-    return import_path_env(OPENBLAS_NUM_THREADS="1", OMP_NUM_THREADS="1", MKL_NUM_THREADS="1")
+    env = import_path_env(OPENBLAS_NUM_THREADS="1", OMP_NUM_THREADS="1", MKL_NUM_THREADS="1")
+    env.pop("PYTHONDONTWRITEBYTECODE", None)
+    return env
 
 
 def _time(cmd: list[str], env: dict, cwd: str) -> float:

@@ -20,6 +20,7 @@ Numbers are written at full precision (Excel shows them as formatted: 0.0 for t/
 """
 from __future__ import annotations
 
+import sys
 from pathlib import Path
 
 from millflow.errors import InputError
@@ -30,10 +31,30 @@ __all__ = ["excel_available", "write_workbook", "write_balance_workbook", "class
 def excel_available() -> bool:
     """True when openpyxl can be imported."""
     try:
-        import openpyxl  # noqa: F401
+        _openpyxl()
     except ImportError:
         return False
     return True
+
+
+def _openpyxl():
+    """Import openpyxl without Pillow.
+
+    openpyxl imports Pillow, when installed, only to embed images in a sheet, which these
+    workbooks never hold; Pillow's import is ~50 ms of a run's start-up. It stays
+    importable for everything else (the run's PNGs).
+    """
+    if "openpyxl" in sys.modules:
+        return sys.modules["openpyxl"]
+    hide = "PIL" not in sys.modules
+    if hide:
+        sys.modules["PIL"] = None  # ImportError inside openpyxl's optional import
+    try:
+        import openpyxl
+    finally:
+        if hide and sys.modules.get("PIL", 0) is None:
+            del sys.modules["PIL"]
+    return openpyxl
 
 
 def class_flows_tph(sol) -> dict:
@@ -49,6 +70,7 @@ def _num(v):
 def write_workbook(path, summary: dict, class_tph: dict | None = None) -> Path:
     """Write the workbook (see the module docstring) to ``path``; returns the path."""
     try:
+        _openpyxl()
         from openpyxl import Workbook
         from openpyxl.styles import Font
     except ImportError:
@@ -126,6 +148,7 @@ def write_balance_workbook(path, summary: dict) -> Path:
     ``About`` (input, SHA-256, version, chi-square test, circulating loads).
     """
     try:
+        _openpyxl()
         from openpyxl import Workbook
         from openpyxl.styles import Font
     except ImportError:
