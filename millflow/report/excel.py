@@ -44,7 +44,7 @@ def _openpyxl():
     workbooks never hold; Pillow's import is ~50 ms of a run's start-up. It stays
     importable for everything else (the run's PNGs).
     """
-    if "openpyxl" in sys.modules:
+    if sys.modules.get("openpyxl") is not None:
         return sys.modules["openpyxl"]
     hide = "PIL" not in sys.modules
     if hide:
