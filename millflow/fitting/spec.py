@@ -16,6 +16,8 @@ import numpy as np
 
 from millflow.breakage.rates import X0_DEFAULT
 from millflow.errors import InputError
+from millflow.mill.transport import TRANSPORT_FIT as _TRANSPORT_FIT
+from millflow.mill.transport import is_tanks
 
 __all__ = ["Parameter", "ModelSpec", "RATE_FORMS", "BREAKAGE_FORMS", "MODES", "canonical_location",
            "CLASSIFICATIONS", "TRANSPORTS", "TRANSPORT_FIT", "FORWARD_TOL", "default_parameters"]
@@ -45,11 +47,9 @@ def _transports() -> dict:
 
 
 TRANSPORTS = _transports()
-_CELL_TRANSPORTS = ("perfect_mixing", "tanks_in_series", "recirculating_cells")
-#: Transport parameters that mode "mill" can fit: name -> (fit parameter, transports).
-TRANSPORT_FIT = {"tau": ("ln_tau", tuple(TRANSPORTS)), "pe": ("ln_pe", ("axial_dispersion",)),
-                 "r": ("r", ("recirculating_cells",))}
-_AXIAL_TRANSPORTS = ("plug_flow", "axial_dispersion")
+#: Transport parameters that mode "mill" can fit: name -> (fit parameter, transports);
+#: its home is :mod:`millflow.mill.transport`.
+TRANSPORT_FIT = _TRANSPORT_FIT
 
 
 def canonical_location(loc) -> str:
@@ -172,7 +172,7 @@ class ModelSpec:
         if forms and self.mode == "mill" and self.transport not in _NONLINEAR_TRANSPORTS:
             raise InputError(f"model.kinetics with transport {self.transport!r}: non-linear kinetics are fitted with "
                              f"transports {list(_NONLINEAR_TRANSPORTS)}")
-        if forms and self.mode == "mill" and self.transport == "tanks_in_series":
+        if forms and self.mode == "mill" and is_tanks(self.transport):
             n = dict(self.transport_params).get("n")
             if n is not None and float(n) != int(n):
                 raise InputError(f"model.transport_params.n = {n!r}: a mill with non-linear kinetics solves "
