@@ -18,7 +18,9 @@ rtd classes:
   parameters (or a ``"series"`` of parts);
 - :func:`solve_nonlinear`: a mill with non-linear kinetics by the transport's own solver.
 
-Besides rtd's names, ``"well_mixed"`` (the fit's mode and the non-linear solvers' word
+The predicates are False (and :func:`equal_cells`, :func:`cell_count`,
+:func:`shape_parameter` None) for no transport (None: a fit mode without one). Besides
+rtd's names, ``"well_mixed"`` (the fit's mode and the non-linear solvers' word
 for perfect mixing) is read as ``"perfect_mixing"``.
 
 Examples
@@ -82,7 +84,8 @@ def transport_kind(transport) -> str:
 
     Parameters
     ----------
-    transport : a transport name (see :func:`canonical_transport`) or an ``rtd`` model.
+    transport : a transport name (see :func:`canonical_transport`; ``"series"``: a flowsheet's
+        series of parts) or an ``rtd`` model.
 
     Returns
     -------
@@ -96,7 +99,7 @@ def transport_kind(transport) -> str:
         For something that is neither.
     """
     if isinstance(transport, str):
-        return _NAME_KIND[canonical_transport(transport)]
+        return "series" if transport == "series" else _NAME_KIND[canonical_transport(transport)]
     import rtd
 
     from millflow.mill.scene import _kind
@@ -106,24 +109,29 @@ def transport_kind(transport) -> str:
     return _kind(transport)
 
 
+def _kind_of(transport) -> str | None:
+    """:func:`transport_kind`, None for no transport (a fit mode without one)."""
+    return None if transport is None else transport_kind(transport)
+
+
 def is_cells(transport) -> bool:
     """True for well-mixed cells: perfect mixing, tanks in series, a network of cells."""
-    return transport_kind(transport) in ("perfect_mixing", "tanks", "network")
+    return _kind_of(transport) in ("perfect_mixing", "tanks", "network")
 
 
 def is_tanks(transport) -> bool:
     """True for tanks in series (equal well-mixed tanks in a row, n of them)."""
-    return transport_kind(transport) == "tanks"
+    return _kind_of(transport) == "tanks"
 
 
 def is_network(transport) -> bool:
     """True for a network of cells with back-flow (recirculating cells, a compartment network)."""
-    return transport_kind(transport) == "network"
+    return _kind_of(transport) == "network"
 
 
 def is_plug(transport) -> bool:
     """True for plug flow."""
-    return transport_kind(transport) == "plug"
+    return _kind_of(transport) == "plug"
 
 
 def is_axial(transport, *, open_vessel: bool = True) -> bool:
@@ -139,13 +147,13 @@ def is_axial(transport, *, open_vessel: bool = True) -> bool:
     -------
     bool
     """
-    return transport_kind(transport) in (("plug", "axial", "axial_open") if open_vessel else ("plug", "axial"))
+    return _kind_of(transport) in (("plug", "axial", "axial_open") if open_vessel else ("plug", "axial"))
 
 
 def is_axial_dispersion(transport, *, open_vessel: bool | None = None) -> bool:
     """True for axial dispersion: either vessel (``open_vessel`` None), the open (True) or the closed one (False)."""
     kinds = {None: ("axial", "axial_open"), True: ("axial_open",), False: ("axial",)}[open_vessel]
-    return transport_kind(transport) in kinds
+    return _kind_of(transport) in kinds
 
 
 def equal_cells(transport, params: dict) -> int | None:
@@ -162,7 +170,7 @@ def equal_cells(transport, params: dict) -> int | None:
         1 for perfect mixing, n for tanks in series with an integer n >= 1 (and no other
         parameter), None for every other transport.
     """
-    kind = transport_kind(transport)
+    kind = _kind_of(transport)
     params = dict(params)
     if kind == "perfect_mixing" and not params:
         return 1
@@ -175,16 +183,18 @@ def cell_count(transport, params: dict):
     """Number of cells of a cell transport (1 for perfect mixing, else its ``n``), or None."""
     if not is_cells(transport):
         return None
-    return 1 if transport_kind(transport) == "perfect_mixing" else dict(params).get("n")
+    return 1 if _kind_of(transport) == "perfect_mixing" else dict(params).get("n")
 
 
 def shape_parameter(transport) -> str | None:
     """The parameter that shapes the RTD besides tau: ``"n"`` (cells) or ``"pe"`` (axial), else None."""
-    return {"tanks": "n", "network": "n", "axial": "pe", "axial_open": "pe"}.get(transport_kind(transport))
+    return {"tanks": "n", "network": "n", "axial": "pe", "axial_open": "pe"}.get(_kind_of(transport))
 
 
 def fit_parameters(transport) -> tuple[str, ...]:
     """The transport parameters a fit can estimate for this transport (keys of :data:`TRANSPORT_FIT`)."""
+    if transport is None:
+        return ()
     name = canonical_transport(transport)
     return tuple(k for k, (_, names) in TRANSPORT_FIT.items() if name in names)
 
@@ -247,7 +257,7 @@ def solve_nonlinear(kin, feed, tau: float, transport: str = "well_mixed", *, n_t
                                   holdup=False, m_cells=m_cells)
     if network is not None:
         return nl.cells(kin, feed, network, d, where)
-    kind = transport_kind(transport)
+    kind = _kind_of(transport)
     if kind == "plug":
         return nl.plug_flow(kin, feed, tau, d, rtol=rtol, atol=atol, holdup=False)
     if kind == "axial":
