@@ -72,8 +72,8 @@ from millflow.fitting.sieves import SieveReduction
 from millflow.fitting.spec import _NONLINEAR_CLASSIFIED, FORWARD_TOL, ModelSpec, canonical_location
 from millflow.fitting.translate import Translator
 from millflow.grid import SizeGrid
-from millflow.mill.transport import (cell_count, equal_cells, is_axial, is_axial_dispersion, is_cells, is_network,
-                                     is_plug, is_tanks)
+from millflow.mill.transport import (build_transport, canonical_transport, cell_count, equal_cells, is_axial,
+                                     is_axial_dispersion, is_cells, is_network, is_plug, is_tanks)
 from millflow.mill.well_mixed import well_mixed_population, well_mixed_population_separable
 from millflow.psd import from_sieves
 
@@ -604,14 +604,13 @@ class ForwardModel:
         k), mode "plug_flow" plug flow, mode "well_mixed" perfect mixing or ``n_tanks``
         equal tanks in series.
         """
-        import rtd
         mode = self.spec.mode
         if mode == "mill":
             return self._transport(tau, extra, k)
-        if mode == "plug_flow":
-            return rtd.PlugFlow(tau)
         n = int(self.spec.n_tanks)
-        return rtd.PerfectMixing(tau) if n == 1 else rtd.TanksInSeries(tau, n)
+        if mode == "plug_flow" or n == 1:  # the modes plug_flow and well_mixed name their transport
+            return build_transport(canonical_transport(mode), tau, {})
+        return build_transport("tanks_in_series", tau, {"n": n})
 
     def _chain_cells(self):
         """Number of equal well-mixed cells in a row, or None.
