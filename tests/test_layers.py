@@ -230,3 +230,118 @@ def test_the_rule_above_names_each_suites_tests():
     assert _suite_of_test(bench / "test_bench_core.py") == "core"
     assert _suite_of_test(bench / "test_bench_plot.py") == "plot"  # no such suite: nothing of one is its own
     assert _suite_of_test(ROOT / "tests" / "millflow" / "flowsheet" / "test_flowsheet_bench.py") is None
+
+
+# ------------------------------------------------------------------ one transport dispatch
+# "A transport is dispatched in one place" (docs/CONTRACTS.md): millflow.mill.transport
+# says what a transport is (its kind, its cells, its axis, what a fit can estimate) and
+# solves it; code outside millflow/mill/ asks it instead of comparing transport names or
+# testing rtd classes. Names as *values* (a default, a user's file being written, a label)
+# are not dispatch and are not looked at.
+def _transport_words() -> set[str]:
+    from rtd import names
+
+    # "cells" is also a place of classification (where = "cells"): not a word of its own here
+    return ({*names.TRANSPORTS, *names.ALIASES} - {"cells"}) | {"well_mixed"}
+
+
+def _rtd_classes() -> set[str]:
+    import rtd
+
+    return {n for n in rtd.__all__ if n[:1].isupper() and isinstance(getattr(rtd, n), type)}
+
+
+#: Sites left outside millflow/mill/, as "path: source of the node" (an assignment: its
+#: target) -> why it is not a transport dispatch. A new entry needs its reason.
+TRANSPORT_DISPATCH_ALLOWED: dict[str, str] = {
+    # the valid values of a falsification config's truth.type (a user's file); the three
+    # RTD truths among them are told apart by millflow.falsify.truths.is_rtd_truth, which
+    # asks millflow.mill.transport
+    "millflow/falsify/config.py: TRUTH_TYPES = ...": "the truth types a study config may name",
+    # the fit's modes (batch, plug flow, well mixed, mill): the fit's own vocabulary, read
+    # from a fit config; a mode-"mill" transport is dispatched by millflow.mill.transport
+    "millflow/fitting/spec.py: MODES = ...": "the fit's modes a fit config may name",
+}
+
+
+def _dispatch_nodes(tree, words: set[str], classes: set[str]) -> list[tuple[int, str]]:
+    """(line, source) of the transport dispatches in a module: comparisons with transport
+    names, dicts keyed by them, named tuples of them (``x in _AXIAL_TRANSPORTS``) and
+    isinstance tests on rtd classes. A comparison with the fit's ``mode`` ("batch",
+    "plug_flow", "well_mixed", "mill": the fit's own vocabulary, two of whose words name
+    the linear shortcuts of a mill) is not one; an assignment is given by its target."""
+
+    def named(node) -> bool:
+        if isinstance(node, ast.Constant):
+            return isinstance(node.value, str) and node.value in words
+        if isinstance(node, (ast.Tuple, ast.List, ast.Set)):
+            return any(named(e) for e in node.elts)
+        return False
+
+    def rtd_class(node) -> bool:
+        if isinstance(node, ast.Tuple):
+            return any(rtd_class(e) for e in node.elts)
+        if isinstance(node, ast.Attribute):
+            return isinstance(node.value, ast.Name) and node.value.id == "rtd"
+        return isinstance(node, ast.Name) and node.id in classes
+
+    def is_mode(node) -> bool:  # mode, spec.mode, config.get("mode", ...)
+        if isinstance(node, ast.Call) and node.args:
+            return isinstance(node.args[0], ast.Constant) and node.args[0].value == "mode"
+        return (isinstance(node, ast.Name) and node.id == "mode") or (
+            isinstance(node, ast.Attribute) and node.attr == "mode")
+
+    out = []
+    for node in ast.walk(tree):
+        hit, text = False, None
+        if isinstance(node, ast.Compare):
+            operands = [node.left, *node.comparators]
+            hit = any(named(o) for o in operands) and not any(is_mode(o) for o in operands)
+        elif isinstance(node, (ast.Assign, ast.AnnAssign)) and isinstance(node.value, (ast.Tuple, ast.List, ast.Set)):
+            targets = node.targets if isinstance(node, ast.Assign) else [node.target]
+            hit = any(named(e) for e in node.value.elts if isinstance(e, ast.Constant)) and not any(
+                isinstance(t, ast.Name) and t.id == "__all__" for t in targets)  # __all__: function names
+            text = f"{ast.unparse(targets[0])} = ..."
+        elif isinstance(node, ast.Dict):
+            hit = any(k is not None and named(k) for k in node.keys)
+        elif isinstance(node, ast.Call) and isinstance(node.func, ast.Name) and node.func.id in (
+                "isinstance", "issubclass") and len(node.args) == 2:
+            hit = rtd_class(node.args[1])
+        if hit:
+            out.append((node.lineno, text or ast.unparse(node)))
+    return out
+
+
+def transport_dispatch_sites() -> list[str]:
+    """The transport dispatches of millflow outside millflow/mill/ not allowed below."""
+    words, classes = _transport_words(), _rtd_classes()
+    sites = []
+    mill = ROOT / "millflow" / "mill"
+    for path in sorted((ROOT / "millflow").rglob("*.py")):
+        if mill in path.parents:
+            continue
+        rel = path.relative_to(ROOT).as_posix()
+        for line, text in _dispatch_nodes(ast.parse(path.read_text(encoding="utf-8")), words, classes):
+            if f"{rel}: {text}" not in TRANSPORT_DISPATCH_ALLOWED:
+                sites.append(f"{rel}:{line}: {text}")
+    return sites
+
+
+def test_transports_are_dispatched_in_the_mill_layer():
+    assert transport_dispatch_sites() == [], "ask millflow.mill.transport instead (or allow the site, with why)"
+
+
+def test_the_dispatch_rule_sees_a_dispatch():
+    src = """
+if spec.transport == "plug_flow" or isinstance(m, rtd.TanksInSeries) or x in ("tis", "other"):
+    key = {"axial_dispersion": "pe"}.get(t)
+_AXIAL = ("plug_flow", "axial_dispersion")
+if spec.mode == "plug_flow" or cfg.get("mode") in ("well_mixed", "plug_flow") or where == "cells":
+    table = {"model": "tanks_in_series", "n": 3}
+__all__ = ["well_mixed", "tanks_in_series"]
+cases = [("plug_flow", 1.0)]
+"""
+    found = [text for _, text in _dispatch_nodes(ast.parse(src), _transport_words(), _rtd_classes())]
+    assert sorted(found) == sorted([
+        "spec.transport == 'plug_flow'", "isinstance(m, rtd.TanksInSeries)", "x in ('tis', 'other')",
+        "{'axial_dispersion': 'pe'}", "_AXIAL = ..."])

@@ -112,14 +112,14 @@ def run(args) -> int:
     try:
         path, curve = rtd_cli.load_curve(args.csv, args.kind, args.baseline)
         mom = tracer_moments(curve)
-        from rtd.names import canonical_name
+        from millflow.mill.transport import is_network
 
-        if args.cells is not None and not any(canonical_name(m) == "recirculating_cells" for m in models):
+        if args.cells is not None and not any(is_network(m) for m in models):
             raise rtd.RTDError(f"--cells {args.cells}: applies to --model recirculating_cells (or cells) only")
         with progress("millflow fit-rtd", [f"fit {m}" for m in models], enabled=not args.quiet) as stage:
             for name in models:  # --cells belongs to the recirculating-cells model among several
                 stage(f"fit {name}")
-                cells = args.cells if canonical_name(name) == "recirculating_cells" else None
+                cells = args.cells if is_network(name) else None
                 result = rtd_cli.fit_curve(path, curve, name, cells)
                 fits[name] = (result, params_at_bounds(result, mom["mean"]))
     except rtd.RTDError as err:

@@ -64,8 +64,10 @@ from millflow.falsify.design import batch_design, continuous_design
 from millflow.falsify.noise import make_noise
 from millflow.falsify.nonlinear_truths import AggregationTruth, PopulationTruth
 from millflow.falsify.study import study_parameters
-from millflow.falsify.truths import BREAKAGE_TRUTH, LinearTruth, SlowingDownTruth, classification_truth, rtd_truth
+from millflow.falsify.truths import (BREAKAGE_TRUTH, LinearTruth, SlowingDownTruth, classification_truth,
+                                     is_rtd_truth, rtd_truth)
 from millflow.fitting.models import ModelSpec
+from millflow.mill.transport import is_network
 
 __all__ = ["StudyConfig", "load_config", "parse_config", "TRUTH_TYPES"]
 
@@ -229,11 +231,11 @@ def parse_config(raw: dict, src: str = "<config>") -> StudyConfig:
         if "strength" not in tr and "strengths" not in tr:
             raise InputError(f"{src}: truth.strength or truth.strengths is required for truth.type = {ttype!r}")
         strengths = _numbers(tr["strengths"], "truth.strengths", src) if "strengths" in tr else [float(tr["strength"])]
-    if "r" in tr and ttype != "recirculating_cells":
+    if "r" in tr and not (is_rtd_truth(ttype) and is_network(ttype)):
         raise InputError(f"{src}: truth.r is only for truth.type = 'recirculating_cells'")
-    if "n_screen" in tr and ttype not in ("tanks_in_series", "recirculating_cells", "axial_dispersion"):
+    if "n_screen" in tr and not is_rtd_truth(ttype):
         raise InputError(f"{src}: truth.n_screen (classification inside an RTD mill) is only for RTD truths")
-    if ttype in ("tanks_in_series", "axial_dispersion", "recirculating_cells", "classification") and design.is_batch:
+    if (is_rtd_truth(ttype) or ttype == "classification") and design.is_batch:
         raise InputError(f"{src}: truth.type = {ttype!r} needs a continuous design (design.tau_<unit>: tau_s, "
                          "tau_min, tau_h)")
     if ttype == "slowing_down" and not design.is_batch:
@@ -263,7 +265,7 @@ def parse_config(raw: dict, src: str = "<config>") -> StudyConfig:
 
 def _truth_factory(ttype, tparams, tr, sizes, assumed, src):
     """strength -> truth of ``truth.type``; ``sizes`` holds x_ref and fines in m (or None)."""
-    if ttype in ("tanks_in_series", "axial_dispersion", "recirculating_cells"):
+    if is_rtd_truth(ttype):
         n_screen = tr.get("n_screen")
         return lambda s: rtd_truth(ttype, s, tparams, r=float(tr.get("r", 1.0)),
                                    classification="screen_power" if n_screen is not None else None,

@@ -34,11 +34,12 @@ import numpy as np
 
 from millflow.errors import InputError, SolverError
 from millflow.fitting.models import ForwardModel, ModelSpec
+from millflow.mill.transport import is_axial, is_axial_dispersion, is_network, shape_parameter
 from millflow.nonlinear.kinetics import slowing_down, theta_of
 from millflow.psd import from_sieves
 
-__all__ = ["Truth", "LinearTruth", "SlowingDownTruth", "CallableTruth", "rtd_truth", "classification_truth",
-           "BREAKAGE_TRUTH"]
+__all__ = ["Truth", "LinearTruth", "SlowingDownTruth", "CallableTruth", "rtd_truth", "is_rtd_truth",
+           "classification_truth", "BREAKAGE_TRUTH"]
 
 #: Default breakage parameters of the truths (eq. 5 at x0 = 1 mm, ln of A [1/s]; eq. 6).
 BREAKAGE_TRUTH = {"ln_A0": math.log(1.0 / 60.0), "alpha": 1.0, "phi": 0.4, "gamma": 0.8, "beta": 3.5}
@@ -82,6 +83,25 @@ class LinearTruth:
         return M
 
 
+def is_rtd_truth(ttype) -> bool:
+    """True for the truth types that are a transport of :func:`rtd_truth`.
+
+    Parameters
+    ----------
+    ttype : a truth type (``truth.type`` of a falsification config).
+
+    Returns
+    -------
+    bool
+        True for well-mixed cells with a number of cells (tanks in series, recirculating
+        cells) and the closed axial-dispersion vessel.
+    """
+    try:
+        return shape_parameter(ttype) is not None and not is_axial_dispersion(ttype, open_vessel=True)
+    except ValueError:  # not a transport name
+        return False
+
+
 def rtd_truth(transport: str, strength: float, params: dict | None = None, *, r: float = 1.0,
               classification: str | None = None, n_screen: float | None = None) -> LinearTruth:
     """A linear mill with a real RTD (tanks in series, axial dispersion or recirculating cells).
@@ -91,7 +111,7 @@ def rtd_truth(transport: str, strength: float, params: dict | None = None, *, r:
     tau from the design's ``tau_s`` column. Optional classification ``screen_power`` with
     exponent ``n_screen`` at every cell outlet (cell transports) or along the axis.
     """
-    key = {"tanks_in_series": "n", "recirculating_cells": "n", "axial_dispersion": "pe"}.get(transport)
+    key = shape_parameter(transport) if is_rtd_truth(transport) else None  # cells n, the closed vessel's pe
     if key is None:
         raise InputError(f"truth.type = {transport!r}: expected tanks_in_series, axial_dispersion or "
                          "recirculating_cells")
@@ -101,9 +121,9 @@ def rtd_truth(transport: str, strength: float, params: dict | None = None, *, r:
             raise InputError(f"truth.strength = {strength!r}: the number of cells of {transport} must be an "
                              "integer >= 1")
         val = int(val)
-    tp = {key: val, **({"r": float(r)} if transport == "recirculating_cells" else {})}
+    tp = {key: val, **({"r": float(r)} if is_network(transport) else {})}
     cls = classification if n_screen is not None else None
-    where = "cells" if cls and transport != "axial_dispersion" else None
+    where = "cells" if cls and not is_axial(transport) else None
     spec = ModelSpec(mode="mill", transport=transport, transport_params=tp, tau_column="tau_s",
                      classification=cls, where=where)
     p = {**BREAKAGE_TRUTH, **(params or {})}

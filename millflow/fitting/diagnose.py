@@ -45,6 +45,7 @@ from millflow.errors import InputError, MillflowError
 from millflow.fitting.estimate import fit
 from millflow.fitting.models import ForwardModel, ModelSpec, Parameter, default_parameters
 from millflow.fitting.progress import reporter
+from millflow.mill.transport import cell_count, is_axial_dispersion, is_cells, is_network, is_plug, is_tanks
 
 __all__ = ["Diagnosis", "candidate_specs", "diagnose"]
 
@@ -99,19 +100,19 @@ def _transport_alternatives(base: ModelSpec) -> dict:
     (e.g. a classification placement of another transport) is left out."""
     tr, tp, fitted = base.transport, dict(base.transport_params), base.transport_fit
     specs = {}
-    if tr in ("perfect_mixing", "tanks_in_series"):
-        n = 1 if tr == "perfect_mixing" else int(round(float(tp["n"])))
-        for m in sorted({max(n - 1, 1), n + 1} - {n}) if tr == "tanks_in_series" else (2, 3):
+    if is_cells(tr) and not is_network(tr):  # perfect mixing or tanks in series
+        n = int(round(float(cell_count(tr, tp))))
+        for m in sorted({max(n - 1, 1), n + 1} - {n}) if is_tanks(tr) else (2, 3):
             specs[f"tanks_{m}" if m > 1 else "perfect_mixing"] = dict(
                 transport="tanks_in_series" if m > 1 else "perfect_mixing",
                 transport_params={**{k: v for k, v in tp.items() if k != "n"}, **({"n": m} if m > 1 else {})})
-    elif tr == "recirculating_cells" and "r" not in fitted:
+    elif is_network(tr) and "r" not in fitted:
         specs["cells_r_fitted"] = dict(transport_params={k: v for k, v in tp.items() if k != "r"},
                                        transport_fit=fitted + ("r",))
-    elif tr in ("axial_dispersion", "axial_dispersion_open") and "pe" not in fitted:
+    elif is_axial_dispersion(tr) and "pe" not in fitted:
         specs["axial_pe_fitted"] = dict(transport_params={k: v for k, v in tp.items() if k != "pe"},
                                         transport_fit=fitted + ("pe",))
-    elif tr == "plug_flow":
+    elif is_plug(tr):
         specs["axial_pe_fitted"] = dict(transport="axial_dispersion", transport_params={},
                                         transport_fit=fitted + ("pe",))
     out = {}
@@ -131,11 +132,11 @@ def _nesting_values(user: ModelSpec) -> dict:
     out = {"s_slow": 0.0, "lam_pop": 0.0, "beta0": 0.0}
     if "r" in tp:
         out["r"] = float(tp["r"])
-    elif user.transport == "recirculating_cells":
+    elif is_network(user.transport):
         out["r"] = 1.0  # rtd's default recirculation ratio
     if "pe" in tp:
         out["ln_pe"] = math.log(float(tp["pe"]))
-    elif user.transport == "plug_flow":
+    elif is_plug(user.transport):
         out["ln_pe"] = 6.0
     return out
 

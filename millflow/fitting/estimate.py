@@ -33,8 +33,9 @@ from scipy.stats import qmc
 
 from millflow.errors import InputError, MillflowError, SolverError
 from millflow.fitting.forward import ForwardModel
-from millflow.fitting.spec import _AXIAL_TRANSPORTS, FORWARD_TOL, Parameter, default_parameters
+from millflow.fitting.spec import FORWARD_TOL, Parameter, default_parameters
 from millflow.fitting.progress import reporter
+from millflow.mill.transport import is_axial
 from millflow.fitting.statistics import information_criteria, jacobian, parameter_statistics
 
 __all__ = ["FitResult", "fit", "compare_models", "SAME_SSR_RTOL"]
@@ -215,7 +216,8 @@ def prediction_noise(model) -> float | None:
     """
     noise = getattr(model, "fd_noise", None)
     spec = getattr(model, "spec", None)
-    if getattr(spec, "mode", None) == "mill" and getattr(spec, "transport", None) in _AXIAL_TRANSPORTS:
+    transport = getattr(spec, "transport", None)
+    if getattr(spec, "mode", None) == "mill" and transport is not None and is_axial(transport, open_vessel=False):
         return max(float(noise or 0.0), AXIAL_PREDICTION_NOISE)
     return noise
 

@@ -69,10 +69,11 @@ from millflow.batch import batch_grind_population
 from millflow.errors import InputError
 from millflow.fitting.data import PSDData
 from millflow.fitting.sieves import SieveReduction
-from millflow.fitting.spec import (_AXIAL_TRANSPORTS, _CELL_TRANSPORTS, _NONLINEAR_CLASSIFIED, FORWARD_TOL,
-                                   ModelSpec, canonical_location)
+from millflow.fitting.spec import _NONLINEAR_CLASSIFIED, FORWARD_TOL, ModelSpec, canonical_location
 from millflow.fitting.translate import Translator
 from millflow.grid import SizeGrid
+from millflow.mill.transport import (build_transport, canonical_transport, cell_count, equal_cells, is_axial,
+                                     is_axial_dispersion, is_cells, is_network, is_plug, is_tanks)
 from millflow.mill.well_mixed import well_mixed_population, well_mixed_population_separable
 from millflow.psd import from_sieves
 
@@ -179,7 +180,7 @@ class ForwardModel:
                                        "(millflow.mill.nonlinear.age_slowing)")
             return self.fd_noise, "non-linear kinetics: stiff ODE / Newton solves at their relative tolerance"
         if self.spec.mode == "mill" and self._chain_cells() is None and not (
-                self.spec.transport == "recirculating_cells" or self.spec.transport == "plug_flow"):
+                is_network(self.spec.transport) or is_plug(self.spec.transport)):
             return FORWARD_TOL, "mill solves refined to FORWARD_TOL of the feed (millflow.mill)"
         return float(np.finfo(float).eps) * self.n, ("exact linear solves (triangular substitution or the "
                                                      "eigenbasis of eq. 4): rounding, ~N eps")
@@ -363,12 +364,12 @@ class ForwardModel:
         spec = self.spec
         if loc in ("product", "holdup"):
             return
-        cells = {"perfect_mixing": 1}.get(spec.transport) or dict(spec.transport_params).get("n")
-        axial = spec.transport in _AXIAL_TRANSPORTS
-        ok = "'product', 'holdup'" + (f" or 'cell:K' (K = 1..{int(cells)})" if spec.transport in _CELL_TRANSPORTS
+        cells = cell_count(spec.transport, spec.transport_params)
+        axial = is_axial(spec.transport, open_vessel=False)
+        ok = "'product', 'holdup'" + (f" or 'cell:K' (K = 1..{int(cells)})" if is_cells(spec.transport)
                                       else "") + (" or 'z:Y' (0 <= Y <= 1)" if axial else "")
         good = False
-        if loc.startswith("cell:") and spec.transport in _CELL_TRANSPORTS:
+        if loc.startswith("cell:") and is_cells(spec.transport):
             k = loc[5:]
             good = k.isdigit() and 1 <= int(k) <= int(cells)
         elif loc.startswith("z:") and axial:
@@ -517,9 +518,9 @@ class ForwardModel:
             tau_pc, extra = self.transport_values(p)
             if self._chain_cells() is not None:
                 self._predict_chain(S, b, d, tau_pc, out, sep)
-            elif self.spec.transport == "recirculating_cells" and self.spec.where in (None, "discharge", "cells"):
+            elif is_network(self.spec.transport) and self.spec.where in (None, "discharge", "cells"):
                 self._predict_network(S, b, d, tau_pc, extra, out)
-            elif self.spec.transport == "plug_flow" and all(g[1] != "holdup" for g in self.groups):
+            elif is_plug(self.spec.transport) and all(g[1] != "holdup" for g in self.groups):
                 self._predict_plug(S, b, d, tau_pc, out)
             else:
                 self._predict_mill(S, b, d, tau_pc, extra, out)
@@ -549,7 +550,7 @@ class ForwardModel:
         # exit flows; where = "cells": every cell outlet), or in every tank (mode
         # "well_mixed", as the linear forward model places it)
         d_all = self.discharge(p, n_pop) if (spec.classification and mode != "batch") else None
-        axis = spec.transport in _AXIAL_TRANSPORTS + ("axial_dispersion_open",)
+        axis = mode == "mill" and is_axial(spec.transport)
         where = (spec.where or ("axis" if axis else "discharge")) if mode == "mill" else "cells"
         age = "slowing_down" in spec.kinetics
         for c in range(len(self.conditions)):
@@ -579,21 +580,18 @@ class ForwardModel:
                     continue
                 if mode == "mill":
                     tr = spec.transport
-                    kw = {"transport": "plug_flow" if tr == "plug_flow" else
-                          "axial_dispersion" if tr == "axial_dispersion" else "well_mixed",
-                          "n_tanks": int(tp.get("n", 1)) if tr == "tanks_in_series" else 1}
-                    if tr == "axial_dispersion":
+                    kw = {"transport": tr, "n_tanks": int(tp.get("n", 1)) if is_tanks(tr) else 1}
+                    if is_axial_dispersion(tr, open_vessel=False):
                         kw["pe"] = float(extra["pe"][k]) if "pe" in extra else float(tp["pe"])
                     tc = float(tau_pc[k, c])
-                    if tr in ("recirculating_cells", "axial_dispersion_open"):
+                    if is_network(tr) or is_axial_dispersion(tr, open_vessel=True):
                         try:  # the network of cells, or the open vessel (millflow.mill.nonlinear.solve_transport)
-                            kw["network" if tr == "recirculating_cells" else "model"] = self._transport(tc, extra, k)
+                            kw["network" if is_network(tr) else "model"] = self._transport(tc, extra, k)
                         except InputError:  # outside rtd's domain (e.g. r < 0): this member only
                             out[k, gsel] = np.nan
                             continue
                 else:
-                    kw = {"transport": "plug_flow" if mode == "plug_flow" else "well_mixed",
-                          "n_tanks": spec.n_tanks}
+                    kw = {"transport": mode, "n_tanks": spec.n_tanks}  # mode plug_flow or well_mixed
                     tc = float(tau[c])
                 if d_all is not None:
                     kw["d"], kw["where"] = d_all[k, c], where
@@ -609,14 +607,13 @@ class ForwardModel:
         k), mode "plug_flow" plug flow, mode "well_mixed" perfect mixing or ``n_tanks``
         equal tanks in series.
         """
-        import rtd
         mode = self.spec.mode
         if mode == "mill":
             return self._transport(tau, extra, k)
-        if mode == "plug_flow":
-            return rtd.PlugFlow(tau)
         n = int(self.spec.n_tanks)
-        return rtd.PerfectMixing(tau) if n == 1 else rtd.TanksInSeries(tau, n)
+        if mode == "plug_flow" or n == 1:  # the modes plug_flow and well_mixed name their transport
+            return build_transport(canonical_transport(mode), tau, {})
+        return build_transport("tanks_in_series", tau, {"n": n})
 
     def _chain_cells(self):
         """Number of equal well-mixed cells in a row, or None.
@@ -625,12 +622,10 @@ class ForwardModel:
         (perfect mixing, tanks in series with integer n), else None.
         """
         spec = self.spec
-        if spec.transport == "perfect_mixing":
-            return 1
-        n = dict(spec.transport_params).get("n")
-        if spec.transport == "tanks_in_series" and float(n) == int(n) and spec.where in (None, "discharge", "cells"):
-            return int(n)
-        return None
+        n = equal_cells(spec.transport, spec.transport_params) if spec.transport is not None else None
+        if n is not None and is_tanks(spec.transport) and spec.where not in (None, "discharge", "cells"):
+            return None
+        return n
 
     def _predict_chain(self, S, b, d, tau, out, sep):
         """Mode "mill" for a chain of equal well-mixed cells, vectorised.

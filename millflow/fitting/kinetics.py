@@ -273,24 +273,13 @@ class CompiledKinetics:
         (L, N) mass fractions of those samples (hold-up with its overflow in class 1).
         ``slowing_down`` needs ``model`` (the rtd model of the transport, any with an
         exit-age density; with ``d`` a network of cells): :meth:`solve_age`."""
-        from millflow.mill import nonlinear as nl
+        from millflow.mill.transport import solve_nonlinear
         if "slowing_down" in self.forms:
             return self.solve_age(S, b, feed, model, p, k, d=d, where=where, locations=locations)
         kin = self._kin(S, b, p, k)
-        try:
-            if model is not None:
-                r = nl.solve_transport(kin, feed, model, d, where=None if d is None else where, tol=ODE_RTOL,
-                                       holdup=False, m_cells=AXIAL_CELLS)
-            elif network is not None:
-                r = nl.cells(kin, feed, network, d, where)
-            elif transport == "plug_flow":
-                r = nl.plug_flow(kin, feed, tau, d, rtol=ODE_RTOL, atol=ODE_ATOL, holdup=False)
-            elif transport == "axial_dispersion":
-                r = nl.axial_dispersion(kin, feed, tau, pe, d, m_cells=AXIAL_CELLS)
-            elif n_tanks == 1:
-                r = nl.well_mixed(kin, feed, tau, d)
-            else:
-                r = nl.tanks_in_series(kin, feed, tau, n_tanks, d, where)
+        try:  # the transport's own solver (millflow.mill.transport)
+            r = solve_nonlinear(kin, feed, tau, transport, n_tanks=n_tanks, pe=pe, d=d, where=where, network=network,
+                                model=model, rtol=ODE_RTOL, atol=ODE_ATOL, tol=ODE_RTOL, m_cells=AXIAL_CELLS)
         except MillflowError as exc:
             self._failed(exc)
             return np.full(S.size if locations is None else (len(locations), S.size), np.nan)
@@ -315,7 +304,6 @@ class CompiledKinetics:
             rows.append(m / m.sum())
         return np.array(rows)
 
-
     def solve_age(self, S, b, feed, model, p, k, *, d=None, where="discharge", locations=None):
         """Slowing-down in the particle's age in a continuous mill, member k.
 
@@ -328,7 +316,8 @@ class CompiledKinetics:
         solve for an estimate); classification on the axis is refused.
         """
         from millflow.mill import nonlinear as nl
-        if d is not None and (where == "axis" or type(model).__name__ in ("PlugFlow", "AxialDispersion")):
+        from millflow.mill.transport import is_axial, is_plug
+        if d is not None and (where == "axis" or is_plug(model) or is_axial(model)):
             raise InputError(nl._AGE_CLASSIFIED)
         locs = ["product"] if locations is None else list(locations)
         bad = sorted({loc for loc in locs if loc not in ("product", "holdup")})

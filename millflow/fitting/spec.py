@@ -16,6 +16,8 @@ import numpy as np
 
 from millflow.breakage.rates import X0_DEFAULT
 from millflow.errors import InputError
+from millflow.mill.transport import TRANSPORT_FIT as _TRANSPORT_FIT
+from millflow.mill.transport import TRANSPORT_NAMES, is_cells, is_tanks
 
 __all__ = ["Parameter", "ModelSpec", "RATE_FORMS", "BREAKAGE_FORMS", "MODES", "canonical_location",
            "CLASSIFICATIONS", "TRANSPORTS", "TRANSPORT_FIT", "FORWARD_TOL", "default_parameters"]
@@ -45,11 +47,9 @@ def _transports() -> dict:
 
 
 TRANSPORTS = _transports()
-_CELL_TRANSPORTS = ("perfect_mixing", "tanks_in_series", "recirculating_cells")
-#: Transport parameters that mode "mill" can fit: name -> (fit parameter, transports).
-TRANSPORT_FIT = {"tau": ("ln_tau", tuple(TRANSPORTS)), "pe": ("ln_pe", ("axial_dispersion",)),
-                 "r": ("r", ("recirculating_cells",))}
-_AXIAL_TRANSPORTS = ("plug_flow", "axial_dispersion")
+#: Transport parameters that mode "mill" can fit: name -> (fit parameter, transports);
+#: its home is :mod:`millflow.mill.transport`.
+TRANSPORT_FIT = _TRANSPORT_FIT
 
 
 def canonical_location(loc) -> str:
@@ -172,7 +172,7 @@ class ModelSpec:
         if forms and self.mode == "mill" and self.transport not in _NONLINEAR_TRANSPORTS:
             raise InputError(f"model.kinetics with transport {self.transport!r}: non-linear kinetics are fitted with "
                              f"transports {list(_NONLINEAR_TRANSPORTS)}")
-        if forms and self.mode == "mill" and self.transport == "tanks_in_series":
+        if forms and self.mode == "mill" and is_tanks(self.transport):
             n = dict(self.transport_params).get("n")
             if n is not None and float(n) != int(n):
                 raise InputError(f"model.transport_params.n = {n!r}: a mill with non-linear kinetics solves "
@@ -191,7 +191,7 @@ class ModelSpec:
 
     def _check_age_slowing(self, consts: dict):
         """Refuse what slowing-down in the particle's age cannot fit in a continuous mill."""
-        cells = self.mode == "well_mixed" or (self.mode == "mill" and self.transport in _CELL_TRANSPORTS
+        cells = self.mode == "well_mixed" or (self.mode == "mill" and is_cells(self.transport)
                                                and self.where != "axis")
         if self.classification is not None and not cells:
             where = self.transport if self.mode == "mill" else self.mode
@@ -199,7 +199,7 @@ class ModelSpec:
                              f"({where}): classification on the axis makes classes travel at different speeds, so "
                              "a particle's age and its position are not tied (millflow solves the age-structured "
                              "balance for well-mixed cells only); expected a cell transport (well_mixed, "
-                             f"{', '.join(_CELL_TRANSPORTS)}) or no classification")
+                             f"{', '.join(n for n in TRANSPORT_NAMES if is_cells(n))}) or no classification")
         if "tau" in self.transport_fit and "t_ref_s" not in consts:
             raise InputError("model.kinetics = 'slowing_down' with model.transport_fit = ['tau']: the default t_ref "
                              "(the longest tau) would move with the fit; expected model.kinetics_params.t_ref_s "

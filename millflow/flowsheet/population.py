@@ -15,6 +15,8 @@ from __future__ import annotations
 
 import numpy as np
 
+from millflow.mill.transport import equal_cells
+
 __all__ = ["solve_population"]
 
 
@@ -22,13 +24,7 @@ def _chain_cells(unit) -> int | None:
     """Number of equal well-mixed cells of a mill without classification or kinetics, else None."""
     if getattr(unit, "kinetic_nonlinear", True) or unit.classification is not None:
         return None
-    params = dict(unit.transport_params)
-    if unit.transport == "perfect_mixing" and not params:
-        return 1
-    if unit.transport == "tanks_in_series" and set(params) == {"n"} and float(params["n"]).is_integer() \
-            and params["n"] >= 1:
-        return int(params["n"])
-    return None
+    return equal_cells(unit.transport, unit.transport_params)
 
 
 def solve_population(fs, forms: dict, throughput: dict | None = None):

@@ -23,6 +23,7 @@ from collections.abc import Mapping
 import numpy as np
 
 from millflow.linalg import breakage_matrix
+from millflow.mill.transport import equal_cells
 
 __all__ = ["CellCircuit", "cell_chain", "cell_circuit", "structured_solve"]
 
@@ -34,13 +35,8 @@ def cell_chain(unit, grid, throughput=None, water=None):
     if getattr(unit, "type", None) != "mill" or getattr(unit, "kinetic_nonlinear", True) \
             or unit.classification is not None:
         return None
-    params = dict(unit.transport_params)
-    if unit.transport == "perfect_mixing" and not params:
-        n = 1
-    elif unit.transport == "tanks_in_series" and set(params) == {"n"} \
-            and float(params["n"]).is_integer() and params["n"] >= 1:
-        n = int(params["n"])
-    else:
+    n = equal_cells(unit.transport, unit.transport_params)
+    if n is None:
         return None
     tau = unit.residence_time(throughput, water)
     S, b = unit.breakage_functions(grid, tau, throughput)

@@ -26,6 +26,7 @@ import numpy as np
 from millflow.breakage.averaged import breakage_on_grid, curve_on_grid
 from millflow.classifiers import efficiency, mill_discharge_rates
 from millflow.errors import InputError, MillflowError, SolverError
+from millflow.mill.transport import BUILDERS, build_transport, is_axial, is_tanks
 
 __all__ = [
     "Feed", "MillUnit", "Mill", "Classifier", "Mixer", "Splitter", "Product", "UNIT_TYPES", "TRANSPORTS",
@@ -33,35 +34,10 @@ __all__ = [
 ]
 
 
-def _transport_registry() -> dict:
-    from rtd import names
-
-    return {name: entry.build for name, entry in names.TRANSPORTS.items()}
-
-
 #: Transport (residence time distribution) models by their canonical name in rtd's one
 #: table (:mod:`rtd.names`; flowsheet files also accept its aliases); each builds an
-#: ``rtd`` model from tau [s] and its own parameters.
-TRANSPORTS = _transport_registry()
-
-
-def build_transport(model: str, tau: float, params: dict):
-    """The rtd model of a mill from its transport name and parameters.
-
-    The rtd model of a mill: a name of :data:`TRANSPORTS` with its parameters, or
-    ``"series"`` with ``params["parts"]`` = [(model, parameters, tau_fraction), ...]
-    (rtd.Series of the parts, part k with tau_k = tau_fraction_k tau).
-    """
-    if model == "series":
-        import rtd
-
-        return rtd.Series(*[TRANSPORTS[m](tau * f, **_model_params(p)) for m, p, f in params["parts"]])
-    return TRANSPORTS[model](tau, **_model_params(params))
-
-
-def _model_params(params: dict) -> dict:
-    """The rtd model's own parameters (``discharge`` is the mill's: where the open vessel's product is taken)."""
-    return {k: v for k, v in params.items() if k != "discharge"}
+#: ``rtd`` model from tau [s] and its own parameters (:data:`millflow.mill.transport.BUILDERS`).
+TRANSPORTS = BUILDERS
 
 
 #: The tolerance of a non-linear mill's product relative to its feed (that of the linear mills'
@@ -270,7 +246,7 @@ class MillUnit:
             raise SolverError(f"units.{self.name}: the mill receives no solids (inflow {total!r} kg/s)")
         if self.needs_water and water is None:
             raise SolverError(f"units.{self.name}: slurry hold-up given but the water through the mill is unknown")
-        if self.transport == "tanks_in_series":
+        if is_tanks(self.transport):
             n = self.transport_params["n"]
             if not (isinstance(n, (int, float, np.integer, np.floating)) and float(n) == round(float(n)) and n >= 1):
                 raise InputError(f"units.{self.name}.transport.n = {n!r}: a mill with non-linear kinetics solves "
@@ -306,7 +282,7 @@ class MillUnit:
                               f"of the size grid ({grid.x[0] * 1e6:.4g} um); expected at most {MAX_OVERFLOW:g}: "
                               "raise [grid] top_um so the aggregates are resolved")
         p[0] += overflow
-        axis = self.transport in ("plug_flow", "axial_dispersion", "axial_dispersion_open")
+        axis = is_axial(self.transport)
         placed = "" if d is None else (", classification d* along the axis" if axis else ", discharge classification d*"
                                        + ("" if where in (None, "discharge") else f" ({where})"))
         info = {"method": f"non-linear kinetics ({kin.describe()}): {r.method}{placed}",

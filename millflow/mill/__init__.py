@@ -15,6 +15,8 @@ scene, :func:`transient_mill` the dynamics. Modules, one job each:
 - :mod:`~millflow.mill.axial`: the axial-dispersion PDE by finite volumes;
 - :mod:`~millflow.mill.axial_open`: the open vessel's PDE on the whole line (sampled or
   flux discharge);
+- :mod:`~millflow.mill.transport`: the one transport dispatch (names, kinds, cells, what
+  a fit can estimate, builders) that code outside the mill layer asks;
 - :mod:`~millflow.mill.transient`: the dynamic response;
 - :mod:`~millflow.mill.population`: the products of many mills (rate vectors) at once;
 - :mod:`~millflow.mill.nonlinear`: mills with non-linear kinetics (aggregation,

@@ -9,6 +9,7 @@ from millflow.errors import InputError
 from millflow.flowsheet.readers.tables import _named_file, _Table
 from millflow.flowsheet.units import TRANSPORTS
 from millflow.inputs import UNITS, read_json
+from millflow.mill.transport import is_axial_dispersion, is_tanks
 from rtd import names as rtd_names
 
 
@@ -30,7 +31,7 @@ def _transport_table(tr: _Table, extra: tuple = ()) -> tuple[str, dict]:
         if k in tr.data:
             tparams[k] = tr.plain(k, kind=float)
     keys = ["model", *entry.required, *entry.optional, *extra]
-    if model == "axial_dispersion_open":  # where the discharge is taken (millflow.mill.axial_open)
+    if is_axial_dispersion(model, open_vessel=True):  # where the discharge is taken (millflow.mill.axial_open)
         from millflow.mill.axial_open import DISCHARGES
 
         discharge = tr.plain("discharge", None, kind=str)
@@ -99,7 +100,7 @@ def _rtd_fit(tr: _Table, base: Path | None, classified: bool, kinetic: bool = Fa
     if missing:
         raise InputError(f"{p}: params {missing} missing for model {model!r}")
     note = f"transport from {p.name} ({model}, fitted in {unit})"
-    if model == "tanks_in_series" and (classified or kinetic) and params["n"] != round(params["n"]):
+    if is_tanks(model) and (classified or kinetic) and params["n"] != round(params["n"]):
         whole = max(1, round(params["n"]))
         why = ("discharge classification needs whole cells" if classified
                else "non-linear kinetics are solved tank by tank")
