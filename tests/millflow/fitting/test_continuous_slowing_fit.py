@@ -141,7 +141,9 @@ def test_noise_free_truth_is_recovered():
         assert abs(got - v) < 1e-5 * max(1.0, abs(v)), (name, got, v)
 
 
-def _write_fit(tmp_path, design, M, sigma, seed, model_toml, params_toml, optimizer_toml):
+def write_sieve_files(tmp_path, design, M, sigma, seed):
+    """psd.csv and process.csv of ``design``'s samples of the products M, with Gaussian
+    noise ``sigma`` on the cumulative passing (seeded), as a sieve analysis reports them."""
     clean = design.passing_at_sieves(M).ravel()
     noisy = clean + sigma * np.random.default_rng(seed).standard_normal(clean.size)
     data = design.data(noisy, design.sample_keys())
@@ -152,6 +154,10 @@ def _write_fit(tmp_path, design, M, sigma, seed, model_toml, params_toml, optimi
     t["size_mm"] = t.size_m * 1e3
     t[["condition", "location", "time_s", "size_mm", "passing"]].to_csv(tmp_path / "psd.csv", index=False)
     data.process.reset_index().to_csv(tmp_path / "process.csv", index=False)
+
+
+def _write_fit(tmp_path, design, M, sigma, seed, model_toml, params_toml, optimizer_toml):
+    write_sieve_files(tmp_path, design, M, sigma, seed)
     cfg = tmp_path / "fit.toml"
     cfg.write_text(f"""
 [data]

@@ -18,6 +18,7 @@ from millflow.falsify.truths import BREAKAGE_TRUTH, SlowingDownTruth
 from millflow.fitting.models import ForwardModel, ModelSpec
 from millflow.mill import nonlinear as nl
 from millflow.nonlinear import Aggregation, constant_kernel, kinetics
+from tests.millflow.fitting.test_continuous_slowing_fit import write_sieve_files
 
 TAUS = [120.0, 240.0, 480.0, 960.0, 240.0, 960.0]
 SCREENS = [1.0, 1.0, 1.0, 1.0, 2.0, 2.0]  # mm
@@ -57,15 +58,7 @@ def test_forward_model_reproduces_the_classified_cells_truth(where):
 @pytest.mark.slow  # ~4 min on a loaded machine: a 8-parameter global search over 6 steady non-linear mills
 def test_cli_fit_recovers_a_non_linear_truth_with_classification_and_recirculating_cells(tmp_path, capsys):
     design, M = _truth()
-    clean = design.passing_at_sieves(M).ravel()
-    noisy = clean + 0.005 * np.random.default_rng(1).standard_normal(clean.size)
-    data = design.data(noisy, design.sample_keys())
-    t = data.table.copy()
-    t["passing"] = t.groupby(["condition", "location", "time_s"], sort=False).passing.transform(
-        lambda v: np.minimum.accumulate(v.clip(0.0, 1.0).to_numpy()))
-    t["size_mm"] = t.size_m * 1e3
-    t[["condition", "location", "time_s", "size_mm", "passing"]].to_csv(tmp_path / "psd.csv", index=False)
-    data.process.reset_index().to_csv(tmp_path / "process.csv", index=False)
+    write_sieve_files(tmp_path, design, M, 0.005, 1)
     cfg = tmp_path / "fit.toml"
     # bounds: at ln_c50 -> -2 with ln_A0 -> -7 the retained coarse classes aggregate faster than
     # they break and the mill has no steady state (the fit's corner check refuses such bounds)
