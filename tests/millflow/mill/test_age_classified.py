@@ -8,26 +8,19 @@ from scipy.integrate import quad
 
 import rtd
 from millflow import steady_mill
-from millflow.breakage import b_from_B, normalized_B, power_law_rates
 from millflow.errors import InputError
-from millflow.grid import SizeGrid
 from millflow.mill import nonlinear as nl
 from millflow.mill.age_cells import age_structured
 from millflow.nonlinear import kinetics
+from tests.millflow.mill.nonlinear_scene import TAU, breakage_scene
 
-TAU = 600.0
 S_SLOW = 2.0
 CELLS = {"perfect_mixing": lambda: rtd.PerfectMixing(TAU), "tanks_3": lambda: rtd.TanksInSeries(TAU, 3),
          "recirculating": lambda: rtd.RecirculatingCells(TAU, 4, 0.5)}
 
 
 def _scene(n=16):
-    grid = SizeGrid.geometric(1e-2, 2 ** 0.25, n)
-    S = power_law_rates(grid.x, 30.0 / TAU, 1.0, grid.x[0])
-    S[-1] = 0.0
-    b = b_from_B(normalized_B(grid.x, 0.4, 0.8, 3.0))
-    feed = np.zeros(n)
-    feed[:3] = [0.2, 0.5, 0.3]
+    grid, S, b, feed = breakage_scene(n)
     d = np.linspace(0.3, 1.0, n)  # coarse classes held back, d*_N = 1
     return S, b, feed, d
 

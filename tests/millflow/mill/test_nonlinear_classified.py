@@ -8,23 +8,16 @@ from scipy.integrate import solve_ivp
 
 import rtd
 from millflow import steady_mill
-from millflow.breakage import b_from_B, normalized_B, power_law_rates
 from millflow.classifiers import screen_discharge
 from millflow.errors import InputError
-from millflow.grid import SizeGrid
 from millflow.mill import nonlinear as nl
 from millflow.nonlinear import Aggregation, constant_kernel, kinetics
+from tests.millflow.mill.nonlinear_scene import TAU, breakage_scene
 
-TAU = 600.0
 
 
 def _scene(n=30):
-    grid = SizeGrid.geometric(1e-2, 2 ** 0.25, n)
-    S = power_law_rates(grid.x, 30.0 / TAU, 1.0, grid.x[0])
-    S[-1] = 0.0
-    b = b_from_B(normalized_B(grid.x, 0.4, 0.8, 3.0))
-    feed = np.zeros(n)
-    feed[:3] = [0.2, 0.5, 0.3]
+    grid, S, b, feed = breakage_scene(n)
     d = screen_discharge(grid.x, 2e-3, 3.0)  # a grate: coarse classes retained (d* -> 0 above 2 mm)
     return grid, S, b, feed, np.maximum(d, 1e-3)
 

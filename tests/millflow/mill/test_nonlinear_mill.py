@@ -7,25 +7,18 @@ import pytest
 from scipy.integrate import solve_ivp
 
 import rtd
-from millflow.breakage import b_from_B, normalized_B, power_law_rates
 from millflow.errors import SolverError
-from millflow.grid import SizeGrid
 from millflow.mill.well_mixed import solve_well_mixed
 from millflow.mill import nonlinear as nl
 from millflow.mill.axial import solve_axial_grid
 from millflow.mill.segregated import segregated
 from millflow.nonlinear import Aggregation, constant_kernel, kinetics
+from tests.millflow.mill.nonlinear_scene import TAU, breakage_scene
 
-TAU = 600.0
 
 
 def _scene(n=40):
-    grid = SizeGrid.geometric(1e-2, 2 ** 0.25, n)
-    S = power_law_rates(grid.x, 30.0 / TAU, 1.0, grid.x[0])
-    S[-1] = 0.0
-    b = b_from_B(normalized_B(grid.x, 0.4, 0.8, 3.0))
-    feed = np.zeros(n)
-    feed[:3] = [0.2, 0.5, 0.3]
+    grid, S, b, feed = breakage_scene(n)
     return grid, S, b, feed
 
 

@@ -7,25 +7,18 @@ import pytest
 from scipy.integrate import quad_vec, solve_ivp
 
 import rtd
-from millflow.breakage import b_from_B, normalized_B, power_law_rates
 from millflow.classifiers import screen_discharge
 from millflow.errors import InputError
-from millflow.grid import SizeGrid
 from millflow.mill import transient_mill
 from millflow.mill import nonlinear as nl
 from millflow.mill.axial import _bernoulli
 from millflow.nonlinear import Aggregation, batch_nonlinear, constant_kernel, kinetics
+from tests.millflow.mill.nonlinear_scene import TAU, breakage_scene
 
-TAU = 600.0
 
 
 def _scene(n=14, beta0=0.02, lam=-1.0):
-    grid = SizeGrid.geometric(1e-2, 2 ** 0.25, n)
-    S = power_law_rates(grid.x, 30.0 / TAU, 1.0, grid.x[0])
-    S[-1] = 0.0
-    b = b_from_B(normalized_B(grid.x, 0.4, 0.8, 3.0))
-    feed = np.zeros(n)
-    feed[:3] = [0.2, 0.5, 0.3]
+    grid, S, b, feed = breakage_scene(n)
     w = np.zeros((n, n))
     w[:, n // 2:] = 3.0
     kin = kinetics(S, b, w=w, lam=lam, aggregation=Aggregation(constant_kernel(beta0), grid.x[-1]), grid=grid)

@@ -9,24 +9,17 @@ from scipy.integrate import quad, solve_ivp
 
 import rtd
 from millflow import steady_mill
-from millflow.breakage import b_from_B, normalized_B, power_law_rates
 from millflow.classifiers import screen_discharge
 from millflow.errors import InputError, SolverError
-from millflow.grid import SizeGrid
 from millflow.mill import Mill, transfer_matrix
 from millflow.mill import nonlinear as nl
 from millflow.nonlinear import Aggregation, batch_nonlinear, constant_kernel, kinetics
+from tests.millflow.mill.nonlinear_scene import TAU, breakage_scene
 
-TAU = 600.0
 
 
 def _scene(n=16):
-    grid = SizeGrid.geometric(1e-2, 2 ** 0.25, n)
-    S = power_law_rates(grid.x, 30.0 / TAU, 1.0, grid.x[0])
-    S[-1] = 0.0
-    b = b_from_B(normalized_B(grid.x, 0.4, 0.8, 3.0))
-    feed = np.zeros(n)
-    feed[:3] = [0.2, 0.5, 0.3]
+    grid, S, b, feed = breakage_scene(n)
     return grid, S, b, feed
 
 
