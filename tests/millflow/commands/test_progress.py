@@ -15,6 +15,7 @@ import time
 import pytest
 
 from tests import paths
+from tests.millflow.commands.test_file_conventions import FALSIFY  # the same small study
 
 pytestmark = pytest.mark.skipif(sys.platform == "win32", reason="pseudo-terminals are POSIX")
 if sys.platform != "win32":
@@ -22,23 +23,6 @@ if sys.platform != "win32":
     import termios
 
 FS, EX = paths.FLOWSHEETS, paths.EXAMPLES
-FALSIFY = """replicates = 2
-seed = 12
-workers = 1
-drift_replicates = 2
-[truth]
-type = "tanks_in_series"
-strengths = [1, 5]
-[assumed]
-mode = "well_mixed"
-[design]
-tau_min = [0.5, 1, 2, 4]
-top_size_um = 4000
-n_sieves = 12
-[noise]
-kind = "gaussian"
-sigma = 0.01
-"""
 
 
 def _small_fit_config(folder):
