@@ -482,18 +482,14 @@ def unphysical(bal) -> list[str]:
         if not M > 1e-9 * scale:
             out.append(f"stream {n} has solids {M * 3.6:.4g} t/h")
     if st.wet:
-        for s, n in enumerate(st.streams):
-            W = float(bal.z[st.w_index(s)])
-            if W < -1e-9 * scale:
-                _, sd, ok = bal.water(n)
-                if not ok or W < -3.0 * sd:
-                    out.append(f"stream {n} has water {W * 3.6:.4g} t/h")
-        for k, u in enumerate(st.additions):
-            a = float(bal.z[st.a_index(k)])
-            if a < -1e-9 * scale:
-                _, sd, ok = bal.addition(u)
-                if not ok or a < -3.0 * sd:
-                    out.append(f"water added at {u} is {a * 3.6:.4g} t/h")
+        checks = [(st.w_index(s), bal.water, n, f"stream {n} has water") for s, n in enumerate(st.streams)]
+        checks += [(st.a_index(k), bal.addition, u, f"water added at {u} is") for k, u in enumerate(st.additions)]
+        for index, sd_of, name, what in checks:
+            v = float(bal.z[index])
+            if v < -1e-9 * scale:
+                _, sd, ok = sd_of(name)
+                if not ok or v < -3.0 * sd:  # below 0 by more than its error (or no error known)
+                    out.append(f"{what} {v * 3.6:.4g} t/h")
     return out
 
 
