@@ -27,6 +27,7 @@ __all__ = ["single_threaded_blas", "blas_threads", "limit_blas_threads"]
 _state = threading.local()
 _controller = None
 _controller_modules = None  # _loaded_libraries() when the controller was built
+_modules_seen = -1  # len(sys.modules) when the libraries were last looked at
 
 
 #: Parts of the file names of the BLAS libraries threadpoolctl controls (OpenBLAS, MKL,
@@ -49,7 +50,9 @@ def _loaded_libraries():
 def _get_controller():
     """The cached ThreadpoolController, rebuilt when a shared library was loaded since
     (it may be another BLAS); None without threadpoolctl."""
-    global _controller, _controller_modules
+    global _controller, _controller_modules, _modules_seen
+    if _controller is not None and len(sys.modules) == _modules_seen:
+        return _controller  # nothing imported since: no library can have been loaded (the hot path)
     if _controller is None or _loaded_libraries() != _controller_modules:
         try:
             from threadpoolctl import ThreadpoolController
@@ -59,6 +62,7 @@ def _get_controller():
 
         _controller = ThreadpoolController()
         _controller_modules = _loaded_libraries()
+    _modules_seen = len(sys.modules)
     return _controller
 
 
