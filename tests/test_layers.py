@@ -258,8 +258,8 @@ TRANSPORT_DISPATCH_ALLOWED: dict[str, str] = {
     # RTD truths among them are told apart by millflow.falsify.truths.is_rtd_truth, which
     # asks millflow.mill.transport
     "millflow/falsify/config.py: TRUTH_TYPES = ...": "the truth types a study config may name",
-    # the fit's modes (batch, plug flow, well mixed, mill): the fit's own vocabulary, read
-    # from a fit config; a mode-"mill" transport is dispatched by millflow.mill.transport
+    # the valid values of a fit config's mode; the modes that name a transport (plug_flow,
+    # well_mixed) are resolved by millflow.mill.transport.mode_transport
     "millflow/fitting/spec.py: MODES = ...": "the fit's modes a fit config may name",
 }
 
@@ -267,9 +267,9 @@ TRANSPORT_DISPATCH_ALLOWED: dict[str, str] = {
 def _dispatch_nodes(tree, words: set[str], classes: set[str]) -> list[tuple[int, str]]:
     """(line, source) of the transport dispatches in a module: comparisons with transport
     names, dicts keyed by them, named tuples of them (``x in _AXIAL_TRANSPORTS``) and
-    isinstance tests on rtd classes. A comparison with the fit's ``mode`` ("batch",
-    "plug_flow", "well_mixed", "mill": the fit's own vocabulary, two of whose words name
-    the linear shortcuts of a mill) is not one; an assignment is given by its target."""
+    isinstance tests on rtd classes, also comparisons with the fit's ``mode`` (its words
+    ``plug_flow`` and ``well_mixed`` name a transport, resolved by
+    ``millflow.mill.transport.mode_transport``); an assignment is given by its target."""
 
     def named(node) -> bool:
         if isinstance(node, ast.Constant):
@@ -285,18 +285,12 @@ def _dispatch_nodes(tree, words: set[str], classes: set[str]) -> list[tuple[int,
             return isinstance(node.value, ast.Name) and node.value.id == "rtd"
         return isinstance(node, ast.Name) and node.id in classes
 
-    def is_mode(node) -> bool:  # mode, spec.mode, config.get("mode", ...)
-        if isinstance(node, ast.Call) and node.args:
-            return isinstance(node.args[0], ast.Constant) and node.args[0].value == "mode"
-        return (isinstance(node, ast.Name) and node.id == "mode") or (
-            isinstance(node, ast.Attribute) and node.attr == "mode")
-
     out = []
     for node in ast.walk(tree):
         hit, text = False, None
         if isinstance(node, ast.Compare):
             operands = [node.left, *node.comparators]
-            hit = any(named(o) for o in operands) and not any(is_mode(o) for o in operands)
+            hit = any(named(o) for o in operands)
         elif isinstance(node, (ast.Assign, ast.AnnAssign)) and isinstance(node.value, (ast.Tuple, ast.List, ast.Set)):
             targets = node.targets if isinstance(node, ast.Assign) else [node.target]
             hit = any(named(e) for e in node.value.elts if isinstance(e, ast.Constant)) and not any(
@@ -344,4 +338,5 @@ cases = [("plug_flow", 1.0)]
     found = [text for _, text in _dispatch_nodes(ast.parse(src), _transport_words(), _rtd_classes())]
     assert sorted(found) == sorted([
         "spec.transport == 'plug_flow'", "isinstance(m, rtd.TanksInSeries)", "x in ('tis', 'other')",
-        "{'axial_dispersion': 'pe'}", "_AXIAL = ..."])
+        "{'axial_dispersion': 'pe'}", "_AXIAL = ...", "spec.mode == 'plug_flow'",
+        "cfg.get('mode') in ('well_mixed', 'plug_flow')"])

@@ -201,7 +201,7 @@ def parse_config(raw: dict, src: str = "<config>") -> StudyConfig:
         akw["kinetics"], akw["kinetics_params"] = _kinetics(asm, f"{src}: assumed")
     elif "kinetics_params" in asm:
         raise InputError(f"{src}: assumed.kinetics_params given without assumed.kinetics")
-    if not design.is_batch and akw.get("mode", "batch") in ("well_mixed", "plug_flow", "mill"):
+    if not design.is_batch and akw.get("mode", "batch") != "batch":
         akw["tau_column"] = "tau_s"
     if akw.get("mode", "batch") == "batch" and not design.is_batch:
         raise InputError(f"{src}: assumed.mode = 'batch' needs design.times_<unit> (times_s, times_min, times_h)")

@@ -45,7 +45,8 @@ from millflow.errors import InputError, MillflowError
 from millflow.fitting.estimate import fit
 from millflow.fitting.models import ForwardModel, ModelSpec, Parameter, default_parameters
 from millflow.fitting.progress import reporter
-from millflow.mill.transport import cell_count, is_axial_dispersion, is_cells, is_network, is_plug, is_tanks
+from millflow.mill.transport import (cell_count, is_axial_dispersion, is_cells, is_network, is_plug, is_tanks,
+                                     mode_transport)
 
 __all__ = ["Diagnosis", "candidate_specs", "diagnose"]
 
@@ -72,19 +73,18 @@ def candidate_specs(spec: ModelSpec, data) -> dict:
     cls_ok = spec.classification is None
     if batch:
         out["slowing_down"] = replace(base, kinetics=("slowing_down",))
-    if batch or spec.mode in ("well_mixed", "plug_flow", "mill"):
-        try:  # with the user's classification where the non-linear solves take it (well-mixed cells)
-            out["cushioning"] = replace(base, kinetics=("population",))
-            out["aggregation"] = replace(base, kinetics=("aggregation",))
-        except InputError:  # a transport or classification the non-linear solves do not cover
-            out.pop("cushioning", None)
-    if spec.mode == "well_mixed":
-        for n in (2, 3):
+    try:  # with the user's classification where the non-linear solves take it
+        out["cushioning"] = replace(base, kinetics=("population",))
+        out["aggregation"] = replace(base, kinetics=("aggregation",))
+    except InputError:  # a transport or classification the non-linear solves do not cover
+        out.pop("cushioning", None)
+    if spec.mode != "mill" and not batch and is_cells(mode_transport(spec.mode, spec.n_tanks)[0]):
+        for n in (2, 3):  # a mode of well-mixed tanks: its alternatives in the number of tanks
             if n != spec.n_tanks:
                 out[f"tanks_{n}"] = replace(base, n_tanks=n)
     if spec.mode == "mill":
         out.update(_transport_alternatives(base))
-    if spec.mode in ("well_mixed", "mill") and cls_ok and spec.screen_column in data.process.columns:
+    if not batch and cls_ok and spec.screen_column in data.process.columns:
         try:
             out["classification"] = replace(base, classification="screen_power")
         except InputError:

@@ -32,12 +32,13 @@ Parameters (positive ones in logs, named ``ln_...``):
   A / c50^n is identifiable from product samples: the fit reports correlation 1).
   ``screen_power_cut``: the same with a hard cut at the opening (classes whose lower
   edge is at or above it cannot pass: d* = 1e-12).
-- mode ``batch`` (eq. 4, times from the table), ``plug_flow`` (eq. 4 at t = tau),
-  ``well_mixed`` (eq. 3; ``n_tanks`` > 1: equal well-mixed tanks in series, tau/n each,
-  the same classification in each). For continuous modes tau comes from a process column
-  (``tau_column``) or is 1, in which case A is the dimensionless tau*A.
-  Location ``holdup`` of a well-mixed mill predicts the mill content, proportional
-  to p_i / d_i*: sampling product and hold-up separates breakage from classification.
+- mode ``batch`` (eq. 4, times from the table), ``plug_flow`` (eq. 4 at t = tau; with
+  classification class i travels at d_i* u, rates S/d*), ``well_mixed`` (eq. 3; ``n_tanks``
+  > 1: equal well-mixed tanks in series, tau/n each, the same classification at each
+  outlet). For continuous modes tau comes from a process column (``tau_column``) or is 1,
+  in which case A is the dimensionless tau*A. Location ``holdup`` of well-mixed tanks
+  predicts the mill content, proportional to p_i / d_i* in one tank: sampling product and
+  hold-up separates breakage from classification.
 - mode ``mill``: any transport model of :mod:`millflow.mill` (``transport`` one of
   :data:`TRANSPORTS`, its fixed parameters in ``transport_params``, tau from
   ``tau_column`` or 1), classification d_i* as above placed by ``where`` (None: the
@@ -46,11 +47,16 @@ Parameters (positive ones in logs, named ``ln_...``):
   Locations ``product``, ``holdup`` (mill content), ``cell:K`` (content of cell K,
   1-based, cell transports; ``cell_K`` is accepted as an alias) and ``z:Y`` (content at
   the fractional axial position Y, plug flow and axial dispersion), spelled as
-  :func:`millflow.steady_mill` reads them. Evaluated member by member and condition by condition by
-  :class:`millflow.mill.Mill` (``steady_mill`` for hold-up samples): exact, but much
-  slower than the vectorised modes (milliseconds per member and condition instead of
-  one array operation for the whole population): prefer local fits from a good start
-  (``fit(..., global_search=False)``) or a small differential-evolution population.
+  :func:`millflow.steady_mill` reads them.
+
+Every continuous mode reaches the mill through one door,
+:class:`millflow.mill.samples.SampledMill` (the modes ``plug_flow`` and ``well_mixed``
+stand for the transport :func:`millflow.mill.transport.mode_transport` names): chains of
+cells, networks of cells and plug flow are solved for the whole population at once;
+other transports (axial dispersion, hold-up of plug flow) one refined mill per member and
+condition, milliseconds each instead of one array operation for the whole population:
+prefer local fits from a good start (``fit(..., global_search=False)``) or a small
+differential-evolution population there.
 
 The parameter vectors are decoded by :class:`~millflow.fitting.translate.Translator` (the
 one translator of a fit vector into S, b, d* and transport values, eq. 10 included), which
@@ -69,12 +75,12 @@ from millflow.batch import batch_grind_population
 from millflow.errors import InputError
 from millflow.fitting.data import PSDData
 from millflow.fitting.sieves import SieveReduction
-from millflow.fitting.spec import _NONLINEAR_CLASSIFIED, FORWARD_TOL, ModelSpec, canonical_location
+from millflow.fitting.spec import FORWARD_TOL, ModelSpec, canonical_location
 from millflow.fitting.translate import Translator
 from millflow.grid import SizeGrid
-from millflow.mill.transport import (build_transport, canonical_transport, cell_count, equal_cells, is_axial,
-                                     is_axial_dispersion, is_cells, is_network, is_plug, is_tanks)
-from millflow.mill.well_mixed import well_mixed_population, well_mixed_population_separable
+from millflow.mill.samples import SampledMill
+from millflow.mill.transport import (cell_count, is_axial,
+                                     is_cells, mode_transport)
 from millflow.psd import from_sieves
 
 __all__ = ["ForwardModel", "auto_grid"]
@@ -160,8 +166,8 @@ class ForwardModel:
                                      "'slowing_down' (kappa(t) in the particle's age) is fitted to 'product' and "
                                      "'holdup' samples (segregated flow over the exit ages has no cell or axial "
                                      "contents)")
-            elif spec.mode == "mill":
-                cells_ok = spec.transport in _NONLINEAR_CLASSIFIED
+            elif spec.mode != "batch":
+                cells_ok = is_cells(self.mill_door().transport)
                 bad = sorted({g[1] for g in self.groups if g[1] != "product" and not (
                     cells_ok and (g[1] == "holdup" or g[1].startswith("cell:")))})
                 if bad:
@@ -179,8 +185,8 @@ class ForwardModel:
                 return self.fd_noise, ("slowing-down in the particle's age: exit-age quadrature at its tolerance "
                                        "(millflow.mill.nonlinear.age_slowing)")
             return self.fd_noise, "non-linear kinetics: stiff ODE / Newton solves at their relative tolerance"
-        if self.spec.mode == "mill" and self._chain_cells() is None and not (
-                is_network(self.spec.transport) or is_plug(self.spec.transport)):
+        door = self.mill_door()
+        if door is not None and door.route(self.groups) == "members":
             return FORWARD_TOL, "mill solves refined to FORWARD_TOL of the feed (millflow.mill)"
         return float(np.finfo(float).eps) * self.n, ("exact linear solves (triangular substitution or the "
                                                      "eigenbasis of eq. 4): rounding, ~N eps")
@@ -305,14 +311,8 @@ class ForwardModel:
         cond_index = {c: k for k, c in enumerate(self.conditions)}
         for (cond, loc, t), grp in samples.groupby(["condition", "location", "time_s"], sort=False):
             loc = canonical_location(loc)
-            if self.spec.mode == "mill":
+            if self.spec.mode != "batch":
                 self._check_mill_location(loc, cond)
-            elif self.spec.mode != "batch" and loc not in ("product", "holdup"):
-                raise InputError(f"location {loc!r} of condition {cond!r}: a {self.spec.mode} mill predicts "
-                                 "'product' and (well_mixed) 'holdup' samples")
-            if loc == "holdup" and self.spec.mode != "mill" and (
-                    self.spec.mode != "well_mixed" or self.spec.n_tanks != 1):
-                raise InputError("location 'holdup' needs mode well_mixed with n_tanks = 1")
             groups.append((cond_index[cond], loc, float(t)))
             ys.append(grp.passing.to_numpy())
             ws.append(grp.weight.to_numpy())
@@ -361,15 +361,15 @@ class ForwardModel:
         return out
 
     def _check_mill_location(self, loc, cond):
-        spec = self.spec
+        door = self.mill_door()
         if loc in ("product", "holdup"):
             return
-        cells = cell_count(spec.transport, spec.transport_params)
-        axial = is_axial(spec.transport, open_vessel=False)
-        ok = "'product', 'holdup'" + (f" or 'cell:K' (K = 1..{int(cells)})" if is_cells(spec.transport)
+        cells = cell_count(door.transport, door.params)
+        axial = is_axial(door.transport, open_vessel=False)
+        ok = "'product', 'holdup'" + (f" or 'cell:K' (K = 1..{int(cells)})" if is_cells(door.transport)
                                       else "") + (" or 'z:Y' (0 <= Y <= 1)" if axial else "")
         good = False
-        if loc.startswith("cell:") and is_cells(spec.transport):
+        if loc.startswith("cell:") and is_cells(door.transport):
             k = loc[5:]
             good = k.isdigit() and 1 <= int(k) <= int(cells)
         elif loc.startswith("z:") and axial:
@@ -378,7 +378,7 @@ class ForwardModel:
             except ValueError:
                 good = False
         if not good:
-            raise InputError(f"location {loc!r} of condition {cond!r}: a mill with transport {spec.transport!r} "
+            raise InputError(f"location {loc!r} of condition {cond!r}: a mill with transport {door.transport!r} "
                              f"predicts {ok}")
 
     def _apply_D(self, Y):
@@ -485,7 +485,8 @@ class ForwardModel:
         n_pop = theta.shape[0]
         p = self._unpack(theta)
         mode = self.spec.mode
-        geometric = self._ratio is not None and (mode == "well_mixed" or (mode == "mill" and self._chain_cells()))
+        door = self.mill_door()
+        geometric = self._ratio is not None and door is not None and door.chain_cells is not None
         sep = None
         if geometric:  # eqs. 6/8 on a geometric grid: eq. 3 by the O(N) recurrences, no b formed
             S, *sep = self.translator.separable_on_grid(p, self._proc, len(self.conditions), self.grid, self._ratio)
@@ -496,40 +497,19 @@ class ForwardModel:
         out = np.empty((n_pop, len(self.groups), self.n))
         if self._nonlinear is not None:
             self._predict_nonlinear(S, b, p, tau, out)
-        elif mode == "well_mixed":
-            d = self.discharge(p, n_pop)
-            prod = self._feeds
-            tau_k = tau[None, :] / self.spec.n_tanks
-            if b is not None:
-                b_pc = b if b.ndim == 4 else b[:, None]
-            for _ in range(self.spec.n_tanks):  # equal well-mixed tanks in series, tau/n each (eq. 3)
-                if b is None:
-                    prod = well_mixed_population_separable(S, prod, *sep, tau_k, d)
-                else:
-                    prod = well_mixed_population(S, b_pc, prod, tau_k, d)
-            for g, (c, loc, _) in enumerate(self.groups):
-                if loc == "holdup":
-                    m = prod[:, c] / d[:, c]
-                    out[:, g] = m / m.sum(axis=1, keepdims=True)
-                else:
-                    out[:, g] = prod[:, c]
-        elif mode == "mill":
-            d = self.discharge(p, n_pop) if self.spec.classification else None
-            tau_pc, extra = self.transport_values(p)
-            if self._chain_cells() is not None:
-                self._predict_chain(S, b, d, tau_pc, out, sep)
-            elif is_network(self.spec.transport) and self.spec.where in (None, "discharge", "cells"):
-                self._predict_network(S, b, d, tau_pc, extra, out)
-            elif is_plug(self.spec.transport) and all(g[1] != "holdup" for g in self.groups):
-                self._predict_plug(S, b, d, tau_pc, out)
-            else:
-                self._predict_mill(S, b, d, tau_pc, extra, out)
-        else:
+        elif door is None:  # batch: eq. 4 by the core's population solve, exact also for nearly equal rates
             for c in range(len(self.conditions)):
                 gsel = [g for g, grp in enumerate(self.groups) if grp[0] == c]
-                t = np.array([self.groups[g][2] for g in gsel]) if mode == "batch" else np.full(len(gsel), tau[c])
-                # eq. 4 by the core's population solve: exact also for nearly equal rates
+                t = np.array([self.groups[g][2] for g in gsel])
                 out[:, gsel] = batch_grind_population(S[:, c], b[:, c] if b.ndim == 4 else b, self._feeds[c], t)
+        else:  # a continuous mill: its transport resolved once, every member and condition by its route
+            d = self.discharge(p, n_pop) if self.spec.classification else None
+            if mode == "mill":
+                tau_pc, extra = self.transport_values(p)
+                door = self.mill_door(extra)
+            else:
+                tau_pc = np.broadcast_to(np.asarray(tau, float), (n_pop, len(self.conditions)))
+            door.samples(S, b, self._feeds, tau_pc, d, self.groups, out, sep)
         return out
 
     def _predict_nonlinear(self, S, b, p, tau, out):
@@ -541,225 +521,66 @@ class ForwardModel:
         """
         spec, nl = self.spec, self._nonlinear
         mode = spec.mode
-        tau_pc = None
+        n_pop = S.shape[0]
+        door = None
         if mode == "mill":
             tau_pc, extra = self.transport_values(p)
-        tp = dict(spec.transport_params)
-        n_pop = S.shape[0]
-        # classification: at the discharge (mode "mill": the last cell's or the network's
-        # exit flows; where = "cells": every cell outlet), or in every tank (mode
-        # "well_mixed", as the linear forward model places it)
-        d_all = self.discharge(p, n_pop) if (spec.classification and mode != "batch") else None
-        axis = mode == "mill" and is_axial(spec.transport)
-        where = (spec.where or ("axis" if axis else "discharge")) if mode == "mill" else "cells"
+            door = self.mill_door(extra)
+        elif mode != "batch":
+            tau_pc, door = np.broadcast_to(np.asarray(tau, float), (n_pop, len(self.conditions))), self.mill_door()
+        # classification where the mill places it: mode "mill" at the discharge (the last
+        # cell's or the network's exit flows; where = "cells": every cell outlet) or along
+        # the axis; mode "well_mixed" in every tank, as the linear forward model places it
+        d_all = self.discharge(p, n_pop) if (spec.classification and door is not None) else None
+        where = None if door is None else door.classified_at
         age = "slowing_down" in spec.kinetics
         for c in range(len(self.conditions)):
             gsel = [g for g, grp in enumerate(self.groups) if grp[0] == c]
-            if mode == "batch":  # the whole population in one stacked solve
+            if door is None:  # batch: the whole population in one stacked solve
                 t = np.array([self.groups[g][2] for g in gsel])
                 out[:, gsel] = nl.solve_batch_population(S[:, c], b[:, c] if b.ndim == 4 else b,
                                                          self._feeds[c], t, p)
                 continue
             locs = [self.groups[g][1] for g in gsel]
-            for k in range(S.shape[0]):
+            for k in range(n_pop):
                 bk = b[k, c] if b.ndim == 4 else b[k]
                 if not (np.isfinite(S[k, c]).all() and np.isfinite(bk).all()):
                     out[k, gsel] = np.nan
                     continue
+                tc = float(tau_pc[k, c])
+                try:  # the transport of member k; outside rtd's domain (e.g. r < 0): this member only
+                    route = {"model": door.model(tc, k)} if age else door.nonlinear_route(tc, k)
+                except InputError:
+                    out[k, gsel] = np.nan
+                    continue
+                dk = None if d_all is None else d_all[k, c]
                 if age:  # kappa(t) in the particle's age: segregated flow over the exit ages of the transport
                     # (with classification, the age-structured cell balance)
-                    try:
-                        model = self._age_transport(float(tau_pc[k, c]) if mode == "mill" else float(tau[c]),
-                                                    extra if mode == "mill" else {}, k)
-                    except InputError:  # outside rtd's domain (e.g. r < 0): this member only
-                        out[k, gsel] = np.nan
-                        continue
-                    dk = None if d_all is None else d_all[k, c]
-                    out[k, gsel] = nl.solve_age(S[k, c], bk, self._feeds[c], model, p, k, d=dk, where=where,
-                                                locations=locs)
+                    out[k, gsel] = nl.solve_age(S[k, c], bk, self._feeds[c], route["model"], p, k, d=dk,
+                                                where=where, locations=locs)
                     continue
-                if mode == "mill":
-                    tr = spec.transport
-                    kw = {"transport": tr, "n_tanks": int(tp.get("n", 1)) if is_tanks(tr) else 1}
-                    if is_axial_dispersion(tr, open_vessel=False):
-                        kw["pe"] = float(extra["pe"][k]) if "pe" in extra else float(tp["pe"])
-                    tc = float(tau_pc[k, c])
-                    if is_network(tr) or is_axial_dispersion(tr, open_vessel=True):
-                        try:  # the network of cells, or the open vessel (millflow.mill.nonlinear.solve_transport)
-                            kw["network" if is_network(tr) else "model"] = self._transport(tc, extra, k)
-                        except InputError:  # outside rtd's domain (e.g. r < 0): this member only
-                            out[k, gsel] = np.nan
-                            continue
-                else:
-                    kw = {"transport": mode, "n_tanks": spec.n_tanks}  # mode plug_flow or well_mixed
-                    tc = float(tau[c])
-                if d_all is not None:
-                    kw["d"], kw["where"] = d_all[k, c], where
+                if dk is not None:
+                    route["d"], route["where"] = dk, where
                 if any(loc != "product" for loc in locs):
-                    kw["locations"] = locs  # hold-up and cell samples of well-mixed cells
-                out[k, gsel] = nl.solve_steady(S[k, c], bk, self._feeds[c], tc, p, k, **kw)
+                    route["locations"] = locs  # hold-up and cell samples of well-mixed cells
+                out[k, gsel] = nl.solve_steady(S[k, c], bk, self._feeds[c], tc, p, k, **route)
 
-    def _age_transport(self, tau: float, extra: dict, k: int):
-        """The rtd model of this model's transport at mean residence time ``tau`` [s], member k.
+    def mill_door(self, extra: dict | None = None):
+        """The mill of a continuous mode, resolved once: a :class:`~millflow.mill.samples.SampledMill`.
 
-        The rtd model whose exit-age density :func:`millflow.mill.nonlinear.age_slowing`
-        averages over: mode "mill" its transport (fitted transport parameters of member
-        k), mode "plug_flow" plug flow, mode "well_mixed" perfect mixing or ``n_tanks``
-        equal tanks in series.
-        """
-        mode = self.spec.mode
-        if mode == "mill":
-            return self._transport(tau, extra, k)
-        n = int(self.spec.n_tanks)
-        if mode == "plug_flow" or n == 1:  # the modes plug_flow and well_mixed name their transport
-            return build_transport(canonical_transport(mode), tau, {})
-        return build_transport("tanks_in_series", tau, {"n": n})
-
-    def _chain_cells(self):
-        """Number of equal well-mixed cells in a row, or None.
-
-        Number of equal well-mixed cells in a row for transports that are such a chain
-        (perfect mixing, tanks in series with integer n), else None.
+        Mode "mill" its transport (``extra``: fitted transport parameters per member, from
+        :meth:`transport_values`), modes "plug_flow" and "well_mixed" the transport they name
+        (:func:`~millflow.mill.transport.mode_transport`); None for mode "batch".
         """
         spec = self.spec
-        n = equal_cells(spec.transport, spec.transport_params) if spec.transport is not None else None
-        if n is not None and is_tanks(spec.transport) and spec.where not in (None, "discharge", "cells"):
+        if spec.mode == "batch":
             return None
-        return n
-
-    def _predict_chain(self, S, b, d, tau, out, sep):
-        """Mode "mill" for a chain of equal well-mixed cells, vectorised.
-
-        Mode "mill" for a chain of equal well-mixed cells, vectorised over the population
-        and the conditions: eq. 3 per cell (tau/n each) by
-        :func:`millflow.mill.well_mixed.well_mixed_population`, classification at the
-        discharge (the last cell's outflow) or at every cell outlet (``where="cells"``).
-        Cell content per unit feed rate is tau_k p_k / d (classified outlet) or tau_k p_k.
-        ``b`` None: eqs. 6/8 on a geometric grid, by the O(N) recurrences of ``sep``
-        (:func:`millflow.mill.well_mixed.well_mixed_population_separable`).
-        """
-        n = self._chain_cells()
-        ones = np.ones_like(S)
-        stream = np.broadcast_to(self._feeds, S.shape)
-        contents = []
-        if b is not None:
-            b_pc = b if b.ndim == 4 else b[:, None]
-        for k in range(n):
-            classified = d is not None and (self.spec.where == "cells" or k == n - 1)
-            dk = d if classified else ones
-            if b is None:
-                stream = well_mixed_population_separable(S, stream, *sep, tau / n, dk)
-            else:
-                stream = well_mixed_population(S, b_pc, stream, tau / n, dk)
-            contents.append(stream / dk)
-        for g, (c, loc, _) in enumerate(self.groups):
-            if loc == "product":
-                m = stream[:, c]
-            elif loc == "holdup":
-                m = sum(h[:, c] for h in contents)
-            else:  # cell:K
-                m = contents[int(loc[5:]) - 1][:, c]
-            out[:, g] = m / m.sum(axis=1, keepdims=True)
-
-    def _predict_plug(self, S, b, d, tau, out):
-        """Mode "mill" with plug flow, vectorised over the population.
-
-        Mode "mill" with plug flow (product and z:Y samples), vectorised over the
-        population: eq. 4 in the contact time, classification along the axis (class i
-        travels at d_i* u, so its rate per unit length is S_i/d_i*), by
-        :func:`millflow.batch.batch_grind_population` on the dimensionless rates
-        tau S/d* at the positions Y (1 = the discharge). The content at Y is
-        tau M(Y)/d* per unit length (normalised).
-        """
-        rates = S * tau[:, :, None] if d is None else S * tau[:, :, None] / d
-        for c in range(len(self.conditions)):
-            gsel = [g for g, grp in enumerate(self.groups) if grp[0] == c]
-            pos = np.array([1.0 if self.groups[g][1] == "product" else float(self.groups[g][1][2:]) for g in gsel])
-            M = batch_grind_population(rates[:, c], b[:, c] if b.ndim == 4 else b, self._feeds[c], pos)
-            for r, g in enumerate(gsel):
-                m = M[:, r] if (self.groups[g][1] == "product" or d is None) else M[:, r] / d[:, c]
-                with np.errstate(invalid="ignore"):
-                    out[:, g] = m / m.sum(axis=1, keepdims=True)
-
-    def _predict_network(self, S, b, d, tau, extra, out):
-        """Mode "mill" for recirculating cells, vectorised over the population and the conditions.
-
-        Mode "mill" for recirculating cells, vectorised over the population and the
-        conditions (:func:`millflow.mill.cells.solve_cells_population`: a batched n x n
-        solve per class); one network per member and condition when transport
-        parameters are fitted. Members outside rtd's domain (e.g. r < 0) give NaN.
-        """
-        from millflow.mill.cells import network_of, solve_cells_population
-        n_pop, C = S.shape[:2]
-        nets = np.empty((n_pop, C), dtype=object)
-        bad = np.zeros((n_pop, C), dtype=bool)
-        fitted = bool(self.spec.transport_fit)
-        for c in range(C):
-            for k in range(n_pop if fitted else 1):
-                try:
-                    net = network_of(self._transport(tau[k, c], extra, k))
-                except InputError:
-                    net, bad[k, c] = None, True
-                if fitted:
-                    nets[k, c] = net
-                else:
-                    nets[:, c] = [net] * n_pop
-        if bad.any():  # a valid placeholder, then NaN
-            ok = next(v for v in nets.ravel() if v is not None) if (~bad).any() else None
-            if ok is None:
-                out[:] = np.nan
-                return
-            nets[bad] = ok
-        b_pc = b if b.ndim == 4 else b[:, None]
-        where = "cells" if self.spec.where == "cells" else "discharge"
-        prod, hold = solve_cells_population(S, b_pc, self._feeds[None], nets, d, where)
-        for g, (c, loc, _) in enumerate(self.groups):
-            if loc == "product":
-                m = prod[:, c]
-            elif loc == "holdup":
-                m = hold[:, c].sum(axis=1)
-            else:  # cell:K
-                m = hold[:, c, int(loc[5:]) - 1]
-            with np.errstate(invalid="ignore"):
-                out[:, g] = m / m.sum(axis=1, keepdims=True)
-        out[bad.any(axis=1)] = np.nan
-
-    def _predict_mill(self, S, b, d, tau, extra, out):
-        """Mode "mill": one :class:`~millflow.mill.Mill` per member and condition (slow path)."""
-        from millflow.mill import Mill, steady_mill
-        spec = self.spec
-        fixed = not spec.transport_fit
-        loc_of = {"product": "discharge", "holdup": "holdup"}
-        for c in range(len(self.conditions)):
-            gsel = [g for g, grp in enumerate(self.groups) if grp[0] == c]
-            locs = [self.groups[g][1] for g in gsel]
-            only_product = all(loc == "product" for loc in locs)
-            specs = [loc_of.get(loc, loc) for loc in locs]
-            zs = sorted({float(loc[2:]) for loc in locs if loc.startswith("z:")})
-            kw = {"positions": zs} if zs else {}
-            tr = self._transport(tau[0, c], extra, 0) if fixed else None
-            for k in range(S.shape[0]):
-                Sk = S[k, c]
-                bk = b[k, c] if b.ndim == 4 else b[k]
-                dk = None if d is None else d[k, c]
-                if not (np.isfinite(Sk).all() and np.isfinite(bk).all() and (dk is None or np.isfinite(dk).all())):
-                    out[k, gsel] = np.nan  # outside the model's domain: reported, not solved
-                    continue
-                if not fixed:
-                    try:
-                        tr = self._transport(tau[k, c], extra, k)
-                    except InputError:
-                        out[k, gsel] = np.nan
-                        continue
-                # FORWARD_TOL of the feed (module constant); above it the solve raises
-                if only_product:
-                    out[k, gsel] = Mill(Sk, bk, tr, dk, spec.where).product(self._feeds[c], tol=FORWARD_TOL)
-                else:
-                    ds = steady_mill(Sk, bk, self._feeds[c], tr, dk, where=spec.where, locations=specs,
-                                     tol=FORWARD_TOL, **kw)
-                    vals = ds["sample"].values
-                    for r, (g, loc) in enumerate(zip(gsel, locs)):
-                        out[k, g] = ds["product"].values if loc == "product" else vals[r]
+        name, params, where = mode_transport(spec.mode, spec.n_tanks, spec.transport, spec.transport_params, spec.where)
+        if spec.mode != "mill":
+            return SampledMill(name, params, where, tol=FORWARD_TOL)
+        extra = dict(extra or {})
+        return SampledMill(name, params, where, lambda tau, k: self._transport(tau, extra, k),
+                           fitted=bool(spec.transport_fit), tol=FORWARD_TOL, extra=extra)
 
     def _cum_at_rows(self, theta):
         """Cumulative passing of the grid solution at every measured row.

@@ -17,7 +17,7 @@ import numpy as np
 from millflow.breakage.rates import X0_DEFAULT
 from millflow.errors import InputError
 from millflow.mill.transport import TRANSPORT_FIT as _TRANSPORT_FIT
-from millflow.mill.transport import TRANSPORT_NAMES, is_cells, is_tanks
+from millflow.mill.transport import TRANSPORT_NAMES, is_cells, is_tanks, mode_transport
 
 __all__ = ["Parameter", "ModelSpec", "RATE_FORMS", "BREAKAGE_FORMS", "MODES", "canonical_location",
            "CLASSIFICATIONS", "TRANSPORTS", "TRANSPORT_FIT", "FORWARD_TOL", "default_parameters"]
@@ -191,9 +191,8 @@ class ModelSpec:
 
     def _check_age_slowing(self, consts: dict):
         """Refuse what slowing-down in the particle's age cannot fit in a continuous mill."""
-        cells = self.mode == "well_mixed" or (self.mode == "mill" and is_cells(self.transport)
-                                               and self.where != "axis")
-        if self.classification is not None and not cells:
+        name, _, at = mode_transport(self.mode, self.n_tanks, self.transport, self.transport_params, self.where)
+        if self.classification is not None and not (is_cells(name) and at != "axis"):
             where = self.transport if self.mode == "mill" else self.mode
             raise InputError(f"model.classification = {self.classification!r} with model.kinetics = 'slowing_down' "
                              f"({where}): classification on the axis makes classes travel at different speeds, so "

@@ -38,7 +38,7 @@ from rtd import names as _names
 __all__ = ["KINDS", "TRANSPORT_NAMES", "TRANSPORT_FIT", "BUILDERS", "canonical_transport", "transport_kind",
            "is_cells", "is_tanks", "is_network", "is_plug", "is_axial", "is_axial_dispersion", "equal_cells",
            "cell_count",
-           "shape_parameter", "fit_parameters", "build_transport", "solve_nonlinear"]
+           "shape_parameter", "fit_parameters", "build_transport", "mode_transport", "solve_nonlinear"]
 
 #: Kinds of transport: well-mixed cells (one cell, a chain of equal tanks, a network of
 #: cells with back-flow), plug flow, the closed and the open axial-dispersion vessel,
@@ -197,6 +197,43 @@ def fit_parameters(transport) -> tuple[str, ...]:
         return ()
     name = canonical_transport(transport)
     return tuple(k for k, (_, names) in TRANSPORT_FIT.items() if name in names)
+
+
+#: The fit's continuous modes that name a transport: mode -> (transport, where d* acts).
+_MODE_TRANSPORT = {"plug_flow": ("plug_flow", "axis"), "well_mixed": ("tanks_in_series", "cells")}
+
+
+def mode_transport(mode: str, n_tanks: int = 1, transport=None, params=None, where=None):
+    """The transport a fit's mode stands for: (name, parameters, where d* acts).
+
+    Parameters
+    ----------
+    mode : the fit's mode: ``"plug_flow"`` (eq. 4 at t = tau, d* in the velocity),
+        ``"well_mixed"`` (``n_tanks`` equal well-mixed tanks, d* at every tank outlet) or
+        ``"mill"`` (``transport`` with ``params`` and ``where`` as given).
+    n_tanks : tanks of mode ``"well_mixed"`` (1: perfect mixing).
+    transport, params, where : mode ``"mill"``'s transport, its parameters besides tau and
+        where its classification acts.
+
+    Returns
+    -------
+    tuple
+        (canonical transport name, parameters dict, where).
+
+    Raises
+    ------
+    InputError
+        For mode ``"batch"`` (no transport) or an unknown mode.
+    """
+    if mode == "mill":
+        return canonical_transport(transport), dict(params or {}), where
+    if mode not in _MODE_TRANSPORT:
+        raise InputError(f"mode {mode!r}: expected one of {sorted(_MODE_TRANSPORT) + ['mill']} (a mode with a "
+                         "transport)")
+    name, at = _MODE_TRANSPORT[mode]
+    if name == "tanks_in_series" and int(n_tanks) == 1:
+        return "perfect_mixing", {}, at
+    return name, ({"n": int(n_tanks)} if name == "tanks_in_series" else {}), at
 
 
 def build_transport(model: str, tau: float, params: dict):

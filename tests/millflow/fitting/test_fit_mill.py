@@ -58,6 +58,45 @@ def test_mill_mode_equals_well_mixed_and_tanks(cls):
     np.testing.assert_allclose(mm.predict(theta), wm.predict(theta), rtol=0, atol=1e-10)
 
 
+def test_the_modes_name_their_transport():
+    """The fit's modes plug_flow and well_mixed stand for a transport of the mill layer."""
+    from millflow.mill.transport import mode_transport
+    assert mode_transport("plug_flow") == ("plug_flow", {}, "axis")
+    assert mode_transport("well_mixed") == ("perfect_mixing", {}, "cells")
+    assert mode_transport("well_mixed", 3) == ("tanks_in_series", {"n": 3}, "cells")
+    assert mode_transport("mill", 1, "tis", {"n": 2}, None) == ("tanks_in_series", {"n": 2}, None)
+    with pytest.raises(InputError, match="mode 'batch'"):
+        mode_transport("batch")
+
+
+def test_plug_flow_mode_classifies_along_the_axis_as_mode_mill():
+    """Mode plug_flow with classification is plug flow with d* in the velocity (rates S/d*),
+    the same as mode "mill" with plug flow: the classification is used, not dropped (the
+    same batch solve in the contact time: 1e-12 on mass fractions <= 1)."""
+    theta = np.array([[-3.5, 1.0, 0.4, 0.8, 3.0, 0.0, 1.5], [-3.0, 0.7, 0.5, 1.0, 4.0, 0.2, 1.0]])
+    d = _data(["c1", "c2"], ["product"], PROC)
+    pf = ForwardModel(ModelSpec(mode="plug_flow", classification="screen", tau_column="tau_s"), d, GRID)
+    mm = ForwardModel(ModelSpec(mode="mill", transport="plug_flow", classification="screen", tau_column="tau_s"),
+                      d, GRID)
+    plain = ForwardModel(ModelSpec(mode="plug_flow", tau_column="tau_s"), d, GRID)
+    np.testing.assert_allclose(pf.predict_grid(theta), mm.predict_grid(theta), rtol=0, atol=1e-12)
+    assert np.abs(pf.predict_grid(theta) - plain.predict_grid(theta[:, :5])).max() > 1e-3
+
+
+def test_well_mixed_tanks_predict_holdup_and_cell_samples():
+    """Mode well_mixed with n_tanks = 3 reads hold-up and cell:K samples like mode "mill"
+    with three tanks classified at every outlet (the same eq. 3 chain: 1e-12)."""
+    theta = np.array([[-3.5, 1.0, 0.4, 0.8, 3.0, 0.0, 1.5], [-3.0, 0.7, 0.5, 1.0, 4.0, 0.2, 1.0]])
+    d = _data(["c1", "c2"], ["product", "holdup", "cell:2"], PROC)
+    wm = ForwardModel(ModelSpec(mode="well_mixed", n_tanks=3, classification="screen", tau_column="tau_s"), d, GRID)
+    mm = ForwardModel(ModelSpec(mode="mill", transport="tanks_in_series", transport_params={"n": 3}, where="cells",
+                                classification="screen", tau_column="tau_s"), d, GRID)
+    np.testing.assert_allclose(wm.predict_grid(theta), mm.predict_grid(theta), rtol=0, atol=1e-12)
+    with pytest.raises(InputError, match="cell:4"):
+        ForwardModel(ModelSpec(mode="well_mixed", n_tanks=3, tau_column="tau_s"), _data(["c1"], ["cell:4"], PROC),
+                     GRID)
+
+
 def test_mill_mode_cell_samples():
     """Without classification the last of n tanks holds what it discharges: cell:n = product.
     Locations are spelled as steady_mill reads them (cell:K); the old cell_K is an alias."""
@@ -197,7 +236,7 @@ def test_mill_mode_chain_is_vectorised_and_equals_the_mill(where):
     d = _data(["c1", "c2"], ["cell:1", "cell:2", "holdup", "product"], PROC)
     m = ForwardModel(ModelSpec(mode="mill", transport="tanks_in_series", transport_params={"n": 3},
                                classification="screen", where=where, tau_column="tau_s"), d, GRID)
-    assert m._chain_cells() == 3
+    assert m.mill_door().chain_cells == 3
     rng = np.random.default_rng(3)
     theta = np.column_stack([rng.uniform(-6, -3, 4), rng.uniform(0.5, 1.5, 4), rng.uniform(0.2, 0.8, 4),
                              rng.uniform(0.5, 1.2, 4), rng.uniform(2.5, 5, 4), rng.uniform(-1, 0.5, 4),
@@ -206,7 +245,7 @@ def test_mill_mode_chain_is_vectorised_and_equals_the_mill(where):
     p = m._unpack(theta)
     slow = np.empty_like(fast)
     tau, extra = m.transport_values(p)
-    m._predict_mill(m.rates(p), m.frac_b(p, 4), m.discharge(p, 4), tau, extra, slow)
+    m.mill_door(extra).samples_by_member(m.rates(p), m.frac_b(p, 4), m._feeds, m.discharge(p, 4), tau, m.groups, slow)
     np.testing.assert_allclose(fast, slow, rtol=0, atol=1e-12)
 
 
@@ -227,7 +266,7 @@ def test_mill_mode_recirculating_cells_vectorised_equals_the_mill(where):
     p = m._unpack(theta)
     slow = np.empty_like(fast)
     tau, extra = m.transport_values(p)
-    m._predict_mill(m.rates(p), m.frac_b(p, 4), m.discharge(p, 4), tau, extra, slow)
+    m.mill_door(extra).samples_by_member(m.rates(p), m.frac_b(p, 4), m._feeds, m.discharge(p, 4), tau, m.groups, slow)
     np.testing.assert_allclose(fast, slow, rtol=0, atol=1e-12)
     theta[1, -1] = -1.0  # r < 0: outside rtd's domain, that member only
     got = m.predict_grid(theta)
@@ -268,7 +307,8 @@ def test_mill_mode_plug_flow_vectorised_equals_the_mill(cls):
     p = m._unpack(theta)
     slow = np.empty_like(fast)
     tau, extra = m.transport_values(p)
-    m._predict_mill(m.rates(p), m.frac_b(p, 4), m.discharge(p, 4) if cls else None, tau, extra, slow)
+    d_star = m.discharge(p, 4) if cls else None
+    m.mill_door(extra).samples_by_member(m.rates(p), m.frac_b(p, 4), m._feeds, d_star, tau, m.groups, slow)
     np.testing.assert_allclose(fast, slow, rtol=0, atol=1e-12)
 
 
