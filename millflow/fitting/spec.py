@@ -17,7 +17,7 @@ import numpy as np
 from millflow.breakage.rates import X0_DEFAULT
 from millflow.errors import InputError
 from millflow.mill.transport import TRANSPORT_FIT as _TRANSPORT_FIT
-from millflow.mill.transport import TRANSPORT_NAMES, is_cells, is_tanks
+from millflow.mill.transport import TRANSPORT_NAMES, is_axial_dispersion, is_cells, is_tanks
 
 __all__ = ["Parameter", "ModelSpec", "RATE_FORMS", "BREAKAGE_FORMS", "MODES", "canonical_location",
            "CLASSIFICATIONS", "TRANSPORTS", "TRANSPORT_FIT", "FORWARD_TOL", "default_parameters"]
@@ -193,13 +193,16 @@ class ModelSpec:
         """Refuse what slowing-down in the particle's age cannot fit in a continuous mill."""
         cells = self.mode == "well_mixed" or (self.mode == "mill" and is_cells(self.transport)
                                                and self.where != "axis")
-        if self.classification is not None and not cells:
+        closed = self.mode == "mill" and is_axial_dispersion(self.transport, open_vessel=False)
+        if self.classification is not None and not (cells or closed):
             where = self.transport if self.mode == "mill" else self.mode
             raise InputError(f"model.classification = {self.classification!r} with model.kinetics = 'slowing_down' "
                              f"({where}): classification on the axis makes classes travel at different speeds, so "
                              "a particle's age and its position are not tied (millflow solves the age-structured "
-                             "balance for well-mixed cells only); expected a cell transport (well_mixed, "
-                             f"{', '.join(n for n in TRANSPORT_NAMES if is_cells(n))}) or no classification")
+                             "balance for well-mixed cells and the age-position balance for the closed axial-"
+                             "dispersion vessel); expected a cell transport (well_mixed, "
+                             f"{', '.join(n for n in TRANSPORT_NAMES if is_cells(n))}), axial_dispersion (a large pe "
+                             "for near plug flow) or no classification")
         if "tau" in self.transport_fit and "t_ref_s" not in consts:
             raise InputError("model.kinetics = 'slowing_down' with model.transport_fit = ['tau']: the default t_ref "
                              "(the longest tau) would move with the fit; expected model.kinetics_params.t_ref_s "
