@@ -35,7 +35,7 @@ hold-up / tau between the two (plus the tail bound) is the error estimate (measu
 With classification on the axis of plug flow or axial dispersion classes travel at
 different speeds, so a particle's age and its position are not tied and the state is a
 density in both: the closed axial-dispersion vessel is solved by
-:mod:`millflow.mill.age_axis` (:func:`age_structured` routes it there); plug flow and the
+:mod:`millflow.mill.age_axis` (:func:`millflow.mill.nonlinear.age_slowing` routes it there); plug flow and the
 open vessel with classification stay refused (:data:`AXIS_REFUSED`).
 """
 from __future__ import annotations
@@ -154,18 +154,12 @@ def age_structured(kin: Kinetics, feed, transport, d=None, where="discharge", *,
     x s), ``info["cell_holdup"]`` (cells, N), ``info["age_horizon_s"]`` where the ODE
     stopped. ``error_estimate=False``: one solve at (rtol, atol), the estimate is then the
     tail bound only (the fit's forward model, whose own noise level is set apart).
-    The closed axial-dispersion vessel (``transport`` rtd.AxialDispersion, ``d`` the
-    relative axial velocities) goes to :func:`millflow.mill.age_axis.age_structured_axial`
-    with the error target max(rtol, AXIS_TOL) (its grid in z sets what is reachable).
+    The closed axial-dispersion vessel with ``d`` on its axis is
+    :func:`millflow.mill.age_axis.age_structured_axial` (``age_slowing`` routes it there).
     """
     net = network_of(transport)
     if net is None:
         kind = type(transport).__name__
-        if kind == "AxialDispersion" and getattr(transport, "bc", None) == "closed":
-            from millflow.mill.age_axis import AXIS_TOL, age_structured_axial
-
-            return age_structured_axial(kin, feed, transport, d, tol=max(rtol, AXIS_TOL), tail=tail,
-                                        holdup=holdup, error_estimate=error_estimate)
         if kind in ("PlugFlow", "AxialDispersion") or where == "axis":
             raise InputError(AXIS_REFUSED)
         raise InputError(f"transport {transport!r}: kappa(t) with classification is solved on networks of well-mixed "

@@ -495,6 +495,11 @@ def age_slowing(kin: Kinetics, feed, transport, d=None, where="discharge", *, to
     feed, _ = _check(kin, feed, float(getattr(transport, "mean", 1.0)))
     if kin.age is None:
         raise InputError("age_slowing: the kinetics have no kappa(t) (kinetics(..., kappa_t=...))")
+    if d is not None and isinstance(transport, _rtd().AxialDispersion) and transport.bc == "closed":
+        from millflow.mill.age_axis import AXIS_TOL, age_structured_axial
+
+        return age_structured_axial(kin, feed, transport, d, tol=max(tol, AXIS_TOL), holdup=holdup,
+                                    error_estimate=error_estimate)
     if d is not None:
         return age_structured(kin, feed, transport, d, where or "discharge", rtol=max(tol, 1e-13), holdup=holdup,
                               error_estimate=error_estimate)
