@@ -313,11 +313,15 @@ class CompiledKinetics:
         unit feed, or with ``locations`` ("product", "holdup") (L, N) mass fractions;
         NaN on failure. With classification ``d`` (N,) placed by ``where`` ("discharge",
         "cells") the age-structured cell balance (one solve at :data:`AGE_TOL`, no second
-        solve for an estimate); classification on the axis is refused.
+        solve for an estimate); with ``d`` on the axis of the closed axial-dispersion vessel
+        the age-position balance on the fixed grid of :data:`AXIAL_CELLS` volumes (one solve
+        at :data:`AGE_ODE_RTOL`); classification on the axis of plug flow and of the open
+        vessel is refused.
         """
         from millflow.mill import nonlinear as nl
-        from millflow.mill.transport import is_axial, is_plug
-        if d is not None and (where == "axis" or is_plug(model) or is_axial(model)):
+        from millflow.mill.transport import is_axial, is_axial_dispersion
+        axis = d is not None and is_axial_dispersion(model, open_vessel=False)
+        if d is not None and not axis and (where == "axis" or is_axial(model)):
             raise InputError(nl._AGE_CLASSIFIED)
         locs = ["product"] if locations is None else list(locations)
         bad = sorted({loc for loc in locs if loc not in ("product", "holdup")})
@@ -328,6 +332,10 @@ class CompiledKinetics:
         try:
             if d is None:
                 r = nl.age_slowing(self._kin(S, b, p, k), feed, model, tol=AGE_TOL, holdup=hold)
+            elif axis:  # a fixed grid: a refined one would move with the parameters
+                from millflow.mill.age_axis import age_structured_axial
+                r = age_structured_axial(self._kin(S, b, p, k), feed, model, d, rtol=AGE_ODE_RTOL,
+                                         tail=AGE_ODE_ATOL, m_cells=AXIAL_CELLS, holdup=hold, error_estimate=False)
             else:  # the age-structured cell balance, one solve (errors ~1e-12 of the feed, measured)
                 from millflow.mill.age_cells import age_structured
                 r = age_structured(self._kin(S, b, p, k), feed, model, d, where, rtol=AGE_ODE_RTOL,

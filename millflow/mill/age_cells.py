@@ -32,9 +32,11 @@ joins the error estimate. The whole solve runs at (rtol, atol) and at tolerances
 tighter; the tighter answer is returned and the largest difference of the product and of
 hold-up / tau between the two (plus the tail bound) is the error estimate (measured).
 
-Plug flow and axial dispersion with classification on the axis are refused: classes
-travel at different speeds, so a particle's age and its position are not tied, and the
-state would be a density in both (not solved here).
+With classification on the axis of plug flow or axial dispersion classes travel at
+different speeds, so a particle's age and its position are not tied and the state is a
+density in both: the closed axial-dispersion vessel is solved by
+:mod:`millflow.mill.age_axis` (:func:`millflow.mill.nonlinear.age_slowing` routes it there); plug flow and the
+open vessel with classification stay refused (:data:`AXIS_REFUSED`).
 """
 from __future__ import annotations
 
@@ -57,9 +59,10 @@ AGE_RTOL, AGE_ATOL = 1e-10, 1e-14
 #: The integration stops once the mass still in the mill is below this share of the feed.
 AGE_TAIL = 1e-13
 #: Why plug flow and axial dispersion with classification stay refused.
-AXIS_REFUSED = ("kappa(t) (slowing-down in the particle's age) with classification on the axis (plug flow, axial "
-                "dispersion): classes travel at different speeds, so age and position are not tied and the state "
-                "would be a density in both, which millflow does not solve; expected a cell transport "
+AXIS_REFUSED = ("kappa(t) (slowing-down in the particle's age) with classification on the axis of plug flow or of "
+                "the open axial-dispersion vessel: classes travel at different speeds, so age and position are not "
+                "tied and the state is a density in both, which millflow solves for the closed vessel only; "
+                "expected rtd.AxialDispersion(tau, pe) (closed, a large Pe for near plug flow), a cell transport "
                 "(rtd.PerfectMixing, rtd.TanksInSeries, rtd.RecirculatingCells, a CompartmentNetwork) or d = None")
 
 
@@ -151,6 +154,8 @@ def age_structured(kin: Kinetics, feed, transport, d=None, where="discharge", *,
     x s), ``info["cell_holdup"]`` (cells, N), ``info["age_horizon_s"]`` where the ODE
     stopped. ``error_estimate=False``: one solve at (rtol, atol), the estimate is then the
     tail bound only (the fit's forward model, whose own noise level is set apart).
+    The closed axial-dispersion vessel with ``d`` on its axis is
+    :func:`millflow.mill.age_axis.age_structured_axial` (``age_slowing`` routes it there).
     """
     net = network_of(transport)
     if net is None:

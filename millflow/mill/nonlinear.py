@@ -28,8 +28,11 @@ the linear mill, with classification d* where the linear mill takes it.
   (:func:`age_slowing`); with classification d* in cells (perfect mixing, tanks in series,
   recirculating cells, compartment networks) no one E(t) applies (a particle's exit depends
   on the class it is in, which changes as it breaks) and the age-structured balance of
-  :mod:`millflow.mill.age_cells` is solved, one linear ODE in the age; plug flow and axial
-  dispersion with classification on the axis are refused (age and position are not tied);
+  :mod:`millflow.mill.age_cells` is solved, one linear ODE in the age; with classification on
+  the axis of the closed axial-dispersion vessel age and position are not tied and the
+  age-position balance of :mod:`millflow.mill.age_axis` is solved (finite volumes in z, one
+  sparse linear ODE in the age); plug flow and the open vessel with classification on the
+  axis are refused;
 - micromixing limits for any RTD model with ``pdf``/``cdf``: complete segregation,
   int_0^inf E(t) M_batch(t) dt, and maximum mixedness (Zwietering 1959),
   dM/dlambda = -R(M) + h(lambda) (M - f), h = E/(1 - F), integrated from large lambda
@@ -459,7 +462,8 @@ def _rtd():
 
 
 # ---------------------------------------------------------------- slowing-down in age
-#: The refusal that remains: classification on the axis (cells are solved by :mod:`millflow.mill.age_cells`).
+#: The refusal that remains: classification on the axis of plug flow and of the open vessel (cells are
+#: solved by :mod:`millflow.mill.age_cells`, the closed vessel by :mod:`millflow.mill.age_axis`).
 _AGE_CLASSIFIED = AXIS_REFUSED
 
 
@@ -482,12 +486,20 @@ def age_slowing(kin: Kinetics, feed, transport, d=None, where="discharge", *, to
     ("discharge", "cells", 1-based cell numbers) as the linear cells place it, a cell
     transport is solved by the age-structured balance
     (:func:`millflow.mill.age_cells.age_structured`, to ``tol`` of the feed;
-    ``error_estimate=False`` skips its second, tighter solve); plug flow and axial
-    dispersion with classification are refused (age and position are not tied).
+    ``error_estimate=False`` skips its second, tighter solve), the closed axial-dispersion
+    vessel with ``d`` the relative axial velocities by the age-position balance
+    (:func:`millflow.mill.age_axis.age_structured_axial`, to max(``tol``, AXIS_TOL): its grid
+    in z); plug flow and the open vessel with classification are refused (age and position
+    are not tied).
     """
     feed, _ = _check(kin, feed, float(getattr(transport, "mean", 1.0)))
     if kin.age is None:
         raise InputError("age_slowing: the kinetics have no kappa(t) (kinetics(..., kappa_t=...))")
+    if d is not None and isinstance(transport, _rtd().AxialDispersion) and transport.bc == "closed":
+        from millflow.mill.age_axis import AXIS_TOL, age_structured_axial
+
+        return age_structured_axial(kin, feed, transport, d, tol=max(tol, AXIS_TOL), holdup=holdup,
+                                    error_estimate=error_estimate)
     if d is not None:
         return age_structured(kin, feed, transport, d, where or "discharge", rtol=max(tol, 1e-13), holdup=holdup,
                               error_estimate=error_estimate)
@@ -559,6 +571,11 @@ def solve_transport(kin: Kinetics, feed, transport, d=None, *, where=None, dispe
     sc = _scene(kin.S, kin.b, transport, d, where, dispersion, discharge=discharge)
     feed, _ = _check(kin, feed, 1.0)
     if kin.age is not None:
+        if sc.kind == "axial" and (sc.d is not None or sc.dispersion is not None):
+            from millflow.mill.age_axis import age_structured_axial
+
+            return age_structured_axial(kin, feed, transport, sc.d, dispersion=sc.dispersion, tol=tol,
+                                        holdup=holdup, m_cells=m_cells)
         if sc.dispersion is not None or (sc.d is not None and sc.kind not in ("perfect_mixing", "network")):
             raise InputError(_AGE_CLASSIFIED)
         if sc.kind in ("series", "parallel"):

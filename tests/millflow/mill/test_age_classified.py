@@ -1,7 +1,8 @@
 """Slowing-down in the particle's age with classification (millflow.mill.age_cells): the
 age-structured cell balance against segregated flow (d* = 1), the linear classified mill
 (kappa = 1), closed forms integrated by scipy quad, its mass balance, its error estimate
-against a tight solve, and the refusal of classification on the axis."""
+against a tight solve, and the refusal of classification on the axis of plug flow and of the
+open vessel."""
 import numpy as np
 import pytest
 from scipy.integrate import quad
@@ -114,7 +115,8 @@ def test_error_estimate_bounds_the_error_against_a_tight_solve(name, rtol):
 def test_classification_on_the_axis_is_refused():
     S, b, feed, d = _scene()
     kin = _slow(S, b)
-    for T in (rtd.PlugFlow(TAU), rtd.AxialDispersion(TAU, 8.0)):
+    # the closed axial vessel is solved (millflow.mill.age_axis, test_age_axis.py)
+    for T in (rtd.PlugFlow(TAU), rtd.AxialDispersion(TAU, 8.0, bc="open")):
         with pytest.raises(InputError, match="age and position are not tied"):
             nl.solve_transport(kin, feed, T, d, where="axis")
     with pytest.raises(InputError, match="age and position are not tied"):
