@@ -7,7 +7,8 @@ solution M(t) = exp(K t) feed is evaluated by the block eigen-decomposition of
 :class:`~millflow.linalg.SpectralBlocks`, which stays accurate when rates are equal
 or nearly equal (where Reid's closed form divides by zero), when they span many
 decades and when S t is huge or tiny. The ODE path (scipy's ``solve_ivp`` with the
-analytic Jacobian K) is kept for comparison and for nonlinear terms added later.
+analytic Jacobian K, through :func:`millflow.ode.integrate_linear`) is kept for
+comparison and for nonlinear terms added later.
 
 Plug flow (no back-mixing) is the same solution at the contact time t* = y/u,
 u = L/tau: the product is M(t* = tau), the axial profile M(y) at any positions.
@@ -18,12 +19,12 @@ import time
 from dataclasses import dataclass, field
 
 import numpy as np
-from scipy.integrate import solve_ivp
 
 from millflow import checks
-from millflow.errors import InputError, SolverError
+from millflow.errors import InputError
 from millflow.linalg import (DEFAULT_CLUSTER_GAP, SpectralBlocks, breakage_matrix,
                              eigenvectors_distinct_population)
+from millflow.ode import integrate_linear
 
 __all__ = ["BatchResult", "batch_grind", "batch_grind_population", "batch_solve", "grind", "plug_flow_profile",
            "ODE_METHODS"]
@@ -246,8 +247,8 @@ def batch_grind(S, b, feed, t, method: str = "exact", *, rtol: float = 1e-10, at
 def _ode_solve(K: np.ndarray, feed: np.ndarray, t: np.ndarray, method: str, rtol: float, atol: float):
     """Solve exp(K t) feed by scipy's solve_ivp.
 
-    exp(K t) feed by solve_ivp; the Jacobian is the constant K (a callable, since
-    scipy's LSODA rejects an array Jacobian).
+    exp(K t) feed by :func:`millflow.ode.integrate_linear`: dM/dt = K M with the constant
+    Jacobian K.
     """
     order = np.argsort(t)
     t_sorted = t[order]
@@ -255,12 +256,8 @@ def _ode_solve(K: np.ndarray, feed: np.ndarray, t: np.ndarray, method: str, rtol
     at_zero = t_sorted == 0.0
     out[order[at_zero]] = feed
     if (~at_zero).any():
-        sol = solve_ivp(
-            lambda _t, y: K @ y, (0.0, float(t_sorted[-1])), feed, method=method,
-            t_eval=t_sorted[~at_zero], jac=lambda _t, y: K, rtol=rtol, atol=atol,
-        )
-        if not sol.success:
-            raise SolverError(f"solve_ivp({method}) failed: {sol.message}")
+        sol = integrate_linear(K, (0.0, float(t_sorted[-1])), feed, method=method, t_eval=t_sorted[~at_zero],
+                               rtol=rtol, atol=atol, what="batch grind (ODE path)")
         out[order[~at_zero]] = sol.y.T
         info = {"nfev": int(sol.nfev), "njev": int(sol.njev), "nlu": int(sol.nlu)}
     else:

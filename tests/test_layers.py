@@ -17,7 +17,8 @@ PACKAGES = ("millflow", "rtd")
 LAYERS = [
     ("base", ("millflow.errors", "millflow._interrupt", "millflow.grid", "millflow.compiled", "millflow.plotting",
               "millflow.inputs", "millflow._lazy", "millflow.threads", "millflow.balances",
-              "millflow.progress", "millflow.report", "millflow._dataset")),  # report: pages from summaries, no physics
+              "millflow.progress", "millflow.report", "millflow._dataset",  # report: pages from summaries, no physics
+              "millflow.ode")),  # ode: the one home of solve_ivp
     ("kinetics", ("millflow.psd", "millflow.checks", "millflow.classifiers", "millflow.cyclones", "millflow.breakage",
                   "millflow.linalg",
                   "millflow.batch", "millflow.nonlinear")),  # nonlinear: where issue 12's kinetics land

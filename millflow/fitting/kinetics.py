@@ -59,6 +59,7 @@ import numpy as np
 
 from millflow.batch import batch_grind_population
 from millflow.errors import InputError, MillflowError
+from millflow.ode import integrate
 
 __all__ = ["fines_mask", "KINETICS_FORMS", "KINETICS_CONSTANTS", "KINETICS_DEFAULTS", "ODE_RTOL", "ODE_ATOL", "AGE_TOL",
            "CompiledKinetics", "StackedKinetics", "stacked_batch", "check_kinetics", "theta_slowing"]
@@ -449,8 +450,6 @@ def stacked_batch(stack: StackedKinetics, feed, t, rtol: float = ODE_RTOL, atol:
     solves (the step sequence is shared). Returns (P, T, N) with the overflow added to
     class 1; a failed solve gives NaN for every member (a point the optimiser avoids) and
     appends its message to ``failures`` when given."""
-    from scipy.integrate import solve_ivp
-
     P, n = stack.P, stack.n
     n1 = n + 1
     out = np.full((P, t.size, n), np.nan)
@@ -461,20 +460,17 @@ def stacked_batch(stack: StackedKinetics, feed, t, rtol: float = ODE_RTOL, atol:
     Y = np.empty((t.size, y0.size))
     Y[order[~pos]] = y0
     if pos.any():
+        what = f"stacked batch solve of {P} members"
         try:
-            with warnings.catch_warnings():  # a failed solve is reported by sol.success
+            with warnings.catch_warnings():  # a failed solve is the SolverError below
                 warnings.simplefilter("ignore")
-                sol = solve_ivp(lambda _t, y: stack.rate(y), (0.0, float(ts[-1])), y0, method="LSODA",
+                # finite: LSODA can end "successfully" on NaN rates
+                sol = integrate(lambda _t, y: stack.rate(y), (0.0, float(ts[-1])), y0, method="LSODA",
                                 t_eval=ts[pos], jac=lambda _t, y: stack.jacobian_banded(y), lband=n, uband=n,
-                                rtol=rtol, atol=atol)
-        except MillflowError as exc:
+                                rtol=rtol, atol=atol, finite=True, what=what)
+        except MillflowError as exc:  # a failed solve, or kinetics that refused a state
             if failures is not None:
-                failures.append(f"stacked batch solve of {P} members: {exc}")
-            return out
-        if not sol.success or not np.isfinite(sol.y).all():  # (LSODA can end "successfully" on NaN rates)
-            if failures is not None:
-                why = sol.message if not sol.success else "non-finite states"
-                failures.append(f"stacked batch solve of {P} members (LSODA, rtol {rtol:g}): {why}")
+                failures.append(str(exc) if str(exc).startswith(what) else f"{what}: {exc}")
             return out
         Y[order[pos]] = sol.y.T
     Y = Y.reshape(t.size, P, n1).transpose(1, 0, 2)

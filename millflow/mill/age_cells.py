@@ -43,13 +43,13 @@ from __future__ import annotations
 import time
 
 import numpy as np
-from scipy.integrate import solve_ivp
 
 from millflow.errors import InputError, SolverError
 from millflow.linalg import breakage_matrix
 from millflow.mill.cells import cell_operators, network_of
 from millflow.mill.nonlinear_cell import NonlinearSteady, _check
 from millflow.nonlinear.kinetics import Kinetics
+from millflow.ode import integrate
 
 __all__ = ["age_structured", "AGE_RTOL", "AGE_ATOL", "AGE_TAIL", "AXIS_REFUSED"]
 
@@ -129,10 +129,8 @@ def _solve(kap, Kb, T, y0, fsum, tscale, horizon, rtol, atol, tail):
         return float(z[:m].sum()) - tail * fsum
     left.terminal, left.direction = True, -1
     at = np.concatenate([np.full(m, atol * fsum), np.full(m, atol * fsum * tscale)])
-    sol = solve_ivp(rhs, (0.0, horizon), np.concatenate([y0, np.zeros(m)]), method="LSODA", jac=jac, rtol=rtol,
-                    atol=at, events=left)
-    if not sol.success:
-        raise SolverError(f"age-structured mill: the ODE in the age (LSODA, rtol {rtol:g}) failed: {sol.message}")
+    sol = integrate(rhs, (0.0, horizon), np.concatenate([y0, np.zeros(m)]), method="LSODA", jac=jac, rtol=rtol,
+                    atol=at, events=left, what="age-structured mill")
     if sol.status != 1:
         raise SolverError(f"age-structured mill: {sol.y[:m, -1].sum() / fsum:.3g} of the feed is still in the mill "
                           f"at age {horizon:.4g} s (the horizon); expected it below {tail:g}")

@@ -44,6 +44,7 @@ import scipy.linalg
 from scipy.linalg import lapack
 
 from millflow.errors import SolverError
+from millflow.ode import integrate
 
 __all__ = ["NewtonResult", "newton", "DenseFactor", "SparseFactor", "BlockTridiagonalFactor", "ChainFactor",
            "REFRESH_RATIO"]
@@ -320,8 +321,6 @@ def newton(F, factor, y0, scale, *, tol: float, max_iter: int = MAX_ITER, ptc_it
 def _integrate_to_steady(F, dynamics, y, scale, dt0, res, horizons: int = 14):
     """Mass dy/dt = F(y) from y by BDF (rtol 1e-6) over horizons dt0 10^k until max|F| < 1e-6 s;
     returns (y, F(y), max|F|, right-hand-side evaluations)."""
-    from scipy.integrate import solve_ivp
-
     mass, jacobian = dynamics
     inv = 1.0 / np.asarray(mass, float)
     import scipy.sparse as sp
@@ -336,11 +335,12 @@ def _integrate_to_steady(F, dynamics, y, scale, dt0, res, horizons: int = 14):
     f, nfev, T = F(y), 0, dt0
     for _ in range(horizons):
         try:
-            sol = solve_ivp(rhs, (0.0, T), y, method="BDF", jac=jac, rtol=1e-6, atol=1e-12 * max(np.abs(y).max(), 1.0))
-        except SolverError:
+            sol = integrate(rhs, (0.0, T), y, method="BDF", jac=jac, rtol=1e-6, atol=1e-12 * max(np.abs(y).max(), 1.0),
+                            what="Newton's transient continuation")
+        except SolverError:  # a failed solve (or a right-hand side that refused the state): stop here
             break
         nfev += int(sol.nfev)
-        if not sol.success or not np.isfinite(sol.y[:, -1]).all():
+        if not np.isfinite(sol.y[:, -1]).all():
             break
         y = sol.y[:, -1]
         f = F(y)

@@ -74,6 +74,7 @@ from millflow.mill.nonlinear_cell import (GRID_NOTE, NEWTON_RTOL, NonlinearStead
                                           residual_scale, well_mixed)
 from millflow.mill.well_mixed import solve_well_mixed
 from millflow.nonlinear.kinetics import Kinetics
+from millflow.ode import integrate
 from millflow.threads import limit_blas_threads
 
 __all__ = ["NonlinearSteady", "MicromixingLimits", "MicromixingBounds", "well_mixed", "tanks_in_series", "cells",
@@ -371,8 +372,6 @@ def _plug_ode(kin: Kinetics, y0, tau, v, z, rtol, atol, holdup: bool):
     Integrate dF/dz = tau R(F / v) (and dQ/dz = F / v, the hold-up, when asked) from
     F(0) = y0 to the positions z; returns (T, n1) fluxes and (T, n1) or None hold-ups.
     """
-    from scipy.integrate import solve_ivp
-
     n1 = y0.size
     iv = 1.0 / v
 
@@ -399,11 +398,8 @@ def _plug_ode(kin: Kinetics, y0, tau, v, z, rtol, atol, holdup: bool):
     at0 = z == 0.0
     out[at0] = u0
     if (~at0).any():
-        sol = solve_ivp(rhs, (0.0, float(z.max())), u0, method="LSODA", t_eval=np.unique(z[~at0]), jac=jac,
-                        rtol=rtol, atol=atol)
-        if not sol.success:
-            raise SolverError(f"plug flow with non-linear kinetics: the ODE solve (LSODA, rtol {rtol:g}) failed: "
-                              f"{sol.message}")
+        sol = integrate(rhs, (0.0, float(z.max())), u0, method="LSODA", t_eval=np.unique(z[~at0]), jac=jac,
+                        rtol=rtol, atol=atol, what="plug flow with non-linear kinetics")
         out[~at0] = sol.y.T[np.searchsorted(np.unique(z[~at0]), z[~at0])]
     return out[:, :n1], (tau * out[:, n1:] if holdup else None)
 
@@ -724,7 +720,7 @@ def micromixing_limits(kin: Kinetics, feed, model, *, rtol: float = 1e-9, atol: 
     convexity; for a population whose rates couple, a real mill's product can lie outside
     both class by class (``note`` says so).
     """
-    from scipy.integrate import quad_vec, solve_ivp
+    from scipy.integrate import quad_vec
 
     from millflow.nonlinear.batch import batch_nonlinear
 
@@ -743,10 +739,8 @@ def micromixing_limits(kin: Kinetics, feed, model, *, rtol: float = 1e-9, atol: 
                                  float(err), time.perf_counter() - start)
     t_max = _horizon(model)
     y0 = np.append(feed, 0.0)
-    sol = solve_ivp(lambda _t, y: kin.rate(y), (0.0, t_max), y0, method="BDF", jac=lambda _t, y: kin.jacobian(y),
-                    rtol=rtol, atol=atol, dense_output=True)
-    if not sol.success:
-        raise SolverError(f"micromixing (segregation): the batch solve failed: {sol.message}")
+    sol = integrate(lambda _t, y: kin.rate(y), (0.0, t_max), y0, method="BDF", jac=lambda _t, y: kin.jacobian(y),
+                    rtol=rtol, atol=atol, dense_output=True, what="micromixing (segregation): the batch grind")
     seg, seg_err = quad_vec(lambda t: sol.sol(t) * float(model.pdf(t)), 0.0, t_max, epsabs=atol, epsrel=rtol,
                             limit=400)
     seg = seg + y0 * float(getattr(model, "atom_at_zero", 0.0) or 0.0)
@@ -764,9 +758,8 @@ def micromixing_limits(kin: Kinetics, feed, model, *, rtol: float = 1e-9, atol: 
     def jac(s, y):
         return kin.jacobian(y) - hazard(lam_max - s) * np.eye(y.size)
 
-    zw = solve_ivp(rhs, (0.0, lam_max), ys, method="BDF", jac=jac, rtol=rtol, atol=atol)
-    if not zw.success:
-        raise SolverError(f"micromixing (maximum mixedness): the Zwietering solve failed: {zw.message}")
+    zw = integrate(rhs, (0.0, lam_max), ys, method="BDF", jac=jac, rtol=rtol, atol=atol,
+                   what="micromixing (maximum mixedness): Zwietering's equation")
     mm = zw.y[:, -1]
     spread = float(np.abs(seg[:-1] - mm[:-1]).max())
     # integrator tolerances, the quadrature's estimate, and the hazard interpolation

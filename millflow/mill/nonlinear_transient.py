@@ -20,12 +20,12 @@ plug flow), with classification where the steady non-linear mill takes it.
   contents older). With d* in the velocity classes travel at different speeds and the
   fronts of a step spread: refused (use axial dispersion at a large Peclet number).
 
-Integration by scipy's ``solve_ivp`` with the analytic Jacobian (sparse: the transport plus
-the dense blocks dR/dc of the cells or nodes). Default method (measured on a mill of four
-recirculating cells with strong aggregation, 84 unknowns, rtol 1e-8: BDF 250,000
-right-hand sides / 140 s, Radau 18,000 / 3.4 s, LSODA 3,500 / 0.5 s): LSODA with the
-Jacobian made dense for cells up to :data:`DENSE_STATE` unknowns, Radau (sparse) above and
-for the axial grids.
+Integration by scipy's ``solve_ivp`` (through :func:`millflow.ode.integrate`) with the analytic
+Jacobian (sparse: the transport plus the dense blocks dR/dc of the cells or nodes). Default
+method (measured on a mill of four recirculating cells with strong aggregation, 84
+unknowns, rtol 1e-8: BDF 250,000 right-hand sides / 140 s, Radau 18,000 / 3.4 s, LSODA
+3,500 / 0.5 s): LSODA with the Jacobian made dense for cells up to :data:`DENSE_STATE`
+unknowns, Radau (sparse) above and for the axial grids.
 Error estimate (measured, not the tolerance): the same solve at 100x tighter tolerances,
 the tighter one returned, the largest difference of product and hold-up; on the axial
 grids plus the spatial error, the same solve on half the volumes. A mill started from
@@ -39,8 +39,9 @@ import time
 import numpy as np
 import scipy.sparse as sp
 
-from millflow.errors import InputError, SolverError
+from millflow.errors import InputError
 from millflow.mill.scene import _check_feed, _scene
+from millflow.ode import integrate
 
 __all__ = ["transient_nonlinear", "DENSE_STATE"]
 
@@ -50,23 +51,15 @@ DENSE_STATE = 500
 
 
 def _integrate(rhs, jac, y0, t, method, rtol, atol):
-    from scipy.integrate import solve_ivp
-
     order = np.argsort(t)
     ts = t[order]
     out = np.empty((t.size, y0.size))
     at0 = ts == 0.0
     out[order[at0]] = y0
     info = {"nfev": 0, "njev": 0, "nlu": 0}
-    if method == "LSODA":  # ODEPACK takes a dense Jacobian
-        jac0 = jac
-
-        def jac(t_, y_):
-            return jac0(t_, y_).toarray()
-    if (~at0).any():
-        sol = solve_ivp(rhs, (0.0, float(ts[-1])), y0, method=method, t_eval=ts[~at0], jac=jac, rtol=rtol, atol=atol)
-        if not sol.success:
-            raise SolverError(f"transient mill with non-linear kinetics: solve_ivp({method}) failed: {sol.message}")
+    if (~at0).any():  # (LSODA gets the sparse Jacobian made dense by integrate)
+        sol = integrate(rhs, (0.0, float(ts[-1])), y0, method=method, t_eval=ts[~at0], jac=jac, rtol=rtol, atol=atol,
+                        what="transient mill with non-linear kinetics")
         out[order[~at0]] = sol.y.T
         info = {"nfev": int(sol.nfev), "njev": int(sol.njev), "nlu": int(sol.nlu)}
     return out, info

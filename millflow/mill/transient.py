@@ -10,10 +10,11 @@ product p_i = h_i sum_k (o_k / V_k) m_ik + beta f_i. Axial dispersion: the same
 system from the finite-volume discretisation of :mod:`millflow.mill.axial` (method of
 lines on a fixed grid); the open vessel from :mod:`millflow.mill.axial_open` on the
 whole line, with its sampled or flux discharge and the steady state's hold-up. All are
-integrated by scipy's implicit ``solve_ivp`` (BDF by default) with the constant sparse
-Jacobian, so stiff rates (tau S up to 1e8) cost little. A pulse is an initial hold-up
-distributed like the inlet (for axial dispersion: in the inlet control volume, an O(h)
-approximation of the inlet delta).
+integrated by scipy's implicit ``solve_ivp`` (BDF by default, through
+:func:`millflow.ode.integrate_linear`) with the constant sparse Jacobian, so stiff rates
+(tau S up to 1e8) cost little. A pulse is an initial hold-up distributed like the inlet
+(for axial dispersion: in the inlet control volume, an O(h) approximation of the inlet
+delta).
 
 Plug flow is exact: the product is the feed delayed by tau and ground for tau.
 Any other rtd model, without classification, passes a pulse exactly by segregated
@@ -27,10 +28,9 @@ import time
 import numpy as np
 import scipy.sparse as sp
 import xarray as xr
-from scipy.integrate import solve_ivp
 
 from millflow.batch import batch_grind
-from millflow.errors import InputError, SolverError
+from millflow.errors import InputError
 from millflow.linalg import breakage_matrix
 from millflow.mill.scene import _check_feed, _scene, _tau
 from millflow.mill.steady import _size_coords
@@ -38,6 +38,7 @@ from millflow.mill.axial import _bernoulli, solve_axial_grid
 from millflow.mill.axial_open import back_layer_matrix, open_grid, solve_axial_open_grid, tail_length
 from millflow.mill.cells import cell_operators, solve_cells
 from millflow.mill.segregated import plug_flow
+from millflow.ode import integrate_linear
 
 __all__ = ["transient_mill"]
 
@@ -150,10 +151,8 @@ def _integrate(J, rhs_const, y0, t, method, rtol, atol):
     out[order[at0]] = y0
     info = {"nfev": 0, "njev": 0, "nlu": 0}
     if (~at0).any():
-        sol = solve_ivp(lambda _t, y: J @ y + rhs_const, (0.0, float(ts[-1])), y0, method=method,
-                        t_eval=ts[~at0], jac=J, rtol=rtol, atol=atol)
-        if not sol.success:
-            raise SolverError(f"transient mill: solve_ivp({method}) failed: {sol.message}")
+        sol = integrate_linear(J, (0.0, float(ts[-1])), y0, c=rhs_const, method=method, t_eval=ts[~at0], rtol=rtol,
+                               atol=atol, what="transient mill")
         out[order[~at0]] = sol.y.T
         info = {"nfev": int(sol.nfev), "njev": int(sol.njev), "nlu": int(sol.nlu)}
     return out, info

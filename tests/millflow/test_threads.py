@@ -46,13 +46,13 @@ def test_batch_nonlinear_factorises_on_one_thread(monkeypatch):
     import millflow.nonlinear.batch as nb
 
     seen = []
-    real = nb.solve_ivp
+    real = nb.integrate
 
     def spy(*args, **kwargs):
         seen.append(blas_threads())
         return real(*args, **kwargs)
 
-    monkeypatch.setattr(nb, "solve_ivp", spy)
+    monkeypatch.setattr(nb, "integrate", spy)
     kin, feed = _scene(30)
     with threadpoolctl.threadpool_limits(2, user_api="blas"):
         nb.batch_nonlinear(kin, feed, [10.0], error_estimate=False)

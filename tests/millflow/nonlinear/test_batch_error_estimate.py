@@ -72,13 +72,13 @@ def test_estimate_is_one_solve(monkeypatch):
     import millflow.nonlinear.batch as nb
 
     calls = []
-    real = nb.solve_ivp
+    real = nb.integrate
 
     def spy(*args, **kwargs):
         calls.append(kwargs.get("rtol"))
         return real(*args, **kwargs)
 
-    monkeypatch.setattr(nb, "solve_ivp", spy)
+    monkeypatch.setattr(nb, "integrate", spy)
     kin, feed = _case(**CASES["constant kernel"])
     r = nb.batch_nonlinear(kin, feed, T, rtol=1e-8, atol=1e-12)
     assert calls == [1e-8] and np.isfinite(r.error_estimate) and r.info["rtol"] == 1e-8
