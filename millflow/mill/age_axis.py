@@ -56,7 +56,6 @@ import time
 
 import numpy as np
 import scipy.sparse as sp
-from scipy.integrate import solve_ivp
 from scipy.sparse.linalg import splu
 
 from millflow.errors import InputError, SolverError
@@ -65,6 +64,7 @@ from millflow.mill.age_cells import AGE_TAIL, _kappa_of
 from millflow.mill.axial import _bernoulli, refine_grids
 from millflow.mill.nonlinear_cell import NonlinearSteady, _check
 from millflow.nonlinear.kinetics import Kinetics
+from millflow.ode import integrate
 from millflow.threads import limit_blas_threads
 
 __all__ = ["age_structured_axial", "AXIS_MAX_STATE", "AXIS_TOL", "PLUG_REFUSED", "OPEN_REFUSED"]
@@ -154,10 +154,8 @@ def _solve_ages(kap, K, T, exit_, y0, fsum, tau, horizon, rtol, atol, tail):
         return float(y[:n].sum()) - tail * fsum
     left.terminal, left.direction = True, -1
     at = np.concatenate([np.full(n, atol * fsum), np.full(n, atol * fsum * tau)])
-    sol = solve_ivp(rhs, (0.0, horizon), np.concatenate([y0, np.zeros(n)]), method="BDF", jac=jac,
-                    rtol=rtol, atol=at, events=left)
-    if not sol.success:
-        raise SolverError(f"age-structured axial mill: the ODE in the age (BDF, rtol {rtol:g}) failed: {sol.message}")
+    sol = integrate(rhs, (0.0, horizon), np.concatenate([y0, np.zeros(n)]), method="BDF", jac=jac, rtol=rtol,
+                    atol=at, events=left, what="age-structured axial mill (the ODE in the age)")
     if sol.status != 1:
         raise SolverError(f"age-structured axial mill: {sol.y[:n, -1].sum() / fsum:.3g} of the feed is still in the "
                           f"mill at age {horizon:.4g} s (the horizon); expected it below {tail:g}")
