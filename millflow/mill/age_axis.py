@@ -58,13 +58,12 @@ import numpy as np
 import scipy.sparse as sp
 from scipy.sparse.linalg import splu
 
-from millflow.errors import InputError, SolverError
+from millflow.errors import InputError
 from millflow.linalg import breakage_matrix
-from millflow.mill.age_cells import AGE_TAIL, _kappa_of
+from millflow.mill.age_cells import AGE_TAIL, _kappa_of, integrate_ages
 from millflow.mill.axial import _bernoulli, refine_grids
 from millflow.mill.nonlinear_cell import NonlinearSteady, _check
 from millflow.nonlinear.kinetics import Kinetics
-from millflow.ode import integrate
 from millflow.threads import limit_blas_threads
 
 __all__ = ["age_structured_axial", "AXIS_MAX_STATE", "AXIS_TOL", "PLUG_REFUSED", "OPEN_REFUSED"]
@@ -150,21 +149,12 @@ def _solve_ages(kap, K, T, exit_, y0, fsum, tau, horizon, rtol, atol, tail):
     def jac(a, _y):
         return J_T + kap(a) * J_K
 
-    def left(_a, y):
-        return float(y[:n].sum()) - tail * fsum
-    left.terminal, left.direction = True, -1
-    at = np.concatenate([np.full(n, atol * fsum), np.full(n, atol * fsum * tau)])
-    sol = integrate(rhs, (0.0, horizon), np.concatenate([y0, np.zeros(n)]), method="BDF", jac=jac, rtol=rtol,
-                    atol=at, events=left, what="age-structured axial mill (the ODE in the age)")
-    if sol.status != 1:
-        raise SolverError(f"age-structured axial mill: {sol.y[:n, -1].sum() / fsum:.3g} of the feed is still in the "
-                          f"mill at age {horizon:.4g} s (the horizon); expected it below {tail:g}")
-    A = float(sol.t[-1])
-    yA = sol.y[:n, -1]
-    Q = sol.y[n:, -1] + splu(-(T + kap(A) * Kb).tocsc()).solve(yA)  # + int_A^inf m at kappa(A)
+    A, yA, Q, steps = integrate_ages(rhs, jac, y0, fsum=fsum, tscale=tau, horizon=horizon, rtol=rtol, atol=atol,
+                                     tail=tail, method="BDF", what="age-structured axial mill")
+    Q = Q + splu(-(T + kap(A) * Kb).tocsc()).solve(yA)  # + int_A^inf m at kappa(A)
     p = exit_ @ Q
     hold = Q.reshape(nodes, n_cls).sum(axis=0)
-    return p, hold, A, float(max(yA.sum(), 0.0)), int(sol.t.size)
+    return p, hold, A, float(max(yA.sum(), 0.0)), steps
 
 
 @limit_blas_threads

@@ -51,7 +51,7 @@ from millflow.mill.nonlinear_cell import NonlinearSteady, _check
 from millflow.nonlinear.kinetics import Kinetics
 from millflow.ode import integrate
 
-__all__ = ["age_structured", "AGE_RTOL", "AGE_ATOL", "AGE_TAIL", "AXIS_REFUSED"]
+__all__ = ["age_structured", "integrate_ages", "AGE_RTOL", "AGE_ATOL", "AGE_TAIL", "AXIS_REFUSED"]
 
 #: Relative and absolute (of the feed) tolerances of the age ODE; the answer comes from a
 #: second solve 10x tighter, so its error is far below these (measured in the tests).
@@ -125,19 +125,43 @@ def _solve(kap, Kb, T, y0, fsum, tscale, horizon, rtol, atol, tail):
         J[m:, :m] = eye
         return J
 
+    A, yA, Q, steps = integrate_ages(rhs, jac, y0, fsum=fsum, tscale=tscale, horizon=horizon, rtol=rtol, atol=atol,
+                                     tail=tail, method="LSODA", what="age-structured mill")
+    tail_q = np.linalg.solve(-(kap(A) * Kb + T), yA)
+    return Q + tail_q, A, float(max(yA.sum(), 0.0)), steps
+
+
+def integrate_ages(rhs, jac, y0, *, fsum: float, tscale: float, horizon: float, rtol: float, atol: float,
+                   tail: float, method: str, what: str):
+    """Integrate an age-structured balance and its running integral up to the age where the mill is empty.
+
+    The state is (M, int_0^a M): ``rhs`` and ``jac`` of both, ``y0`` the initial M (its
+    integral starts at 0). The integration stops at the age A where sum(M) falls below
+    ``tail`` * ``fsum``; reaching ``horizon`` first raises. Absolute tolerances ``atol``
+    * ``fsum`` on M and that times ``tscale`` [s] on its integral.
+
+    Returns
+    -------
+    tuple
+        (A [s], M(A), int_0^A M, number of output points).
+
+    Raises
+    ------
+    SolverError
+        If the ODE fails or mass is still in the mill at the horizon.
+    """
+    m = y0.size
+
     def left(_a, z):
         return float(z[:m].sum()) - tail * fsum
     left.terminal, left.direction = True, -1
     at = np.concatenate([np.full(m, atol * fsum), np.full(m, atol * fsum * tscale)])
-    sol = integrate(rhs, (0.0, horizon), np.concatenate([y0, np.zeros(m)]), method="LSODA", jac=jac, rtol=rtol,
-                    atol=at, events=left, what="age-structured mill")
+    sol = integrate(rhs, (0.0, horizon), np.concatenate([y0, np.zeros(m)]), method=method, jac=jac, rtol=rtol,
+                    atol=at, events=left, what=f"{what} (the ODE in the age)")
     if sol.status != 1:
-        raise SolverError(f"age-structured mill: {sol.y[:m, -1].sum() / fsum:.3g} of the feed is still in the mill "
-                          f"at age {horizon:.4g} s (the horizon); expected it below {tail:g}")
-    A = float(sol.t[-1])
-    yA, Q = sol.y[:m, -1], sol.y[m:, -1]
-    tail_q = np.linalg.solve(-(kap(A) * Kb + T), yA)
-    return Q + tail_q, A, float(max(yA.sum(), 0.0)), int(sol.t.size)
+        raise SolverError(f"{what}: {sol.y[:m, -1].sum() / fsum:.3g} of the feed is still in the mill at age "
+                          f"{horizon:.4g} s (the horizon); expected it below {tail:g}")
+    return float(sol.t[-1]), sol.y[:m, -1], sol.y[m:, -1], int(sol.t.size)
 
 
 def age_structured(kin: Kinetics, feed, transport, d=None, where="discharge", *, rtol: float = AGE_RTOL,

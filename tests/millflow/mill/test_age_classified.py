@@ -112,14 +112,9 @@ def test_error_estimate_bounds_the_error_against_a_tight_solve(name, rtol):
     assert r.error_estimate < 1e3 * rtol
 
 
-def test_classification_on_the_axis_is_refused():
+def test_plug_flow_with_classification_is_refused():
+    """The axis refusals of plug flow and the open vessel are tested in test_age_axis.py;
+    here the plug-flow solver itself refuses kappa(t) with d on its axis."""
     S, b, feed, d = _scene()
-    kin = _slow(S, b)
-    # the closed axial vessel is solved (millflow.mill.age_axis, test_age_axis.py)
-    for T in (rtd.PlugFlow(TAU), rtd.AxialDispersion(TAU, 8.0, bc="open")):
-        with pytest.raises(InputError, match="age and position are not tied"):
-            nl.solve_transport(kin, feed, T, d, where="axis")
     with pytest.raises(InputError, match="age and position are not tied"):
-        nl.plug_flow(kin, feed, TAU, d)
-    with pytest.raises(InputError, match="age and position are not tied"):
-        nl.age_slowing(kin, feed, rtd.PlugFlow(TAU), d)
+        nl.plug_flow(_slow(S, b), feed, TAU, d)
