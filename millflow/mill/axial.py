@@ -127,15 +127,12 @@ def solve_axial_grid(S, b, feed, tau: float, pe: float, m_cells: int, d=None, w=
     # by the subtraction-free recurrence of _gth_factors, so every pivot keeps its
     # relative accuracy however large the dispersion terms D/h are (Pe -> 0).
     loss = node_losses(faces, v, tau * S)
+    lower, diag, upper = tridiagonal(faces, loss)
     # Cancellation in the ordinary pivots grows as (D/h)/v = 1/P; above 1e3 (small cell
     # Peclet numbers) the subtraction-free factors are used, below it LAPACK's (faster
     # here: the Python loop of _gth_factors costs ~1 us per node).
     gth = 1.0 / float(faces.cell_peclet.min()) > 1e3
-    if gth:
-        alpha, beta = faces.alpha, faces.beta
-        piv = _gth_factors(alpha, beta, loss)
-    else:
-        lower, diag, upper = tridiagonal(faces, loss)
+    piv = _gth_factors(faces.alpha, faces.beta, loss) if gth else None
     c = np.empty((n_cls, M + 1) + cols)
     wc = np.empty((n_cls, (M + 1) * int(np.prod(cols, dtype=int))))  # weights * c, flattened
     gain = tau * b * S[np.newaxis, :]  # gain[i, j] = tau b_ij S_j
@@ -147,7 +144,7 @@ def solve_axial_grid(S, b, feed, tau: float, pe: float, m_cells: int, d=None, w=
         rhs = (gain[i, :i] @ wc[:i]).reshape((M + 1,) + cols) if i else np.zeros((M + 1,) + cols)
         rhs[0] += feed[i]
         if gth:  # L's sub-diagonal -alpha/d'_(k-1): y_k = r_k + (alpha / d'_(k-1)) y_(k-1)
-            c_i, info = _gttrs(-alpha[i] / piv[i, :-1], piv[i], -beta[i], du2, ipiv,
+            c_i, info = _gttrs(lower[i] / piv[i, :-1], piv[i], upper[i], du2, ipiv,
                                rhs if cols else rhs[:, np.newaxis])
         else:
             _, _, _, c_i, info = _gtsv(lower[i], diag[i], upper[i], rhs if cols else rhs[:, np.newaxis])

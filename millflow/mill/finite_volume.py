@@ -9,11 +9,15 @@ is fitted to the exponential solutions (Scharfetter-Gummel / Il'in-Allen-Southwe
     F_(k+1/2) = (D/h) [B(-P) c_k - B(P) c_(k+1)] = alpha_k c_k - beta_k c_(k+1),
     P = v h / D (the cell Peclet number),   B(x) = x / (exp(x) - 1).
 
-The flux is exact for convection-dispersion without breakage at any cell Peclet number:
-every steady solution c = A + B exp(v z / D) gives the same F on every face. alpha, beta
-> 0, so each class's matrix is a column-diagonally dominant M-matrix (concentrations stay
-non-negative for every Pe), and the fluxes cancel between volumes, so mass is conserved
-exactly (what leaves the system is what the column sums say). The closed vessel
+What is exact: for convection-dispersion without breakage, every solution c = A +
+B exp(v z / D) of (v c - D c')' = 0 gives F_(k+1/2) = v A, its exact flux, on every face,
+at any cell Peclet number and on non-uniform grids alike, so the node balances reproduce
+it at the nodes to rounding. alpha > 0 and beta >= 0, so each class's matrix is a
+column-diagonally dominant M-matrix (concentrations stay non-negative for every Pe), and
+the fluxes cancel between neighbouring volumes, so mass is conserved exactly: the column
+sums of the node balances are what leaves the system (:func:`tridiagonal`). Not exact:
+the reactions (breakage) are lumped at the nodes (trapezoidal rule, O(h^2) while the cell
+Peclet number is small, tending to first order where it is large). The closed vessel
 (:mod:`millflow.mill.axial`) is [0, 1] in M uniform volumes; the open vessel
 (:mod:`millflow.mill.axial_open`) is the whole line, the mill in M uniform volumes and a
 stretched tail of M volumes on each side.
@@ -37,7 +41,8 @@ class AxialFaces:
     z : (n,) ndarray
         Node positions [fraction of the mill length].
     h : (n - 1,) ndarray
-        Face widths z_(k+1) - z_k [fraction of the mill length].
+        Distances z_(k+1) - z_k between neighbouring nodes [fraction of the mill length]
+        (1/M on the closed grid).
     weights : (n,) ndarray
         Control volumes of the nodes [fraction of the mill length]; they sum to the length
         of the grid.
@@ -49,8 +54,8 @@ class AxialFaces:
         P = v_i h_k / D_i of each class and face [-].
     alpha, beta : (N, n - 1) ndarray
         The flux through the face between nodes k and k + 1 is alpha_ik c_ik - beta_ik
-        c_i(k+1) [1, in units of u]. On the uniform closed grid these are read-only
-        views of one value per class.
+        c_i(k+1) [velocity, in units of u]. On the uniform closed grid these (and
+        ``cell_peclet``) are read-only views of one value per class.
     inlet, outlet : int
         Nodes of the feed plane z = 0 and of the discharge plane z = 1.
     """
@@ -80,9 +85,11 @@ def bernoulli(x) -> np.ndarray:
         B(x), with B(0) = 1: 1 - x/2 for |x| < 1e-8 and x exp(-x) above 700.
     """
     x = np.asarray(x, dtype=float)
-    out = np.ones_like(x)
     small = np.abs(x) < 1e-8
     big = x > 700.0
+    if not (small.any() or big.any()):  # the usual case, without the masked copies
+        return x / np.expm1(x)
+    out = np.ones_like(x)
     mid = ~small & ~big
     out[mid] = x[mid] / np.expm1(x[mid])
     out[small] = 1.0 - 0.5 * x[small]
@@ -90,11 +97,18 @@ def bernoulli(x) -> np.ndarray:
     return out
 
 
-def _fitted(pe: float, v, w, h):
-    """Cell Peclet numbers and face coefficients (N, faces) for widths ``h`` (a number or (faces,))."""
-    D = (np.asarray(w, dtype=float) / pe)[:, np.newaxis]
-    P = np.asarray(v, dtype=float)[:, np.newaxis] * h / D
+def _fitted(D, v, h):
+    """Cell Peclet numbers P = v h / D and the face coefficients (D/h) B(-P), (D/h) B(P)."""
+    P = v * h / D
     return P, D / h * bernoulli(-P), D / h * bernoulli(P)
+
+
+def _repeated(column: np.ndarray, n_faces: int) -> np.ndarray:
+    """A read-only (N, n_faces) view of one value per class: no copy, and cheaper than broadcast_to."""
+    column = np.ascontiguousarray(column, dtype=float)
+    view = np.ndarray((column.size, n_faces), float, column, strides=(column.itemsize, 0))
+    view.flags.writeable = False
+    return view
 
 
 def closed_faces(pe: float, m_cells: int, v, w) -> AxialFaces:
@@ -120,7 +134,8 @@ def closed_faces(pe: float, m_cells: int, v, w) -> AxialFaces:
     z = np.linspace(0.0, 1.0, M + 1)
     weights = np.full(M + 1, h)
     weights[[0, -1]] = 0.5 * h
-    P, alpha, beta = (np.broadcast_to(a, (a.shape[0], M)) for a in _fitted(pe, v, w, h))
+    D = np.asarray(w, dtype=float) / pe
+    P, alpha, beta = (_repeated(a, M) for a in _fitted(D, np.asarray(v, dtype=float), h))
     return AxialFaces(z, np.full(M, h), weights, weights, P, alpha, beta, 0, M)
 
 
@@ -193,7 +208,8 @@ def open_faces(pe: float, m_cells: int, v, w, tail: float) -> AxialFaces:
     upstream = weights.copy()
     upstream[outlet] = 0.5 * h[outlet - 1]
     upstream[outlet + 1:] = 0.0
-    P, alpha, beta = _fitted(pe, v, w, h[np.newaxis, :])
+    D = (np.asarray(w, dtype=float) / pe)[:, np.newaxis]
+    P, alpha, beta = _fitted(D, np.asarray(v, dtype=float)[:, np.newaxis], h[np.newaxis, :])
     return AxialFaces(z, h, weights, upstream, P, alpha, beta, inlet, outlet)
 
 
@@ -242,13 +258,21 @@ def tridiagonal(faces: AxialFaces, loss: np.ndarray):
     Returns
     -------
     lower : (N, n - 1) ndarray
-        A[k + 1, k] = -alpha_k.
+        A[k + 1, k] = -alpha_k (read-only views of one value per class where ``faces``
+        has them).
     diag : (N, n) ndarray
         A[k, k] = loss_k + alpha_k (k < n - 1) + beta_(k-1) (k > 0).
     upper : (N, n - 1) ndarray
-        A[k, k + 1] = -beta_k.
+        A[k, k + 1] = -beta_k (as ``lower``).
     """
     diag = np.array(loss, dtype=float)
     diag[:, :-1] += faces.alpha
     diag[:, 1:] += faces.beta
-    return -faces.alpha, diag, -faces.beta
+    return _negative(faces.alpha), diag, _negative(faces.beta)
+
+
+def _negative(a: np.ndarray) -> np.ndarray:
+    """-a; a view of one value per class stays one (no (N, n - 1) array on the hot path)."""
+    if a.shape[1] and a.strides[1] == 0:
+        return _repeated(-a[:, 0], a.shape[1])
+    return -a
