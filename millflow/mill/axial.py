@@ -131,7 +131,7 @@ def solve_axial_grid(S, b, feed, tau: float, pe: float, m_cells: int, d=None, w=
     # Cancellation in the ordinary pivots grows as (D/h)/v = 1/P; above 1e3 (small cell
     # Peclet numbers) the subtraction-free factors are used, below it LAPACK's (faster
     # here: the Python loop of _gth_factors costs ~1 us per node).
-    gth = 1.0 / float(faces.cell_peclet.min()) > 1e3
+    gth = float(1.0 / faces.cell_peclet.min()) > 1e3  # max(1/P), without an (N, M) array
     piv = _gth_factors(faces.alpha, faces.beta, loss) if gth else None
     c = np.empty((n_cls, M + 1) + cols)
     wc = np.empty((n_cls, (M + 1) * int(np.prod(cols, dtype=int))))  # weights * c, flattened
