@@ -132,7 +132,9 @@ def solve_axial_grid(S, b, feed, tau: float, pe: float, m_cells: int, d=None, w=
     # Peclet numbers) the subtraction-free factors are used, below it LAPACK's (faster
     # here: the Python loop of _gth_factors costs ~1 us per node).
     gth = float(1.0 / faces.cell_peclet.min()) > 1e3  # max(1/P), without an (N, M) array
-    piv = _gth_factors(faces.alpha, faces.beta, loss) if gth else None
+    if gth:  # the pivots, and L's sub-diagonal -alpha/d'_(k-1): y_k = r_k + (alpha / d'_(k-1)) y_(k-1)
+        piv = _gth_factors(faces.alpha, faces.beta, loss)
+        sub = lower / piv[:, :-1]
     c = np.empty((n_cls, M + 1) + cols)
     wc = np.empty((n_cls, (M + 1) * int(np.prod(cols, dtype=int))))  # weights * c, flattened
     gain = tau * b * S[np.newaxis, :]  # gain[i, j] = tau b_ij S_j
@@ -143,9 +145,8 @@ def solve_axial_grid(S, b, feed, tau: float, pe: float, m_cells: int, d=None, w=
         # breakage into class i from every coarser class: one matrix-vector product
         rhs = (gain[i, :i] @ wc[:i]).reshape((M + 1,) + cols) if i else np.zeros((M + 1,) + cols)
         rhs[0] += feed[i]
-        if gth:  # L's sub-diagonal -alpha/d'_(k-1): y_k = r_k + (alpha / d'_(k-1)) y_(k-1)
-            c_i, info = _gttrs(lower[i] / piv[i, :-1], piv[i], upper[i], du2, ipiv,
-                               rhs if cols else rhs[:, np.newaxis])
+        if gth:
+            c_i, info = _gttrs(sub[i], piv[i], upper[i], du2, ipiv, rhs if cols else rhs[:, np.newaxis])
         else:
             _, _, _, c_i, info = _gtsv(lower[i], diag[i], upper[i], rhs if cols else rhs[:, np.newaxis])
         if info != 0:
