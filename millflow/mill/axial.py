@@ -127,14 +127,15 @@ def solve_axial_grid(S, b, feed, tau: float, pe: float, m_cells: int, d=None, w=
     # by the subtraction-free recurrence of _gth_factors, so every pivot keeps its
     # relative accuracy however large the dispersion terms D/h are (Pe -> 0).
     loss = node_losses(faces, v, tau * S)
-    lower, diag, upper = tridiagonal(faces, loss)
     # Cancellation in the ordinary pivots grows as (D/h)/v = 1/P; above 1e3 (small cell
     # Peclet numbers) the subtraction-free factors are used, below it LAPACK's (faster
     # here: the Python loop of _gth_factors costs ~1 us per node).
     gth = float(1.0 / faces.cell_peclet.min()) > 1e3  # max(1/P), without an (N, M) array
-    if gth:  # the pivots, and L's sub-diagonal -alpha/d'_(k-1): y_k = r_k + (alpha / d'_(k-1)) y_(k-1)
-        piv = _gth_factors(faces.alpha, faces.beta, loss)
-        sub = lower / piv[:, :-1]
+    piv = _gth_factors(faces.alpha, faces.beta, loss) if gth else None
+    lower, diag, upper = tridiagonal(faces, loss, overwrite_loss=True)
+    if gth:  # L's sub-diagonal -alpha/d'_(k-1): y_k = r_k + (alpha / d'_(k-1)) y_(k-1),
+        # in the memory of A's diagonal (which these factors do not use: one (N, M) array less)
+        sub = np.divide(lower, piv[:, :-1], out=diag[:, :-1])
     c = np.empty((n_cls, M + 1) + cols)
     wc = np.empty((n_cls, (M + 1) * int(np.prod(cols, dtype=int))))  # weights * c, flattened
     gain = tau * b * S[np.newaxis, :]  # gain[i, j] = tau b_ij S_j

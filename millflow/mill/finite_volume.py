@@ -241,7 +241,7 @@ def node_losses(faces: AxialFaces, v, rates=None) -> np.ndarray:
     return loss
 
 
-def tridiagonal(faces: AxialFaces, loss: np.ndarray):
+def tridiagonal(faces: AxialFaces, loss: np.ndarray, *, overwrite_loss: bool = False):
     """Each class's tridiagonal M-matrix A of the node balances, with column sums ``loss``.
 
     (A c)_k = F_(k+1/2) - F_(k-1/2) + loss_k c_k: what leaves the control volume of node k
@@ -253,7 +253,10 @@ def tridiagonal(faces: AxialFaces, loss: np.ndarray):
     faces : AxialFaces
         The grid and its face coefficients.
     loss : (N, n) ndarray
-        Column sums, e.g. :func:`node_losses` [1, in units of u].
+        Column sums, e.g. :func:`node_losses` [velocity, in units of u].
+    overwrite_loss : bool
+        Build ``diag`` in the memory of ``loss`` (one (N, n) array less where ``loss`` is
+        not needed afterwards).
 
     Returns
     -------
@@ -265,7 +268,7 @@ def tridiagonal(faces: AxialFaces, loss: np.ndarray):
     upper : (N, n - 1) ndarray
         A[k, k + 1] = -beta_k (as ``lower``).
     """
-    diag = np.array(loss, dtype=float)
+    diag = loss if overwrite_loss else np.array(loss, dtype=float)
     diag[:, :-1] += faces.alpha
     diag[:, 1:] += faces.beta
     return _negative(faces.alpha), diag, _negative(faces.beta)
