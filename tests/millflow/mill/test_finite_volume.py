@@ -67,6 +67,9 @@ def test_column_sums_are_the_losses(pe):
         expected[:, -1] += V
         assert np.array_equal(loss, expected)
         lower, diag, upper = tridiagonal(faces, loss)
+        in_place = loss.copy()
+        assert np.array_equal(tridiagonal(faces, in_place, overwrite_loss=True)[1], diag)
+        assert np.array_equal(in_place, diag) and not np.array_equal(loss, diag)
         for i in range(V.size):
             A = _dense(lower[i], diag[i], upper[i])
             assert np.all(np.abs(A.sum(axis=0) - loss[i]) <= 8 * EPS * np.abs(A).max())
