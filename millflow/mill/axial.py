@@ -15,7 +15,7 @@ segregated flow with rates S/d* (every transport time of class i scaled by 1/d_i
 
 Discretisation (vertex-centred finite volumes): nodes z_k = k h, h = 1/M, control
 volumes of width h (h/2 at the two ends). Fluxes between nodes by exponential fitting
-(Scharfetter-Gummel / Il'in-Allen-Southwell),
+(Scharfetter-Gummel / Il'in-Allen-Southwell, :mod:`millflow.mill.finite_volume`),
 
     F_{k+1/2} = (D/h) [B(-P) c_k - B(P) c_{k+1}],   D = w/Pe,  P = v h / D,
     B(x) = x / (exp(x) - 1),
@@ -45,6 +45,8 @@ import numpy as np
 from scipy.linalg import lapack
 
 from millflow.errors import SolverError
+from millflow.mill.finite_volume import bernoulli as _bernoulli  # noqa: F401 (the name the benchmarks' baseline imports)
+from millflow.mill.finite_volume import closed_faces, node_losses, tridiagonal
 
 __all__ = ["AxialSolution", "solve_axial_grid", "solve_axial", "refine_grids"]
 
@@ -103,19 +105,6 @@ def _gth_factors(alpha: np.ndarray, beta: np.ndarray, loss: np.ndarray) -> np.nd
     return piv
 
 
-def _bernoulli(x: np.ndarray) -> np.ndarray:
-    """B(x) = x / (exp(x) - 1), B(0) = 1, without overflow or cancellation."""
-    x = np.asarray(x, dtype=float)
-    out = np.ones_like(x)
-    small = np.abs(x) < 1e-8
-    big = x > 700.0
-    mid = ~small & ~big
-    out[mid] = x[mid] / np.expm1(x[mid])
-    out[small] = 1.0 - 0.5 * x[small]
-    out[big] = x[big] * np.exp(-x[big])
-    return out
-
-
 def solve_axial_grid(S, b, feed, tau: float, pe: float, m_cells: int, d=None, w=None):
     """Concentrations c (M + 1, N[, m]) and product on one grid of ``m_cells`` volumes.
 
@@ -131,47 +120,36 @@ def solve_axial_grid(S, b, feed, tau: float, pe: float, m_cells: int, d=None, w=
     v = np.ones(n_cls) if d is None else np.asarray(d, dtype=float)  # relative axial velocity v_i = d_i*
     w = np.ones(n_cls) if w is None else np.asarray(w, dtype=float)
     M = int(m_cells)
-    h = 1.0 / M
-    z = np.linspace(0.0, 1.0, M + 1)
-    weights = np.full(M + 1, h)
-    weights[[0, -1]] = 0.5 * h
-    D = w / pe
-    P = v * h / D
-    alpha = D / h * _bernoulli(-P)  # coefficient of c_k in F_{k+1/2}
-    beta = D / h * _bernoulli(P)  # minus coefficient of c_{k+1}
+    faces = closed_faces(pe, M, v, w)
+    weights = faces.weights
     # Column sums of each class's matrix (what leaves the system from node k): breakage
     # tau S_i w_k, and the discharge v_i at the last node. The LU factors come from them
     # by the subtraction-free recurrence of _gth_factors, so every pivot keeps its
     # relative accuracy however large the dispersion terms D/h are (Pe -> 0).
-    loss = tau * S[:, np.newaxis] * weights[np.newaxis, :]
-    loss[:, -1] += v
+    loss = node_losses(faces, v, tau * S)
     # Cancellation in the ordinary pivots grows as (D/h)/v = 1/P; above 1e3 (small cell
     # Peclet numbers) the subtraction-free factors are used, below it LAPACK's (faster
     # here: the Python loop of _gth_factors costs ~1 us per node).
-    gth = float(np.max(1.0 / P)) > 1e3
-    piv = _gth_factors(alpha, beta, loss) if gth else None
+    gth = float(1.0 / faces.cell_peclet.min()) > 1e3  # max(1/P), without an (N, M) array
+    piv = _gth_factors(faces.alpha, faces.beta, loss) if gth else None
+    lower, diag, upper = tridiagonal(faces, loss, overwrite_loss=True)
+    if gth:  # L's sub-diagonal -alpha/d'_(k-1): y_k = r_k + (alpha / d'_(k-1)) y_(k-1),
+        # in the memory of A's diagonal (which these factors do not use: one (N, M) array less)
+        sub = np.divide(lower, piv[:, :-1], out=diag[:, :-1])
     c = np.empty((n_cls, M + 1) + cols)
     wc = np.empty((n_cls, (M + 1) * int(np.prod(cols, dtype=int))))  # weights * c, flattened
     gain = tau * b * S[np.newaxis, :]  # gain[i, j] = tau b_ij S_j
     wk = weights.reshape((M + 1,) + (1,) * len(cols))
     du2 = np.zeros(max(M - 1, 0))
     ipiv = np.arange(1, M + 2, dtype=np.int32)  # no row exchanges: the factors are an M-matrix's
-    upper = np.empty(M)
-    lower = np.empty(M)
     for i in range(n_cls):
-        upper.fill(-beta[i])
         # breakage into class i from every coarser class: one matrix-vector product
         rhs = (gain[i, :i] @ wc[:i]).reshape((M + 1,) + cols) if i else np.zeros((M + 1,) + cols)
         rhs[0] += feed[i]
-        if gth:  # L's sub-diagonal -alpha/d'_(k-1): y_k = r_k + (alpha / d'_(k-1)) y_(k-1)
-            c_i, info = _gttrs(-alpha[i] / piv[i, :-1], piv[i], upper, du2, ipiv,
-                               rhs if cols else rhs[:, np.newaxis])
+        if gth:
+            c_i, info = _gttrs(sub[i], piv[i], upper[i], du2, ipiv, rhs if cols else rhs[:, np.newaxis])
         else:
-            lower.fill(-alpha[i])
-            diag = loss[i].copy()
-            diag[:-1] += alpha[i]
-            diag[1:] += beta[i]
-            _, _, _, c_i, info = _gtsv(lower, diag, upper, rhs if cols else rhs[:, np.newaxis])
+            _, _, _, c_i, info = _gtsv(lower[i], diag[i], upper[i], rhs if cols else rhs[:, np.newaxis])
         if info != 0:
             raise SolverError(f"axial dispersion: tridiagonal solve failed for class {i + 1} (info {info})")
         c_i = c_i if cols else c_i[:, 0]
@@ -189,7 +167,7 @@ def solve_axial_grid(S, b, feed, tau: float, pe: float, m_cells: int, d=None, w=
         gained = np.tensordot(b, lost, axes=([1], [0]))
         balance = feed - tau * (lost - gained)
         product = np.where(balance >= 0, balance, product)
-    return z, np.moveaxis(c, 1, 0), product
+    return faces.z, np.moveaxis(c, 1, 0), product
 
 
 def solve_axial(S, b, feed, tau: float, pe: float, d=None, w=None, *, tol: float = 1e-8,

@@ -37,7 +37,8 @@ tau (1 + 2/Pe), the mean of E; for v = w = 1 it is the segregated hold-up G(-K) 
 f - p = tau (I - b) S H holds whenever the Peclet numbers are equal.
 
 Discretisation as the closed vessel (:mod:`millflow.mill.axial`): vertex-centred finite
-volumes with exponentially fitted fluxes, breakage lumped at the nodes, the
+volumes with exponentially fitted fluxes
+(:func:`millflow.mill.finite_volume.open_faces`), breakage lumped at the nodes, the
 subtraction-free (GTH) LU factors of each class's tridiagonal M-matrix, Richardson
 extrapolation over doubled grids. The mill [0, 1] has M uniform volumes; each tail has M
 volumes on the smooth stretching z = L_t (e^(beta j/M) - 1)/(e^beta - 1) with the first
@@ -48,19 +49,15 @@ Zero flux at the upstream end, outflow (Danckwerts) at the downstream end.
 """
 from __future__ import annotations
 
-import math
-from dataclasses import dataclass
-
 import numpy as np
 from scipy.linalg import lapack
 
 from millflow.errors import InputError, SolverError
-from millflow.mill.axial import (AxialSolution, _bernoulli, _gth_factors, better_of_fv_and_limit,
-                                 large_peclet_applies, large_peclet_limit, large_peclet_nodes_valid,
-                                 refine_grids)
+from millflow.mill.axial import (AxialSolution, _gth_factors, better_of_fv_and_limit, large_peclet_applies,
+                                 large_peclet_limit, large_peclet_nodes_valid, refine_grids)
+from millflow.mill.finite_volume import AxialFaces, node_losses, open_faces
 
-__all__ = ["DISCHARGES", "OpenGrid", "solve_axial_open", "solve_axial_open_grid", "open_nodes", "open_grid",
-           "back_layer_matrix", "tail_length"]
+__all__ = ["DISCHARGES", "solve_axial_open", "solve_axial_open_grid", "back_layer_matrix", "tail_length"]
 
 #: Discharges of the open vessel (module docstring).
 DISCHARGES = ("sampled", "flux")
@@ -69,31 +66,6 @@ DISCHARGES = ("sampled", "flux")
 TAIL_DECAY_LENGTHS = 40.0
 
 _gttrs = lapack.get_lapack_funcs("gttrs", dtype=np.float64)
-
-
-def _tail(length: float, m: int) -> np.ndarray:
-    """Node distances (m,) from the mill's end.
-
-    Node distances (m,) from the mill's end: uniform 1/m up to ``length`` <= 1, else
-    geometric with the first volume 1/m and the last node at ``length``.
-    """
-    if length <= 1.0:
-        k = max(1, math.ceil(length * m - 1e-9))
-        return np.arange(1, k + 1) / m
-    # (e^beta - 1) / beta = length: first volume length beta / (m (e^beta - 1)) ~ 1/m
-    from scipy import optimize  # here: scipy.optimize is a large share of start-up
-
-    beta = optimize.brentq(lambda x: math.expm1(x) / x - length, 1e-9, 700.0, xtol=1e-14)
-    j = np.arange(1, m + 1)
-    return length * np.expm1(beta * j / m) / math.expm1(beta)
-
-
-def open_nodes(tail: float, m_cells: int) -> tuple[np.ndarray, int, int]:
-    """Nodes of the whole line and the indices of z = 0 (feed) and z = 1 (discharge)."""
-    M = int(m_cells)
-    side = _tail(tail, M)
-    z = np.concatenate([-side[::-1], np.linspace(0.0, 1.0, M + 1), 1.0 + side])
-    return z, side.size, side.size + M
 
 
 #: Longest tail [mill lengths]: the stretching's exp(beta) stays finite up to ~1e301.
@@ -144,53 +116,16 @@ def _sweep_classes(alpha, beta, piv, gain, weights, source) -> np.ndarray:
     return c
 
 
-@dataclass(frozen=True)
-class OpenGrid:
-    """The whole-line grid and each class's exponentially fitted flux coefficients.
-
-    z (n,) nodes, k0 / k1 the nodes of z = 0 (feed) and z = 1 (discharge), h (n - 1,)
-    volume widths, weights (n,) control volumes, upstream (n,) the weights of (-inf, 1]
-    (the discharge node keeps the half volume on its left), alpha / beta (N, n - 1): the
-    flux across the face between nodes k and k + 1 is alpha_k c_k - beta_k c_(k+1).
-    """
-
-    z: np.ndarray
-    k0: int
-    k1: int
-    h: np.ndarray
-    weights: np.ndarray
-    upstream: np.ndarray
-    alpha: np.ndarray
-    beta: np.ndarray
-
-
-def open_grid(pe: float, m_cells: int, v, w, tail: float) -> OpenGrid:
-    """:class:`OpenGrid` of ``m_cells`` volumes in the mill and tails of length ``tail``."""
-    z, k0, k1 = open_nodes(tail, m_cells)
-    n = z.size
-    h = np.diff(z)
-    weights = np.zeros(n)
-    weights[:-1] += 0.5 * h
-    weights[1:] += 0.5 * h
-    upstream = weights.copy()
-    upstream[k1] = 0.5 * h[k1 - 1]
-    upstream[k1 + 1:] = 0.0
-    D = (np.asarray(w, float) / pe)[:, None]
-    P = np.asarray(v, float)[:, None] * h[None, :] / D
-    return OpenGrid(z, k0, k1, h, weights, upstream, D / h * _bernoulli(-P), D / h * _bernoulli(P))
-
-
-def back_layer_matrix(S, b, tau: float, grid: OpenGrid, v) -> np.ndarray:
+def back_layer_matrix(S, b, tau: float, grid: AxialFaces, v) -> np.ndarray:
     """Map (N, N) from c(1) to the back-dispersion layer of the sampled discharge.
 
     (N, N) map from c(1) to int_(-inf)^1 c^ dz (the sampled discharge's back-dispersion
     layer, module docstring): lower triangular, linear in c(1).
     """
     S = np.asarray(S, dtype=float)
-    loss = tau * S[:, None] * grid.weights[None, :]
-    loss[:, -1] += np.asarray(v, float)
+    loss = node_losses(grid, np.asarray(v, float), tau * S)
     gain = tau * np.asarray(b, float) * S[None, :]
-    return _back_layer(grid.alpha, grid.beta, loss, gain, grid.weights, grid.h, grid.k1, np.eye(S.size))
+    return _back_layer(grid, loss, gain, np.eye(S.size))
 
 
 def solve_axial_open_grid(S, b, feed, tau: float, pe: float, m_cells: int, d=None, w=None,
@@ -208,11 +143,10 @@ def solve_axial_open_grid(S, b, feed, tau: float, pe: float, m_cells: int, d=Non
     v = np.ones(n_cls) if d is None else np.asarray(d, dtype=float)
     w = v.copy() if w is None else np.asarray(w, dtype=float)
     L_t = tail_length(S, tau, pe, v, w) if tail is None else float(tail)
-    g = open_grid(pe, m_cells, v, w, L_t)
-    z, k0, k1, alpha, beta, weights = g.z, g.k0, g.k1, g.alpha, g.beta, g.weights
+    g = open_faces(pe, m_cells, v, w, L_t)
+    z, k0, k1, alpha, beta, weights = g.z, g.inlet, g.outlet, g.alpha, g.beta, g.weights
     n = z.size
-    loss = tau * S[:, None] * weights[None, :]
-    loss[:, -1] += v  # outflow at the downstream end
+    loss = node_losses(g, v, tau * S)  # breakage, and the outflow at the downstream end
     piv = _gth_factors(alpha, beta, loss)
     gain = tau * b * S[None, :]
 
@@ -231,12 +165,13 @@ def solve_axial_open_grid(S, b, feed, tau: float, pe: float, m_cells: int, d=Non
         holdup = tau * upstream
     else:
         product = vk * c[:, k1]
-        holdup = tau * (upstream + _back_layer(alpha, beta, loss, gain, weights, g.h, k1, c[:, k1]))
+        holdup = tau * (upstream + _back_layer(g, loss, gain, c[:, k1]))
     return z, np.moveaxis(c, 1, 0), product, holdup
 
 
-def _back_layer(alpha, beta, loss, gain, weights, h, k1, c_end):
-    """int_(-inf)^1 c^ dz: the source-free equations on nodes 0..k1 with c^(k1) = c(k1)."""
+def _back_layer(grid: AxialFaces, loss, gain, c_end):
+    """int_(-inf)^1 c^ dz: the source-free equations on nodes 0..k1 with c^(k1) = c(k1) (k1 the outlet)."""
+    alpha, beta, weights, h, k1 = grid.alpha, grid.beta, grid.weights, grid.h, grid.outlet
     cols = c_end.shape[1:]
     n = k1  # unknown nodes 0..k1-1
     if n == 0:

@@ -40,8 +40,9 @@ from dataclasses import dataclass
 import numpy as np
 
 from millflow.errors import InputError, SolverError
-from millflow.mill.axial import PE_MIXED, _bernoulli, refine_grids, solve_axial_grid
-from millflow.mill.axial_open import check_discharge, open_grid, solve_axial_open_grid, tail_length
+from millflow.mill.axial import PE_MIXED, refine_grids, solve_axial_grid
+from millflow.mill.axial_open import check_discharge, solve_axial_open_grid, tail_length
+from millflow.mill.finite_volume import AxialFaces, closed_faces, node_losses, open_faces, tridiagonal
 from millflow.mill.newton import BlockTridiagonalFactor, newton
 from millflow.mill.nonlinear_cell import NEWTON_RTOL, NonlinearSteady, _check, _discharge, _no_age, well_mixed
 from millflow.nonlinear.kinetics import Kinetics
@@ -79,29 +80,20 @@ class _Line:
 
 
 def _closed_line(pe, m, v, w) -> _Line:
-    h = 1.0 / m
-    z = np.linspace(0.0, 1.0, m + 1)
-    weights = np.full(m + 1, h)
-    weights[[0, -1]] = 0.5 * h
-    D = w / pe
-    P = v * h / D
-    alpha, beta = D / h * _bernoulli(-P), D / h * _bernoulli(P)
-    return _from_faces(z, weights, np.tile(alpha, (m, 1)), np.tile(beta, (m, 1)), v, 0, m, weights, w, pe, False, False)
-
-
-def _from_faces(z, weights, alpha, beta, v, k0, k_out, hold, w, pe, open_vessel, flux):
-    """Node-balance coefficients from the face coefficients alpha, beta (faces, n1)."""
-    m1 = z.size
-    diag = np.zeros((m1, v.size))
-    diag[:-1] -= alpha
-    diag[1:] -= beta
-    diag[-1] -= v  # outflow at the downstream end
-    return _Line(z, weights, alpha.copy(), diag, beta.copy(), k0, k_out, hold, v, np.diff(z), w, pe, open_vessel, flux)
+    return _from_faces(closed_faces(pe, m, v, w), v, w, pe, False, False)
 
 
 def _open_line(kin, tau, pe, m, v, w, flux=False):
-    g = open_grid(pe, m, v, w, tail_length(np.zeros(v.size), tau, pe, v, w))
-    return _from_faces(g.z, g.weights, g.alpha.T, g.beta.T, v, g.k0, g.k1, g.upstream, w, pe, True, flux)
+    faces = open_faces(pe, m, v, w, tail_length(np.zeros(v.size), tau, pe, v, w))
+    return _from_faces(faces, v, w, pe, True, flux)
+
+
+def _from_faces(faces: AxialFaces, v, w, pe, open_vessel, flux) -> _Line:
+    """Node-balance coefficients (node-major) of the grid ``faces``: minus its tridiagonal matrices."""
+    # outflow at the downstream end; node-major (node, class) like the concentrations
+    lower, diag, upper = (np.ascontiguousarray(-a.T) for a in tridiagonal(faces, node_losses(faces, v)))
+    return _Line(faces.z, faces.weights, lower, diag, upper, faces.inlet, faces.outlet, faces.upstream,
+                 v, faces.h, w, pe, open_vessel, flux)
 
 
 def _scale_terms(line):

@@ -34,8 +34,9 @@ from millflow.errors import InputError
 from millflow.linalg import breakage_matrix
 from millflow.mill.scene import _check_feed, _scene, _tau
 from millflow.mill.steady import _size_coords
-from millflow.mill.axial import _bernoulli, solve_axial_grid
-from millflow.mill.axial_open import back_layer_matrix, open_grid, solve_axial_open_grid, tail_length
+from millflow.mill.axial import solve_axial_grid
+from millflow.mill.axial_open import back_layer_matrix, solve_axial_open_grid, tail_length
+from millflow.mill.finite_volume import closed_faces, node_losses, open_faces, tridiagonal
 from millflow.mill.cells import cell_operators, solve_cells
 from millflow.mill.segregated import plug_flow
 from millflow.ode import integrate_linear
@@ -58,24 +59,17 @@ def _cells_system(sc, n_cls):
     return J, B_in, C, float(net.bypass), n
 
 
-def _fv_jacobian(sc, alpha, beta, v, tau_weights, n_cls):
+def _fv_jacobian(sc, faces, v, tau: float, n_cls):
     """Jacobian of the method of lines on a finite-volume grid.
 
-    J of the method of lines on a finite-volume grid: per class the tridiagonal transport
-    (face fluxes alpha_k c_k - beta_k c_(k+1), per class and face; outflow v_i at the last
-    node) divided by the volumes tau w_k, plus breakage K (x) I.
+    J of the method of lines on a finite-volume grid: per class minus the tridiagonal
+    node balances of :func:`millflow.mill.finite_volume.tridiagonal` (face fluxes, outflow
+    v_i at the last node) divided by the volumes tau w_k, plus breakage K (x) I.
     """
-    n = tau_weights.size
-    scale = sp.diags(1.0 / tau_weights)
-    blocks = []
-    for i in range(n_cls):
-        a_i = np.broadcast_to(alpha[i], (n - 1,))
-        b_i = np.broadcast_to(beta[i], (n - 1,))
-        diag = np.zeros(n)
-        diag[:-1] += a_i
-        diag[1:] += b_i
-        diag[-1] += v[i]
-        blocks.append(scale @ sp.diags([-a_i, diag, -b_i], [-1, 0, 1]))
+    n = faces.z.size
+    lower, diag, upper = tridiagonal(faces, node_losses(faces, v))
+    scale = sp.diags(1.0 / (tau * faces.weights))
+    blocks = [scale @ sp.diags([lower[i], diag[i], upper[i]], [-1, 0, 1]) for i in range(n_cls)]
     K = breakage_matrix(sc.S, sc.b)
     return (-sp.block_diag(blocks) + sp.kron(sp.csr_matrix(K), sp.identity(n))).tocsc()
 
@@ -87,18 +81,14 @@ def _axial_system(sc, n_cls, m_cells):
     v = np.ones(n_cls) if sc.d is None else sc.d
     w = np.ones(n_cls) if sc.dispersion is None else sc.dispersion
     M = int(m_cells)
-    h = 1.0 / M
-    weights = np.full(M + 1, h)
-    weights[[0, -1]] = 0.5 * h
-    D = w / pe
-    P = v * h / D
-    alpha, beta = D / h * _bernoulli(-P), D / h * _bernoulli(P)
-    J = _fv_jacobian(sc, alpha, beta, v, tau * weights, n_cls)
+    faces = closed_faces(pe, M, v, w)
+    weights = faces.weights
+    J = _fv_jacobian(sc, faces, v, tau, n_cls)
     e0 = np.zeros(M + 1)
-    e0[0] = 1.0 / (tau * weights[0])
+    e0[faces.inlet] = 1.0 / (tau * weights[faces.inlet])
     B_in = sp.kron(sp.identity(n_cls), sp.csr_matrix(e0[:, np.newaxis])).tocsr()
     eM = np.zeros(M + 1)
-    eM[-1] = 1.0
+    eM[faces.outlet] = 1.0
     C = sp.kron(sp.diags(v), sp.csr_matrix(eM[np.newaxis, :])).tocsr()
     hold = sp.kron(sp.identity(n_cls), sp.csr_matrix(tau * weights[np.newaxis, :])).tocsr()
     return J, B_in, C, hold, M
@@ -121,15 +111,15 @@ def _axial_open_system(sc, n_cls, m_cells):
     v = np.ones(n_cls) if sc.d is None else sc.d
     w = v.copy() if sc.dispersion is None else sc.dispersion
     M = int(m_cells)
-    g = open_grid(pe, M, v, w, tail_length(sc.S, tau, pe, v, w))
+    g = open_faces(pe, M, v, w, tail_length(sc.S, tau, pe, v, w))
     n = g.z.size
     K = breakage_matrix(sc.S, sc.b)
-    J = _fv_jacobian(sc, g.alpha, g.beta, v, tau * g.weights, n_cls)
+    J = _fv_jacobian(sc, g, v, tau, n_cls)
     e0 = np.zeros(n)
-    e0[g.k0] = 1.0 / (tau * g.weights[g.k0])
+    e0[g.inlet] = 1.0 / (tau * g.weights[g.inlet])
     B_in = sp.kron(sp.identity(n_cls), sp.csr_matrix(e0[:, np.newaxis])).tocsr()
     e1 = np.zeros(n)
-    e1[g.k1] = 1.0
+    e1[g.outlet] = 1.0
     at_discharge = sp.kron(sp.identity(n_cls), sp.csr_matrix(e1[np.newaxis, :])).tocsr()
     upstream = sp.kron(sp.identity(n_cls), sp.csr_matrix(tau * g.upstream[np.newaxis, :])).tocsr()
     if (sc.discharge or "sampled") == "flux":
