@@ -61,7 +61,8 @@ from scipy.sparse.linalg import splu
 from millflow.errors import InputError
 from millflow.linalg import breakage_matrix
 from millflow.mill.age_cells import AGE_TAIL, _kappa_of, integrate_ages
-from millflow.mill.axial import _bernoulli, refine_grids
+from millflow.mill.axial import refine_grids
+from millflow.mill.finite_volume import closed_faces, node_losses, tridiagonal
 from millflow.mill.nonlinear_cell import NonlinearSteady, _check
 from millflow.nonlinear.kinetics import Kinetics
 from millflow.threads import limit_blas_threads
@@ -92,32 +93,25 @@ def _fv_transport(v, w, pe: float, tau: float, m_cells: int):
 
     Returns (T (n, n) sparse csc [1/s], exit (N, n) sparse: the outflow rate of each class
     at the discharge node [1/s], weights (M + 1,) the volumes [fraction of the length]).
-    Face coefficients as :func:`millflow.mill.axial.solve_axial_grid`; T's column of node k
+    The node balances of the linear mill (:func:`millflow.mill.finite_volume.tridiagonal`
+    on :func:`~millflow.mill.finite_volume.closed_faces`, losses the outflow v at the last
+    node) on the masses m = tau h_k c: T = -A diag(1 / (tau h_k)), so T's column of node k
     of class i sums to minus its outflow (zero but at the last node).
     """
-    n_cls, M = v.size, int(m_cells)
-    h = 1.0 / M
-    weights = np.full(M + 1, h)
-    weights[[0, -1]] = 0.5 * h
-    D = w / pe
-    P = v * h / D
-    alpha = D / h * _bernoulli(-P)  # flux alpha c_k - beta c_(k+1) across face k + 1/2
-    beta = D / h * _bernoulli(P)
-    scale = 1.0 / (tau * weights)  # c = m / (tau h_k)
-    k = np.repeat(np.arange(M), n_cls)
-    i = np.tile(np.arange(n_cls), M)
-    lo, hi = k * n_cls + i, (k + 1) * n_cls + i
-    a_f = np.tile(alpha, M) * scale[k]  # rate node k -> k + 1
-    b_f = np.tile(beta, M) * scale[k + 1]  # rate node k + 1 -> k
-    out = v * scale[-1]
-    last = M * n_cls + np.arange(n_cls)
-    rows = np.concatenate([hi, lo, lo, hi, last])
-    cols = np.concatenate([lo, hi, lo, hi, last])
-    vals = np.concatenate([a_f, b_f, -a_f, -b_f, -out])
-    n = (M + 1) * n_cls
+    faces = closed_faces(pe, m_cells, v, w)
+    lower, diag, upper = tridiagonal(faces, node_losses(faces, v))
+    n_cls, nodes = diag.shape
+    scale = 1.0 / (tau * faces.weights)  # c = m / (tau h_k)
+    idx = np.arange(nodes)[:, None] * n_cls + np.arange(n_cls)[None, :]  # (nodes, N) state index
+    rows = np.concatenate([idx[1:].ravel(), idx[:-1].ravel(), idx.ravel()])
+    cols = np.concatenate([idx[:-1].ravel(), idx[1:].ravel(), idx.ravel()])
+    vals = -np.concatenate([(lower.T * scale[:-1, None]).ravel(), (upper.T * scale[1:, None]).ravel(),
+                            (diag.T * scale[:, None]).ravel()])
+    n = nodes * n_cls
     T = sp.csc_matrix((vals, (rows, cols)), shape=(n, n))
-    exit_ = sp.csr_matrix((out, (np.arange(n_cls), last)), shape=(n_cls, n))
-    return T, exit_, weights
+    out = np.asarray(v, float) * scale[-1]
+    exit_ = sp.csr_matrix((out, (np.arange(n_cls), idx[-1])), shape=(n_cls, n))
+    return T, exit_, faces.weights
 
 
 def _slowest_decay(v, w, pe: float, tau: float) -> float:
