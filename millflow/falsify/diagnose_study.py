@@ -100,7 +100,7 @@ def _one(task):
     truth = {**BREAKAGE_TRUTH, **({extra: _truth_value(label, strength)} if extra else {})}
     t0 = time.perf_counter()
     try:
-        dg = diagnose(cfg, quiet=True, loco=False, drift=False)
+        dg = diagnose(cfg, quiet=True, loco=False, drift=False, separation=False)
     except MillflowError as exc:
         return {"truth": label, "replicate": r, "error": str(exc), "runtime_s": time.perf_counter() - t0}
     st = dg.fits[dg.best].stats["params"]

@@ -171,6 +171,11 @@ class Diagnosis:
             lines.append(f"{r['model']:<16}{r['n_params']:>3}{r['ssr']:>12.5g}{r['bic']:>10.2f}{r['delta_bic']:>8.2f}"
                          f"{r['aicc']:>10.2f}{loco:>11}{drift:>18}{lag:>7}{runs:>6}")
         lines.append(f"best supported (BIC): {self.best}; the user's model: {self.user}")
+        for r in self.table:
+            if r.get("separation_lambda") is not None:
+                p = r.get("repeat_choice")
+                lines.append(f"  separated from {r['model']}: lambda = {r['separation_lambda']:.3g}"
+                             + ("" if p is None else f", a repeat prefers {self.best} in ~{100 * p:.0f} %"))
         for name, v in self.verdicts.items():
             lines.append(f"  {name}: {v}")
         lines += [f"note: {n}" for n in self.notes]
@@ -285,12 +290,13 @@ def _drift(model, params, optimizer, result):
 
 
 def diagnose(cfg, *, progress=None, quiet: bool = False, loco: bool = True, drift: bool = True,
-             candidates=None) -> Diagnosis:
+             separation: bool = True, candidates=None) -> Diagnosis:
     """Fit the candidate set of a fit config (:class:`~millflow.fitting.config.FitConfig`)
     and rank it; see the module docstring. ``loco=False`` skips the leave-one-condition-out
-    refits, ``drift=False`` the drift refits (neither changes the ranking by BIC, the
-    choice, or the candidates' estimates and intervals). ``candidates``: labels to fit
-    (default all; ``linear`` and the user's model are always fitted)."""
+    refits, ``drift=False`` the drift refits, ``separation=False`` the noise-free refits
+    of :func:`separation` (none of them changes the ranking by BIC, the choice, or the
+    candidates' estimates and intervals). ``candidates``: labels to fit (default all;
+    ``linear`` and the user's model are always fitted)."""
     from millflow.fitting.statistics import information_criteria
     from millflow.fitting.validate import condition_rmse
 
@@ -364,8 +370,77 @@ def diagnose(cfg, *, progress=None, quiet: bool = False, loco: bool = True, drif
     best = rows[0]["model"]
     if len(next(iter(fits.values())).model.conditions) < 3:
         notes.append("leave-one-condition-out prediction needs >= 3 conditions: not computed")
+    if separation:
+        say("separation of the close candidates on this design")
+        for label, sep in _separation(fits, rows).items():
+            row = next(r for r in rows if r["model"] == label)
+            row.update(separation_lambda=sep["lambda"], repeat_choice=sep["repeat_choice"])
+            if sep["repeat_choice"] is not None and sep["repeat_choice"] < REPEAT_CHOICE_WARN:
+                notes.append(f"this design separates {best} from {label} weakly: {label} fitted to {best}'s "
+                             f"noise-free prediction leaves lambda = {sep['lambda']:.3g} noise variances, so a "
+                             f"repeat of the experiment would prefer {best} in about "
+                             f"{100 * sep['repeat_choice']:.0f} % of repeats; more sampling times or conditions "
+                             "where the two differ would separate them")
     verdicts = _verdicts(fits, user_label, best)
     return Diagnosis(_clean(rows), fits, verdicts, best, user_label, time.perf_counter() - t0, notes)
+
+
+#: Candidates within this BIC of the best are checked by :func:`separation`.
+SEPARATION_DBIC = 10.0
+#: Below this repeat-choice probability diagnose says the design separates two models weakly.
+REPEAT_CHOICE_WARN = 0.9
+
+
+def separation(best, other) -> dict:
+    """How far a design separates two fitted models: the noise-free refit of one to the other.
+
+    ``other`` (a :class:`~millflow.fitting.estimate.FitResult` on the same data) is refitted
+    to ``best``'s prediction without noise, from its own estimate. Its weighted SSR over
+    the noise variance of ``best``'s fit, sigma^2 = SSR_best / (n - p_best), is the
+    non-centrality lambda of the likelihood-ratio statistic between the two on this design
+    (asymptotically, the data drawn from ``best``'s estimate). The probability that a
+    repeat of the experiment prefers ``best`` by BIC, approximately: with as many
+    parameters, Phi(sqrt(lambda)/2) (the difference of the two SSRs / sigma^2 is then
+    about N(lambda, 4 lambda)); with k fewer in ``other``, P(chi'^2_k(lambda) > k ln n);
+    None when ``other`` has more parameters (it may hold ``best``).
+
+    Returns
+    -------
+    dict
+        ``lambda`` [-] and ``repeat_choice`` (probability, or None).
+    """
+    import copy
+
+    from scipy.stats import ncx2, norm
+
+    n, k = best.n_data, best.n_params - other.n_params
+    sigma2 = best.ssr / max(n - best.n_params, 1)
+    target = best.model.predict(best.theta)
+    model = copy.copy(other.model)
+    model.y = target
+    refit = fit(model, other.params, global_search=False, starts=1, grid_check=False, quiet=True, profile=False)
+    lam = refit.ssr / sigma2 if sigma2 > 0 else math.inf
+    if k < 0:
+        return {"lambda": lam, "repeat_choice": None}
+    p = float(norm.cdf(math.sqrt(lam) / 2)) if k == 0 else float(ncx2.sf(k * math.log(n), k, lam))
+    return {"lambda": lam, "repeat_choice": p}
+
+
+def _separation(fits, rows) -> dict:
+    """:func:`separation` of the best candidate from each candidate within :data:`SEPARATION_DBIC`."""
+    best = fits[rows[0]["model"]]
+    out = {}
+    for r in rows[1:]:
+        other = fits.get(r["model"])
+        if other is None or r["delta_bic"] > SEPARATION_DBIC or other.n_params > best.n_params:
+            continue
+        if other.model.y.shape != best.model.y.shape:
+            continue
+        try:
+            out[r["model"]] = separation(best, other)
+        except MillflowError:
+            continue
+    return out
 
 
 def _f(v):

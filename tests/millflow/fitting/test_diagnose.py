@@ -173,3 +173,34 @@ def test_replicate_study_chooses_the_truths_class_and_covers_it():
         assert t["chosen"] >= 5, (label, t["choices"])
     cov = [r["covered"][n] for r in res["replicates"] for n in r["covered"]]
     assert np.mean(cov) >= 0.75, np.mean(cov)
+
+
+def test_separation_measures_how_far_the_design_tells_two_models_apart():
+    """The noise-free refit of separation(): a model is not separated from itself (lambda
+    ~ 0, a repeat prefers either with probability 1/2); first-order against a slowing-down
+    truth (s = 1) gives the non-centrality of the truth's own noise-free refit
+    (SSR / sigma^2 with the known sigma 0.01) to within the spread of the estimates
+    (sigma-hat on ~40 residual degrees of freedom and the fitted parameters: a factor 2)."""
+    from scipy.stats import ncx2
+
+    from millflow.fitting.diagnose import separation
+    from millflow.fitting.estimate import fit
+
+    truth = SlowingDownTruth(1.0)
+    cfg = _cfg(truth)
+    slow, lin = ModelSpec(mode="batch", kinetics=("slowing_down",)), ModelSpec(mode="batch")
+    fits = {}
+    for label, spec in (("slowing_down", slow), ("linear", lin)):
+        fits[label] = fit(cfg.model(spec, DESIGN.grid), study_parameters(spec, BREAKAGE_TRUTH), quiet=True,
+                          grid_check=False, profile=False, starts=3, popsize=8, maxiter=60, seed=0)
+    own = separation(fits["slowing_down"], fits["slowing_down"])
+    assert own["lambda"] < 1e-6 and abs(own["repeat_choice"] - 0.5) < 1e-3
+    sep = separation(fits["slowing_down"], fits["linear"])
+    clean = DESIGN.passing_at_sieves(truth.mass_fractions(DESIGN)).ravel()
+    model = cfg.model(lin, DESIGN.grid)
+    exact = fit(model.__class__(lin, DESIGN.data(clean, DESIGN.sample_keys()), DESIGN.grid),
+                study_parameters(lin, BREAKAGE_TRUTH), quiet=True, grid_check=False, profile=False, starts=3,
+                popsize=8, maxiter=60, seed=0).ssr / 0.01 ** 2
+    assert exact / 2 < sep["lambda"] < 2 * exact, (sep, exact)
+    n = fits["linear"].n_data
+    assert sep["repeat_choice"] == pytest.approx(ncx2.sf(np.log(n), 1, sep["lambda"]), rel=1e-12)
