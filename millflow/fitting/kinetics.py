@@ -75,6 +75,9 @@ KAPPA_FORMS = ("hyperbolic", "exponential")
 #: Volumes of the axial-dispersion grid inside the fit (fixed: a refined grid would change with
 #: the parameters and make the finite-difference sensitivities jump).
 AXIAL_CELLS = 64
+#: Grids of plug flow with classification on the axis inside the fit (8, 16, ..., 128 upwind
+#: cells, extrapolated; fixed for the same reason): ~1e-7 of the feed on the test scenes.
+PLUG_LEVELS = 5
 #: Tolerances of the ODE solves inside the fit (relative to the feed): 1e-7 keeps the
 #: finite-difference noise (rtol / h, h = rtol^(1/3) x scale) near 2e-5 relative, the
 #: model error 1e5 times below 1 % measurement noise.
@@ -320,8 +323,8 @@ class CompiledKinetics:
         vessel is refused.
         """
         from millflow.mill import nonlinear as nl
-        from millflow.mill.transport import is_axial, is_axial_dispersion
-        axis = d is not None and is_axial_dispersion(model, open_vessel=False)
+        from millflow.mill.transport import is_axial, is_plug
+        axis = d is not None and is_axial(model, open_vessel=False)  # plug flow, the closed vessel
         if d is not None and not axis and (where == "axis" or is_axial(model)):
             raise InputError(nl._AGE_CLASSIFIED)
         locs = ["product"] if locations is None else list(locations)
@@ -333,6 +336,10 @@ class CompiledKinetics:
         try:
             if d is None:
                 r = nl.age_slowing(self._kin(S, b, p, k), feed, model, tol=AGE_TOL, holdup=hold)
+            elif axis and is_plug(model):  # fixed grids: refined ones would move with the parameters
+                from millflow.mill.age_axis import age_structured_plug
+                r = age_structured_plug(self._kin(S, b, p, k), feed, model, d, rtol=AGE_ODE_RTOL, tail=AGE_ODE_ATOL,
+                                        levels=PLUG_LEVELS, holdup=hold, error_estimate=False)
             elif axis:  # a fixed grid: a refined one would move with the parameters
                 from millflow.mill.age_axis import age_structured_axial
                 r = age_structured_axial(self._kin(S, b, p, k), feed, model, d, rtol=AGE_ODE_RTOL,

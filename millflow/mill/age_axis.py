@@ -47,8 +47,10 @@ and the exponentially fitted fluxes are the linear mill's second-order scheme; t
 approximations are the grid in z (Richardson), the ODE in the age (tight against loose)
 and the tail (bounded).
 
-Plug flow with classification on the axis (the pure-convection limit) and the open
-vessel are not solved here (:data:`PLUG_REFUSED`, :data:`OPEN_REFUSED`).
+Plug flow with classification on the axis (no dispersion) is the limit of M upwind cells
+in a row (M tanks in series with d* at every outlet) as M -> infinity, whose error is a
+power series in 1/M: :func:`age_structured_plug` extrapolates it by Romberg's table. The
+open vessel is not solved here (:data:`OPEN_REFUSED`).
 """
 from __future__ import annotations
 
@@ -58,7 +60,7 @@ import numpy as np
 import scipy.sparse as sp
 from scipy.sparse.linalg import splu
 
-from millflow.errors import InputError
+from millflow.errors import InputError, SolverError
 from millflow.linalg import breakage_matrix
 from millflow.mill.age_cells import AGE_TAIL, _kappa_of, integrate_ages
 from millflow.mill.axial import refine_grids
@@ -67,7 +69,7 @@ from millflow.mill.nonlinear_cell import NonlinearSteady, _check
 from millflow.nonlinear.kinetics import Kinetics
 from millflow.threads import limit_blas_threads
 
-__all__ = ["age_structured_axial", "AXIS_MAX_STATE", "AXIS_TOL", "PLUG_REFUSED", "OPEN_REFUSED"]
+__all__ = ["age_structured_axial", "age_structured_plug", "AXIS_MAX_STATE", "AXIS_TOL", "OPEN_REFUSED"]
 
 #: Default target of the error estimate (max abs error of product and hold-up / tau, of the feed).
 AXIS_TOL = 1e-7
@@ -76,11 +78,6 @@ AXIS_MAX_STATE = 2**16
 #: The ODE's relative tolerance is this share of ``tol`` (its error must not disturb the
 #: Richardson estimate of the grid); absolute tolerance a tenth of that, of the feed.
 ODE_SHARE = 1e-2
-#: Why plug flow with classification on the axis stays refused.
-PLUG_REFUSED = ("kappa(t) (slowing-down in the particle's age) with classification on the axis of plug flow: the pure-"
-                "convection limit of the age-position balance (classes at different speeds, a density in age and "
-                "position) is not solved; expected rtd.AxialDispersion(tau, pe) with a large Pe (the closed vessel "
-                "is solved, millflow.mill.age_axis), a cell transport, or d = None")
 #: Why the open vessel with classification on the axis stays refused.
 OPEN_REFUSED = ("kappa(t) (slowing-down in the particle's age) with classification on the axis of the open axial-"
                 "dispersion vessel is not solved (its discharge samples a concentration on an infinite line); "
@@ -196,7 +193,8 @@ def age_structured_axial(kin: Kinetics, feed, transport, d=None, *, dispersion=N
     import rtd
 
     if isinstance(transport, rtd.PlugFlow):
-        raise InputError(PLUG_REFUSED)
+        return age_structured_plug(kin, feed, transport, d, tol=tol, rtol=rtol, tail=tail, max_state=max_state,
+                                   error_estimate=error_estimate, holdup=holdup)
     if not isinstance(transport, rtd.AxialDispersion):
         raise InputError(f"transport {transport!r}: the age-position balance is solved for rtd.AxialDispersion "
                          "(closed vessel)")
@@ -280,5 +278,158 @@ def age_structured_axial(kin: Kinetics, feed, transport, d=None, *, dispersion=N
             "classification": "none" if d is None else "d* on the axis (relative axial velocity)"}
     if holdup:
         info.update(holdup=tau * both[n_cls:], holdup_overflow=0.0)
+    return NonlinearSteady(p, 0.0, how, 0.0, float(err), float(abs(p.sum() - feed.sum())), 0,
+                           time.perf_counter() - start, info)
+
+
+def _upwind_transport(v, tau: float, m_cells: int):
+    """Plug flow on M equal cells in a row, node-major (index k N + i): the upwind finite volumes.
+
+    Class i leaves every cell at the rate v_i M / tau [1/s] into the next one (the last
+    one's outflow is the discharge): M tanks in series with d* = v at every outlet, whose
+    limit M -> infinity is plug flow with class i travelling at v_i. Returns (T sparse csc,
+    exit (N, n) sparse) as :func:`_fv_transport`.
+    """
+    n_cls, M = v.size, int(m_cells)
+    rate = np.asarray(v, float) * M / tau
+    idx = np.arange(M)[:, None] * n_cls + np.arange(n_cls)[None, :]
+    rows = np.concatenate([idx.ravel(), idx[1:].ravel()])
+    cols = np.concatenate([idx.ravel(), idx[:-1].ravel()])
+    vals = np.concatenate([-np.tile(rate, M), np.tile(rate, M - 1)])
+    n = M * n_cls
+    T = sp.csc_matrix((vals, (rows, cols)), shape=(n, n))
+    exit_ = sp.csr_matrix((rate, (np.arange(n_cls), idx[-1])), shape=(n_cls, n))
+    return T, exit_
+
+
+def _romberg_weights(levels: int) -> np.ndarray:
+    """Weights c_j with R = sum_j c_j u(M_0 2^j) the Richardson (Romberg) extrapolation in h = 1/M.
+
+    Each level removes the next power of h (h, h^2, ...): R_(j,l) = R_(j,l-1) +
+    (R_(j,l-1) - R_(j-1,l-1)) / (2^l - 1).
+    """
+    table = [np.eye(levels)[j] for j in range(levels)]
+    for lev in range(1, levels):
+        table = [table[j] + (table[j] - table[j - 1]) / (2.0 ** lev - 1.0) for j in range(1, len(table))]
+    return table[-1]
+
+
+@limit_blas_threads
+def age_structured_plug(kin: Kinetics, feed, transport, d=None, *, tol: float = AXIS_TOL,
+                        rtol: float | None = None, tail: float = AGE_TAIL, m_start: int = 8,
+                        levels: int | None = None, max_state: int = AXIS_MAX_STATE, error_estimate: bool = True,
+                        holdup: bool = True) -> NonlinearSteady:
+    """Plug flow with S_i = S_i0 kappa(a) and classification on the axis (class i at velocity d_i* u).
+
+    The age-position balance of the module docstring without dispersion,
+    dc_i/da = -(v_i/tau) dc_i/dz + kappa(a) (K c)_i, discretised in z by M upwind volumes
+    (M equal cells in a row, class i leaving each at the rate v_i M / tau: the age-structured
+    ODE of :func:`_solve_ages` with that transport) on M = ``m_start`` 2^j, j = 0, 1, ...
+    The cells converge to plug flow as M -> infinity with an error that is a power series in
+    h = 1/M (tanks in series tend to plug flow so: (1 + x h)^(-1/h) = e^(-x) (1 + x^2 h / 2
+    + ...)), so the products and hold-ups of the grids are extrapolated to h = 0 by
+    Romberg's table (each level removes the next power of h). Error estimate: the last
+    two diagonal entries' difference, plus the ODE's (the finest grid again at rtol / 10,
+    times the sum of |weights| of the extrapolation) and the tail bound. Refinement stops
+    when the estimate is below ``tol`` (max abs error of the product and of hold-up / tau,
+    in the feed's units); ``levels`` fixes the number of grids instead (the fit's forward
+    model: smooth in the parameters), the estimate then being what those grids give.
+
+    Parameters
+    ----------
+    kin : millflow.nonlinear.Kinetics
+        S_i0 [1/s], b and kappa(t), the age t in s.
+    feed : (N,) feed flows.
+    transport : rtd.PlugFlow, tau [s] its mean.
+    d : (N,) relative axial velocity d_i* > 0 [-] (None: 1, no classification).
+    tol, rtol, tail, max_state, error_estimate, holdup : as :func:`age_structured_axial`.
+    m_start : cells of the first grid (then 2x, 4x, ...).
+    levels : number of grids (None: refine until the estimate meets ``tol``).
+
+    Returns
+    -------
+    NonlinearSteady
+        ``info``: ``m_cells`` (the finest grid), ``grids``, ``grid_error``, ``ode_error``,
+        ``tail_error``, ``holdup`` [s].
+    """
+    import rtd
+
+    if not isinstance(transport, rtd.PlugFlow):
+        raise InputError(f"transport {transport!r}: age_structured_plug solves rtd.PlugFlow")
+    tau = float(transport.mean)
+    feed, tau = _check(kin, feed, tau)
+    if kin.age is None:
+        raise InputError("age_structured_plug: the kinetics have no kappa(t) (kinetics(..., kappa_t=...))")
+    n_cls = kin.n
+    v = np.ones(n_cls) if d is None else np.asarray(d, float)
+    if v.shape != (n_cls,) or not np.all(np.isfinite(v)) or np.any(v <= 0):
+        raise InputError(f"d: expected ({n_cls},) values > 0")
+    if levels is not None and not (isinstance(levels, int) and 2 <= levels <= 12):
+        raise InputError(f"levels = {levels!r}: expected an integer in [2, 12]")
+    m_start = int(m_start)
+    if n_cls * m_start * 4 > max_state:
+        raise InputError(f"age-structured plug flow: {n_cls} classes x {4 * m_start} cells (three grids from "
+                         f"{m_start}) exceed the state limit {max_state} (AXIS_MAX_STATE); expected fewer classes")
+    start = time.perf_counter()
+    K = breakage_matrix(kin.S, kin.b)
+    kap, stencil = _kappa_of(kin.age, tau)
+    fsum = max(float(feed.sum()), 1e-300)
+    # the slowest class crosses in tau / min(v); the cells' spread decays at v M / tau or faster
+    horizon = 20.0 * tau / float(np.min(v)) + 80.0 * tau / (float(np.min(v)) * m_start)
+    rtol = max(ODE_SHARE * tol if rtol is None else float(rtol), 1e-13)
+    atol = 0.1 * rtol
+    tail_hold = max(1.0, 1.0 / float(np.min(v)))  # hold-up / tau of the tail per unit of mass left
+
+    def solve(M, rt, at):
+        T, exit_ = _upwind_transport(v, tau, M)
+        y0 = np.zeros(T.shape[0])
+        y0[:n_cls] = feed  # the feed enters the first cell at age 0
+        p, hold, A, left, pts = _solve_ages(kap, K, T, exit_, y0, fsum, tau, horizon, rt, at, tail)
+        return np.concatenate([p, hold / tau]), left, A, pts
+
+    grids, values, lefts = [], [], []
+    estimate, extrapolated = np.inf, None
+    while True:
+        M = m_start * 2 ** len(grids)
+        if n_cls * M > max_state:
+            break
+        u, left, A, pts = solve(M, rtol, atol)
+        grids.append(M)
+        values.append(u)
+        lefts.append(left)
+        if len(grids) >= 3:
+            now = _romberg_weights(len(grids)) @ np.array(values)
+            before = _romberg_weights(len(grids) - 1) @ np.array(values[:-1])
+            estimate = float(np.abs(now - before).max())
+            extrapolated = now
+            if (levels is None and estimate <= 0.5 * tol) or (levels is not None and len(grids) >= levels):
+                break
+        elif levels is not None and len(grids) >= levels:
+            extrapolated = _romberg_weights(len(grids)) @ np.array(values)
+            estimate = float(np.abs(values[-1] - values[-2]).max())
+            break
+    if extrapolated is None:
+        raise InputError(f"age-structured plug flow: {n_cls} classes leave room for fewer than three grids under the "
+                         f"state limit {max_state}; expected fewer classes or a smaller m_start")
+    weights = _romberg_weights(len(grids))
+    ode_err = 0.0
+    if error_estimate:
+        tight, _, _, _ = solve(grids[-1], max(0.1 * rtol, 3e-14), 0.1 * atol)
+        ode_err = float(np.abs(weights).sum()) * float(np.abs(tight - values[-1]).max())
+    tail_err = float(np.abs(weights).sum()) * max(lefts) * tail_hold
+    err = estimate + ode_err + tail_err
+    if levels is None and err > tol:
+        raise SolverError(f"age-structured plug flow: error estimate {err:.3g} above the tolerance {tol:g} at "
+                          f"{grids[-1]} cells (the state limit {max_state}); loosen tol or use fewer classes")
+    p = extrapolated[:n_cls]
+    how = ("age-structured plug flow: upwind cells in z (M tanks, d* at every outlet), BDF in the particle's age, "
+           f"Romberg extrapolation to M -> infinity over M = {grids}")
+    if stencil:
+        how += " (kappa = theta' by a 4th-order stencil)"
+    info = {"kinetics": kin.describe(), "m_cells": grids[-1], "grids": grids, "grid_error": estimate,
+            "ode_error": ode_err, "tail_error": tail_err, "age_horizon_s": A, "ode_points": pts, "rtol": rtol,
+            "classification": "none" if d is None else "d* on the axis (relative axial velocity)"}
+    if holdup:
+        info.update(holdup=tau * extrapolated[n_cls:], holdup_overflow=0.0)
     return NonlinearSteady(p, 0.0, how, 0.0, float(err), float(abs(p.sum() - feed.sum())), 0,
                            time.perf_counter() - start, info)

@@ -59,11 +59,11 @@ AGE_RTOL, AGE_ATOL = 1e-10, 1e-14
 #: The integration stops once the mass still in the mill is below this share of the feed.
 AGE_TAIL = 1e-13
 #: Why plug flow and axial dispersion with classification stay refused.
-AXIS_REFUSED = ("kappa(t) (slowing-down in the particle's age) with classification on the axis of plug flow or of "
-                "the open axial-dispersion vessel: classes travel at different speeds, so age and position are not "
-                "tied and the state is a density in both, which millflow solves for the closed vessel only; "
-                "expected rtd.AxialDispersion(tau, pe) (closed, a large Pe for near plug flow), a cell transport "
-                "(rtd.PerfectMixing, rtd.TanksInSeries, rtd.RecirculatingCells, a CompartmentNetwork) or d = None")
+AXIS_REFUSED = ("kappa(t) (slowing-down in the particle's age) with classification on the axis of the open axial-"
+                "dispersion vessel: classes travel at different speeds, so age and position are not tied and the "
+                "state is a density in both, which millflow solves for plug flow and the closed vessel only; "
+                "expected rtd.AxialDispersion(tau, pe) (closed), rtd.PlugFlow, a cell transport (rtd.PerfectMixing, "
+                "rtd.TanksInSeries, rtd.RecirculatingCells, a CompartmentNetwork) or d = None")
 
 
 def _kappa_of(age, scale: float):
@@ -176,8 +176,9 @@ def age_structured(kin: Kinetics, feed, transport, d=None, where="discharge", *,
     x s), ``info["cell_holdup"]`` (cells, N), ``info["age_horizon_s"]`` where the ODE
     stopped. ``error_estimate=False``: one solve at (rtol, atol), the estimate is then the
     tail bound only (the fit's forward model, whose own noise level is set apart).
-    The closed axial-dispersion vessel with ``d`` on its axis is
-    :func:`millflow.mill.age_axis.age_structured_axial` (``age_slowing`` routes it there).
+    The closed axial-dispersion vessel and plug flow with ``d`` on the axis are
+    :func:`millflow.mill.age_axis.age_structured_axial` and
+    :func:`~millflow.mill.age_axis.age_structured_plug` (``age_slowing`` routes them there).
     """
     net = network_of(transport)
     if net is None:

@@ -31,8 +31,8 @@ the linear mill, with classification d* where the linear mill takes it.
   :mod:`millflow.mill.age_cells` is solved, one linear ODE in the age; with classification on
   the axis of the closed axial-dispersion vessel age and position are not tied and the
   age-position balance of :mod:`millflow.mill.age_axis` is solved (finite volumes in z, one
-  sparse linear ODE in the age); plug flow and the open vessel with classification on the
-  axis are refused;
+  sparse linear ODE in the age), and for plug flow the limit of upwind cells extrapolated in
+  1/M (Romberg); the open vessel with classification on the axis is refused;
 - micromixing limits for any RTD model with ``pdf``/``cdf``: complete segregation,
   int_0^inf E(t) M_batch(t) dt, and maximum mixedness (Zwietering 1959),
   dM/dlambda = -R(M) + h(lambda) (M - f), h = E/(1 - F), integrated from large lambda
@@ -424,10 +424,8 @@ def plug_flow(kin: Kinetics, feed, tau: float, d=None, *, rtol: float = PLUG_RTO
     feed, tau = _check(kin, feed, tau)
     start = time.perf_counter()
     dx = _discharge(kin, d)
-    if kin.age is not None:
-        if dx is not None:
-            raise InputError(_AGE_CLASSIFIED)
-        return age_slowing(kin, feed, _rtd().PlugFlow(tau))
+    if kin.age is not None:  # d* in the velocity: the age-position balance (millflow.mill.age_axis)
+        return age_slowing(kin, feed, _rtd().PlugFlow(tau), None if dx is None else dx[:-1])
     v = np.ones(kin.n + 1) if dx is None else dx
     y0 = np.append(feed, 0.0)
     z = np.array([1.0] if positions is None else np.append(np.asarray(positions, float), 1.0))
@@ -485,8 +483,9 @@ def age_slowing(kin: Kinetics, feed, transport, d=None, where="discharge", *, to
     ``error_estimate=False`` skips its second, tighter solve), the closed axial-dispersion
     vessel with ``d`` the relative axial velocities by the age-position balance
     (:func:`millflow.mill.age_axis.age_structured_axial`, to max(``tol``, AXIS_TOL): its grid
-    in z); plug flow and the open vessel with classification are refused (age and position
-    are not tied).
+    in z), plug flow with ``d`` by its upwind cells extrapolated to plug flow
+    (:func:`~millflow.mill.age_axis.age_structured_plug`); the open vessel with
+    classification is refused (age and position are not tied).
     """
     feed, _ = _check(kin, feed, float(getattr(transport, "mean", 1.0)))
     if kin.age is None:
@@ -496,6 +495,11 @@ def age_slowing(kin: Kinetics, feed, transport, d=None, where="discharge", *, to
 
         return age_structured_axial(kin, feed, transport, d, tol=max(tol, AXIS_TOL), holdup=holdup,
                                     error_estimate=error_estimate)
+    if d is not None and isinstance(transport, _rtd().PlugFlow):
+        from millflow.mill.age_axis import AXIS_TOL, age_structured_plug
+
+        return age_structured_plug(kin, feed, transport, d, tol=max(tol, AXIS_TOL), holdup=holdup,
+                                   error_estimate=error_estimate)
     if d is not None:
         return age_structured(kin, feed, transport, d, where or "discharge", rtol=max(tol, 1e-13), holdup=holdup,
                               error_estimate=error_estimate)
@@ -572,6 +576,10 @@ def solve_transport(kin: Kinetics, feed, transport, d=None, *, where=None, dispe
 
             return age_structured_axial(kin, feed, transport, sc.d, dispersion=sc.dispersion, tol=tol,
                                         holdup=holdup, m_cells=m_cells)
+        if sc.kind == "plug" and sc.d is not None:
+            from millflow.mill.age_axis import age_structured_plug
+
+            return age_structured_plug(kin, feed, transport, sc.d, tol=tol, holdup=holdup)
         if sc.dispersion is not None or (sc.d is not None and sc.kind not in ("perfect_mixing", "network")):
             raise InputError(_AGE_CLASSIFIED)
         if sc.kind in ("series", "parallel"):

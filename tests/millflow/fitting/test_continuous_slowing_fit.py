@@ -221,13 +221,14 @@ def test_cli_global_fit_recovers_slowing_down_in_tanks_in_series(tmp_path, capsy
 
 
 def test_slowing_down_refusals_are_one_line_errors():
-    for kw in (dict(mode="plug_flow"),
-               dict(mode="mill", transport="axial_dispersion_open", transport_params={"pe": 8.0})):
+    for kw in (dict(mode="mill", transport="axial_dispersion_open", transport_params={"pe": 8.0}),):
         with pytest.raises(InputError, match="model.classification = 'screen_power' with model.kinetics = "
                                              "'slowing_down'.*age and its position are not tied"):
             ModelSpec(tau_column="tau_s", kinetics=("slowing_down",), classification="screen_power",
                       screen_column="screen_mm", **kw)
-    # cells and the closed axial vessel take classification (the age-structured balances)
+    # cells, plug flow and the closed axial vessel take classification (the age-structured balances)
+    ModelSpec(mode="plug_flow", tau_column="tau_s", kinetics=("slowing_down",), classification="screen_power",
+              screen_column="screen_mm")
     ModelSpec(mode="mill", transport="axial_dispersion", transport_params={"pe": 8.0}, tau_column="tau_s",
               kinetics=("slowing_down",), classification="screen_power", screen_column="screen_mm")
     ModelSpec(mode="well_mixed", tau_column="tau_s", kinetics=("slowing_down",), classification="screen_power",
@@ -341,3 +342,28 @@ def test_classified_forward_model_on_the_axis_of_the_closed_vessel():
         assert np.abs(got[c] - fixed.product).max() < 1e-8
         refined = age_structured_axial(kin, feed, T, d[c], tol=1e-6)
         assert np.abs(got[c] - refined.product).max() < 1e-3
+
+
+def test_classified_forward_model_on_the_axis_of_plug_flow():
+    """Mode plug_flow with classification (class i at d_i* u) and slowing-down: the forward
+    model is the extrapolated upwind cells on the fit's fixed grids (millflow.mill.age_axis,
+    PLUG_LEVELS), to the ODE's tolerance (~1e-9 of the feed), and within ~1e-6 of the feed
+    of the refined solve (the fixed grids' extrapolation, measured ~2e-7)."""
+    from millflow.fitting.kinetics import AGE_ODE_ATOL, AGE_ODE_RTOL, PLUG_LEVELS
+    from millflow.mill.age_axis import age_structured_plug
+
+    design = continuous_design(TAUS, extra_process={"screen_mm": [1.0] * len(TAUS)})
+    spec = ModelSpec(tau_column="tau_s", kinetics=("slowing_down",), classification="screen",
+                     screen_column="screen_mm", mode="plug_flow")
+    m = ForwardModel(spec, design.data(), design.grid)
+    d = m.discharge(m._unpack(_theta(spec, {**TRUTH, **SCREEN})), 1)[0]
+    S, b, feed = SlowingDownTruth(0.0).linear_parts(design)
+    kin = kinetics(S[0], b, kappa_t=lambda t: 1.0 / (1.0 + t / T_REF))
+    got = m.predict_grid(_theta(spec, {**TRUTH, **SCREEN}))[0]
+    for c, tau in enumerate(TAUS):
+        T = rtd.PlugFlow(tau)
+        fixed = age_structured_plug(kin, feed, T, d[c], rtol=AGE_ODE_RTOL, tail=AGE_ODE_ATOL, levels=PLUG_LEVELS,
+                                    error_estimate=False)
+        assert np.abs(got[c] - fixed.product).max() < 1e-8
+        refined = age_structured_plug(kin, feed, T, d[c], tol=1e-7)
+        assert np.abs(got[c] - refined.product).max() < 1e-5

@@ -3,14 +3,15 @@ axial-dispersion vessel (millflow.mill.age_axis): the age-position balance again
 linear classified axial mill (kappa = 1), against segregated flow with the vessel's exit-age
 density (v = w = 1), its mass balance, its observed order in z, its error estimate against
 a much finer reference, the routing through the non-linear entry points, and the refusals
-(plug flow and the open vessel with classification, the state limit)."""
+(the open vessel with classification, the state limit); and plug flow with classification
+on the axis (the extrapolated upwind cells) against its exact limits."""
 import numpy as np
 import pytest
 
 import rtd
 from millflow.errors import InputError
 from millflow.mill import nonlinear as nl
-from millflow.mill.age_axis import age_structured_axial
+from millflow.mill.age_axis import age_structured_axial, age_structured_plug
 from millflow.mill.axial import solve_axial
 from millflow.nonlinear import kinetics
 from tests.millflow.mill.nonlinear_scene import TAU, breakage_scene
@@ -112,14 +113,62 @@ def test_the_non_linear_entry_points_reach_it():
 def test_what_is_not_built_is_refused():
     S, b, feed, d = _scene()
     kin = _slow(S, b)
-    for T in (rtd.PlugFlow(TAU), rtd.AxialDispersion(TAU, 8.0, bc="open")):
-        with pytest.raises(InputError, match="age and position are not tied"):
-            nl.solve_transport(kin, feed, T, d, where="axis")
-        with pytest.raises(InputError, match="age and position are not tied"):
-            nl.age_slowing(kin, feed, T, d)
-    with pytest.raises(InputError, match="rtd.AxialDispersion.*with a large Pe"):
-        age_structured_axial(kin, feed, rtd.PlugFlow(TAU), d)
+    T = rtd.AxialDispersion(TAU, 8.0, bc="open")
+    with pytest.raises(InputError, match="age and position are not tied"):
+        nl.solve_transport(kin, feed, T, d, where="axis")
+    with pytest.raises(InputError, match="age and position are not tied"):
+        nl.age_slowing(kin, feed, T, d)
     with pytest.raises(InputError, match="open axial-dispersion vessel is not solved"):
-        age_structured_axial(kin, feed, rtd.AxialDispersion(TAU, 8.0, bc="open"), d)
+        age_structured_axial(kin, feed, T, d)
     with pytest.raises(InputError, match="exceed the state limit 4096"):
         age_structured_axial(kin, feed, rtd.AxialDispersion(TAU, 1e4), d, max_state=4096)
+    with pytest.raises(InputError, match="exceed the state limit 64"):
+        age_structured_plug(kin, feed, rtd.PlugFlow(TAU), d, max_state=64)
+
+
+# ------------------------------------------------------------------ plug flow on the axis
+@pytest.mark.parametrize("strong", [False, True])
+def test_plug_flow_kappa_one_is_the_linear_classified_plug_flow(strong):
+    """kappa = 1: plug flow with class i at d_i* u is eq. 4 with rates S/d* (exact, steady_mill);
+    the extrapolated cells agree within the two estimates, the estimate below 1e-7."""
+    from millflow.mill import steady_mill
+
+    S, b, feed, d = _scene(strong=strong)
+    one = kinetics(S, b, kappa_t=lambda t: 1.0)
+    r = age_structured_plug(one, feed, rtd.PlugFlow(TAU), d, tol=1e-7)
+    lin = steady_mill(S, b, feed, rtd.PlugFlow(TAU), d, locations=["discharge", "holdup"])
+    assert _err(r, lin["product"].values, lin["holdup"].values) <= r.error_estimate + lin.attrs["error_estimate"]
+    assert r.error_estimate < 1e-7
+    assert abs(r.product.sum() - feed.sum()) < 1e-12 * feed.sum()  # breakage conserves mass; rounding
+
+
+def test_plug_flow_without_classification_is_the_batch_grind_at_theta():
+    """v = 1: every particle leaves at age tau, so the product is eq. 4 at theta(tau) =
+    int_0^tau kappa = (tau / s) ln(1 + s) (exact); within the estimate."""
+    from millflow.batch import batch_solve
+
+    S, b, feed, _ = _scene()
+    r = age_structured_plug(_slow(S, b), feed, rtd.PlugFlow(TAU), None, tol=1e-7)
+    exact = batch_solve(S, b, feed, [TAU / S_SLOW * np.log1p(S_SLOW)]).M[0]
+    assert np.abs(r.product - exact).max() <= r.error_estimate < 1e-7
+
+
+@pytest.mark.parametrize("strong", [False, True])
+def test_plug_flow_estimate_bounds_the_error_against_a_tighter_solve(strong):
+    """Slowing-down with classification: the estimate at tol 1e-6 is at least the actual
+    error against the solve at tol 1e-10 (more grids, tighter ODE: its own estimate is
+    ~1e-11, below the tested error)."""
+    S, b, feed, d = _scene(strong=strong)
+    kin = _slow(S, b)
+    r = age_structured_plug(kin, feed, rtd.PlugFlow(TAU), d, tol=1e-6)
+    ref = age_structured_plug(kin, feed, rtd.PlugFlow(TAU), d, tol=1e-10)
+    assert ref.error_estimate < 1e-10
+    assert _err(r, ref.product, ref.info["holdup"]) <= r.error_estimate <= 1e-6
+
+
+def test_plug_flow_entry_points_reach_it():
+    S, b, feed, d = _scene()
+    kin = _slow(S, b)
+    for r in (nl.age_slowing(kin, feed, rtd.PlugFlow(TAU), d), nl.solve_transport(kin, feed, rtd.PlugFlow(TAU), d),
+              nl.plug_flow(kin, feed, TAU, d)):
+        assert "age-structured plug flow" in r.method

@@ -9,7 +9,6 @@ from scipy.integrate import quad
 
 import rtd
 from millflow import steady_mill
-from millflow.errors import InputError
 from millflow.mill import nonlinear as nl
 from millflow.mill.age_cells import age_structured
 from millflow.nonlinear import kinetics
@@ -112,9 +111,8 @@ def test_error_estimate_bounds_the_error_against_a_tight_solve(name, rtol):
     assert r.error_estimate < 1e3 * rtol
 
 
-def test_plug_flow_with_classification_is_refused():
-    """The axis refusals of plug flow and the open vessel are tested in test_age_axis.py;
-    here the plug-flow solver itself refuses kappa(t) with d on its axis."""
+def test_the_plug_flow_solver_routes_classification_on_its_axis():
+    """nl.plug_flow with kappa(t) and d: the age-position balance of plug flow
+    (millflow.mill.age_axis.age_structured_plug; tested in test_age_axis.py)."""
     S, b, feed, d = _scene()
-    with pytest.raises(InputError, match="age and position are not tied"):
-        nl.plug_flow(_slow(S, b), feed, TAU, d)
+    assert "age-structured plug flow" in nl.plug_flow(_slow(S, b), feed, TAU, d).method
