@@ -21,8 +21,9 @@ Forms (``[model] kinetics``, one name or a list; constants in ``[model.kinetics_
   a particle's exit depends on the class it is in, which changes as it breaks: the
   age-structured cell balance is solved instead, one linear ODE in the age
   (:func:`millflow.mill.age_cells.age_structured`, LSODA at :data:`AGE_ODE_RTOL`).
-  Refused: classification on the axis (plug flow, axial dispersion: age and position
-  are not tied) and cell or axial samples.
+  Classification on the axis (plug flow, the closed and open axial-dispersion vessels:
+  age and position are not tied) is the age-position balance of
+  :mod:`millflow.mill.age_axis` on fixed grids. Refused: cell or axial samples.
 - ``population`` (fines cushioning / nipping, Bilgili-Scarlett type): S_i[M] =
   S_i (1 + w F(M))^lambda, F the mass fraction finer than ``fines_um`` (default the
   middle measured sieve), ``w`` (default 1) fixed, parameter ``lam_pop`` (< 0: fines
@@ -317,14 +318,14 @@ class CompiledKinetics:
         unit feed, or with ``locations`` ("product", "holdup") (L, N) mass fractions;
         NaN on failure. With classification ``d`` (N,) placed by ``where`` ("discharge",
         "cells") the age-structured cell balance (one solve at :data:`AGE_TOL`, no second
-        solve for an estimate); with ``d`` on the axis of the closed axial-dispersion vessel
-        the age-position balance on the fixed grid of :data:`AXIAL_CELLS` volumes (one solve
-        at :data:`AGE_ODE_RTOL`); classification on the axis of plug flow and of the open
-        vessel is refused.
+        solve for an estimate); with ``d`` on the axis of the closed or open axial-dispersion
+        vessel the age-position balance on the fixed grid of :data:`AXIAL_CELLS` volumes (one
+        solve at :data:`AGE_ODE_RTOL`; the open vessel with the sampled discharge, the linear
+        fit's), of plug flow the upwind cells on fixed grids.
         """
         from millflow.mill import nonlinear as nl
         from millflow.mill.transport import is_axial, is_plug
-        axis = d is not None and is_axial(model, open_vessel=False)  # plug flow, the closed vessel
+        axis = d is not None and is_axial(model)  # plug flow, the closed and the open vessel
         if d is not None and not axis and (where == "axis" or is_axial(model)):
             raise InputError(nl._AGE_CLASSIFIED)
         locs = ["product"] if locations is None else list(locations)
@@ -340,6 +341,10 @@ class CompiledKinetics:
                 from millflow.mill.age_axis import age_structured_plug
                 r = age_structured_plug(self._kin(S, b, p, k), feed, model, d, rtol=AGE_ODE_RTOL, tail=AGE_ODE_ATOL,
                                         levels=PLUG_LEVELS, holdup=hold, error_estimate=False)
+            elif axis and getattr(model, "bc", "closed") == "open":  # the sampled discharge, a fixed grid
+                from millflow.mill.age_axis import age_structured_open
+                r = age_structured_open(self._kin(S, b, p, k), feed, model, d, discharge="sampled", rtol=AGE_ODE_RTOL,
+                                        tail=AGE_ODE_ATOL, m_cells=AXIAL_CELLS, holdup=hold, error_estimate=False)
             elif axis:  # a fixed grid: a refined one would move with the parameters
                 from millflow.mill.age_axis import age_structured_axial
                 r = age_structured_axial(self._kin(S, b, p, k), feed, model, d, rtol=AGE_ODE_RTOL,

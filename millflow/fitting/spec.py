@@ -192,16 +192,16 @@ class ModelSpec:
     def _check_age_slowing(self, consts: dict):
         """Refuse what slowing-down in the particle's age cannot fit in a continuous mill."""
         name, _, at = mode_transport(self.mode, self.n_tanks, self.transport, self.transport_params, self.where)
-        solved = (is_cells(name) and at != "axis") or is_axial(name, open_vessel=False)
+        solved = (is_cells(name) and at != "axis") or is_axial(name)
         if self.classification is not None and not solved:
             where = self.transport if self.mode == "mill" else self.mode
             raise InputError(f"model.classification = {self.classification!r} with model.kinetics = 'slowing_down' "
                              f"({where}): classification on the axis makes classes travel at different speeds, so "
                              "a particle's age and its position are not tied (millflow solves the age-structured "
                              "balance for well-mixed cells and the age-position balance for plug flow and the closed "
-                             "axial-dispersion vessel); expected a cell transport (well_mixed, "
-                             f"{', '.join(n for n in TRANSPORT_NAMES if is_cells(n))}), plug_flow, axial_dispersion "
-                             "or no classification")
+                             "and open axial-dispersion vessels); expected a cell transport (well_mixed, "
+                             f"{', '.join(n for n in TRANSPORT_NAMES if is_cells(n))}), plug_flow, axial_dispersion, "
+                             "axial_dispersion_open or no classification")
         if "tau" in self.transport_fit and "t_ref_s" not in consts:
             raise InputError("model.kinetics = 'slowing_down' with model.transport_fit = ['tau']: the default t_ref "
                              "(the longest tau) would move with the fit; expected model.kinetics_params.t_ref_s "

@@ -50,7 +50,10 @@ and the tail (bounded).
 Plug flow with classification on the axis (no dispersion) is the limit of M upwind cells
 in a row (M tanks in series with d* at every outlet) as M -> infinity, whose error is a
 power series in 1/M: :func:`age_structured_plug` extrapolates it by Romberg's table. The
-open vessel is not solved here (:data:`OPEN_REFUSED`).
+open vessel (:func:`age_structured_open`) is the same balance on its whole line
+(:mod:`millflow.mill.axial_open`), with the flux discharge from the kappa-weighted
+integral of the mass upstream of z = 1 and the sampled one from the concentration at z = 1
+(its hold-up with the back-dispersion layer in the age as well).
 """
 from __future__ import annotations
 
@@ -64,12 +67,13 @@ from millflow.errors import InputError, SolverError
 from millflow.linalg import breakage_matrix
 from millflow.mill.age_cells import AGE_TAIL, _kappa_of, integrate_ages
 from millflow.mill.axial import refine_grids
-from millflow.mill.finite_volume import closed_faces, node_losses, tridiagonal
+from millflow.mill.finite_volume import closed_faces, node_losses, open_faces, open_nodes, tridiagonal
 from millflow.mill.nonlinear_cell import NonlinearSteady, _check
 from millflow.nonlinear.kinetics import Kinetics
+from millflow.ode import integrate
 from millflow.threads import limit_blas_threads
 
-__all__ = ["age_structured_axial", "age_structured_plug", "AXIS_MAX_STATE", "AXIS_TOL", "OPEN_REFUSED"]
+__all__ = ["age_structured_axial", "age_structured_plug", "AXIS_MAX_STATE", "AXIS_TOL", "age_structured_open"]
 
 #: Default target of the error estimate (max abs error of product and hold-up / tau, of the feed).
 AXIS_TOL = 1e-7
@@ -78,13 +82,6 @@ AXIS_MAX_STATE = 2**16
 #: The ODE's relative tolerance is this share of ``tol`` (its error must not disturb the
 #: Richardson estimate of the grid); absolute tolerance a tenth of that, of the feed.
 ODE_SHARE = 1e-2
-#: Why the open vessel with classification on the axis stays refused.
-OPEN_REFUSED = ("kappa(t) (slowing-down in the particle's age) with classification on the axis of the open axial-"
-                "dispersion vessel is not solved (its discharge samples a concentration on an infinite line); "
-                "expected the closed vessel rtd.AxialDispersion(tau, pe) (millflow.mill.age_axis), a cell "
-                "transport, or d = None")
-
-
 def _fv_transport(v, w, pe: float, tau: float, m_cells: int):
     """The finite-volume transport on the masses of the volumes, node-major (index k N + i).
 
@@ -166,7 +163,8 @@ def age_structured_axial(kin: Kinetics, feed, transport, d=None, *, dispersion=N
         ``theta_t``), the age t in s.
     feed : (N,) feed flows (mass per unit time; the product is in the same units).
     transport : rtd.AxialDispersion with bc "closed": tau = L/u [s] (``.tau``, its mean) and
-        Pe (``.pe``).
+        Pe (``.pe``); bc "open" is :func:`age_structured_open` with the sampled discharge (the
+        linear open vessel's default), rtd.PlugFlow :func:`age_structured_plug`.
     d : (N,) relative axial velocity d_i* > 0 of each class [-] (None: 1).
     dispersion : (N,) relative dispersion w_i > 0 [-] (None: 1).
     tol : target of the error estimate: max abs error of the product and of the hold-up /
@@ -198,8 +196,10 @@ def age_structured_axial(kin: Kinetics, feed, transport, d=None, *, dispersion=N
     if not isinstance(transport, rtd.AxialDispersion):
         raise InputError(f"transport {transport!r}: the age-position balance is solved for rtd.AxialDispersion "
                          "(closed vessel)")
-    if transport.bc != "closed":
-        raise InputError(OPEN_REFUSED)
+    if transport.bc != "closed":  # the open vessel, with the linear open vessel's default discharge
+        return age_structured_open(kin, feed, transport, d, dispersion=dispersion, discharge="sampled", tol=tol,
+                                   rtol=rtol, tail=tail, m_start=m_start, m_cells=m_cells, max_state=max_state,
+                                   error_estimate=error_estimate, holdup=holdup)
     tau, pe = float(transport.tau), float(transport.pe)
     feed, tau = _check(kin, feed, tau)
     if kin.age is None:
@@ -431,5 +431,263 @@ def age_structured_plug(kin: Kinetics, feed, transport, d=None, *, tol: float = 
             "classification": "none" if d is None else "d* on the axis (relative axial velocity)"}
     if holdup:
         info.update(holdup=tau * extrapolated[n_cls:], holdup_overflow=0.0)
+    return NonlinearSteady(p, 0.0, how, 0.0, float(err), float(abs(p.sum() - feed.sum())), 0,
+                           time.perf_counter() - start, info)
+
+
+def _node_major(lower, diag, upper, scale, n_cls: int):
+    """-A diag(scale) of one tridiagonal system per class, node-major (index k N + i), sparse csc."""
+    nodes = diag.shape[1]
+    idx = np.arange(nodes)[:, None] * n_cls + np.arange(n_cls)[None, :]
+    rows = np.concatenate([idx[1:].ravel(), idx[:-1].ravel(), idx.ravel()])
+    cols = np.concatenate([idx[:-1].ravel(), idx[1:].ravel(), idx.ravel()])
+    vals = -np.concatenate([(np.asarray(lower).T * scale[:-1, None]).ravel(),
+                            (np.asarray(upper).T * scale[1:, None]).ravel(), (diag.T * scale[:, None]).ravel()])
+    n = nodes * n_cls
+    return sp.csc_matrix((vals, (rows, cols)), shape=(n, n))
+
+
+def _open_transport(v, w, pe: float, tau: float, m_cells: int, length: float, back_layer: bool):
+    """The open vessel's finite-volume transport on the masses of the volumes of the whole line.
+
+    Returns (T_X sparse csc [1/s] on X = (m, m^) node-major, faces): m the masses of the
+    whole line (:func:`millflow.mill.finite_volume.open_faces` with tails of ``length``,
+    the outflow v at the last node), and with ``back_layer`` m^ the masses of the sampled
+    discharge's back-dispersion layer on the nodes upstream of z = 1 (the source-free
+    equations with c^(1) = c(1), which enters the layer's last node through the face
+    between them, :func:`millflow.mill.axial_open.back_layer_matrix`).
+    """
+    faces = open_faces(pe, m_cells, v, w, length)
+    n_cls = np.size(v)
+    scale = 1.0 / (tau * faces.weights)
+    T = _node_major(*tridiagonal(faces, node_losses(faces, v)), scale, n_cls)
+    if not back_layer:
+        return T, faces
+    k1 = faces.outlet
+    alpha, beta = faces.alpha[:, :k1 - 1], faces.beta[:, :k1 - 1]
+    diag = np.zeros((n_cls, k1))
+    diag[:, :-1] += alpha
+    diag[:, 1:] += beta
+    diag[:, -1] += faces.alpha[:, k1 - 1]  # what flows on to the fixed node z = 1
+    Tb = _node_major(-alpha, diag, -beta, scale[:k1], n_cls)
+    # c(1) = m_(k1) / (tau w_(k1)) enters node k1 - 1 of the layer at beta c(1)
+    src = sp.csc_matrix((faces.beta[:, k1 - 1] * scale[k1],
+                         ((k1 - 1) * n_cls + np.arange(n_cls), k1 * n_cls + np.arange(n_cls))),
+                        shape=(k1 * n_cls, T.shape[0]))
+    return sp.bmat([[T, None], [src, Tb]], format="csc"), faces
+
+
+def _solve_open_ages(kap, K, TX, n, y0, fsum, tau, horizon, rtol, atol, tail, kappa_weighted: bool):
+    """One solve of the open vessel's age ODE on one grid.
+
+    The state X (the masses m of the line, then the back layer's, if any), its running
+    integral Q = int_0^a X and, with ``kappa_weighted``, R = int_0^a kappa m (the product of
+    the flux discharge). Stops when the mass on the line is below ``tail`` of the feed;
+    the rest is closed at kappa(A). Returns (Q, R or None, A, mass left, points).
+    """
+    nx, n_cls = y0.size, K.shape[0]
+    Kb = sp.kron(sp.identity(nx // n_cls, format="csc"), sp.csc_matrix(K), format="csc")
+    eye, zx = sp.identity(nx, format="csc"), sp.csc_matrix((nx, nx))
+    blocks_T = [[TX, zx], [eye, zx]]
+    blocks_K = [[Kb, zx], [zx, zx]]
+    if kappa_weighted:
+        pick = sp.identity(nx, format="csc")[:n]  # m out of X
+        zr, zrx = sp.csc_matrix((n, n)), sp.csc_matrix((nx, n))
+        blocks_T = [row + [zrx] for row in blocks_T] + [[sp.csc_matrix((n, nx)), sp.csc_matrix((n, nx)), zr]]
+        blocks_K = [row + [zrx] for row in blocks_K] + [[pick, sp.csc_matrix((n, nx)), zr]]
+    J_T = sp.bmat(blocks_T, format="csc")
+    J_K = sp.bmat(blocks_K, format="csc")
+    KT = np.ascontiguousarray(K.T)
+
+    def rhs(a, y):
+        x = y[:nx]
+        k = kap(a)
+        dx = TX @ x + k * (x.reshape(-1, n_cls) @ KT).ravel()
+        return np.concatenate([dx, x, k * x[:n]]) if kappa_weighted else np.concatenate([dx, x])
+
+    def jac(a, _y):
+        return J_T + kap(a) * J_K
+
+    def left(_a, y):
+        return float(y[:n].sum()) - tail * fsum
+    left.terminal, left.direction = True, -1
+    at = [np.full(nx, atol * fsum), np.full(nx, atol * fsum * tau)]
+    y_init = [y0, np.zeros(nx)]
+    if kappa_weighted:
+        at.append(np.full(n, atol * fsum * tau))
+        y_init.append(np.zeros(n))
+    sol = integrate(rhs, (0.0, horizon), np.concatenate(y_init), method="BDF", jac=jac, rtol=rtol,
+                    atol=np.concatenate(at), events=left,
+                    what="age-structured open axial mill (the ODE in the age)")
+    if sol.status != 1:
+        raise SolverError(f"age-structured open axial mill: {sol.y[:n, -1].sum() / fsum:.3g} of the feed is still on "
+                          f"the line at age {horizon:.4g} s (the horizon); expected it below {tail:g}")
+    A, y = float(sol.t[-1]), sol.y[:, -1]
+    xA, Q = y[:nx], y[nx:2 * nx].copy()
+    kA = kap(A)
+    rest = splu(-(TX + kA * Kb).tocsc()).solve(xA)  # int_A^inf X at kappa(A)
+    Q += rest
+    R = y[2 * nx:] + kA * rest[:n] if kappa_weighted else None
+    return Q, R, A, float(max(xA.sum(), 0.0)), int(sol.t.size)
+
+
+@limit_blas_threads
+def age_structured_open(kin: Kinetics, feed, transport, d=None, *, dispersion=None, discharge: str = "flux",
+                        tol: float = AXIS_TOL, rtol: float | None = None, tail: float = AGE_TAIL, m_start: int = 16,
+                        m_cells: int | None = None, max_state: int = AXIS_MAX_STATE, error_estimate: bool = True,
+                        holdup: bool = True) -> NonlinearSteady:
+    """The open axial-dispersion vessel with S_i = S_i0 kappa(a) and classification on the axis.
+
+    The age-position balance of the module docstring on the open vessel's whole line
+    (:mod:`millflow.mill.axial_open`: the mill [0, 1] in M uniform volumes and a stretched
+    tail of M volumes on each side, zero flux at the upstream end, outflow at the
+    downstream one), the feed entering the node of z = 0 at age 0. The tails end at
+    L_t = 40 / min_i Pe_i (:func:`millflow.mill.axial_open.tail_length` without breakage,
+    which holds for any kappa). On the masses m_k = tau w_k c_k of the volumes (w_k [-]
+    the control volumes) dm/da = (kappa(a) Kb + T) m, integrated until the mass on the
+    whole line is below ``tail`` of the feed, the rest closed at kappa(A). Discharges:
+
+    - ``"flux"``: the net flux through z = 1 from the balance of (-inf, 1],
+      p = f + K int_0^inf kappa(a) U(a) da with U(a) = sum_k u_k m_k(a) the mass upstream of
+      z = 1 (u_k = ``faces.upstream`` / ``faces.weights``: the discharge node's left half);
+      the running integral of kappa m is carried as extra states. Hold-up
+      int_0^inf U(a) da. Mass is conserved to rounding for any v, w.
+    - ``"sampled"``: p_i = v_i c_i(1) = v_i int_0^inf m_i(1, a) da / (tau w_(k1)); refused
+      for unequal Peclet numbers Pe v_i / w_i (as the linear vessel). Hold-up: that upstream
+      of z = 1 plus the back-dispersion layer, whose age form is the same balance on
+      (-inf, 1] without source and with c^(1, a) = c(1, a) (carried as extra states; its
+      integral over ages is the linear layer, so with v = w = 1 the hold-up is the
+      segregated int (1 - F(t)) exp(K theta(t)) f dt with the open density's F).
+
+    Grids refined as :func:`age_structured_axial` (Richardson on M, 2M, 4M, ...); error
+    estimate = grid + ODE (tight against loose) + tail.
+
+    Parameters
+    ----------
+    kin : millflow.nonlinear.Kinetics
+        S_i0 [1/s], b and kappa(t), the age t in s.
+    feed : (N,) feed flows (mass per unit time; the product is in the same units).
+    transport : rtd.AxialDispersion with bc "open": tau = L/u [s] (``.tau``; its mean is
+        tau (1 + 2/Pe)) and Pe (``.pe``).
+    d : (N,) relative axial velocity d_i* > 0 [-] (None: 1).
+    dispersion : (N,) relative dispersion w_i > 0 [-] (None: d, the open vessel's default).
+    discharge : "flux" (net flux through z = 1) or "sampled" (v c(1)).
+    tol, rtol, tail, m_start, m_cells, max_state, error_estimate, holdup : as
+        :func:`age_structured_axial` (the state counts the nodes of the whole line).
+
+    Returns
+    -------
+    NonlinearSteady
+        As :func:`age_structured_axial`; ``info["discharge"]``, ``info["tail_length"]`` [mill
+        lengths], ``info["holdup"]`` [s] with ``holdup``.
+    """
+    import rtd
+
+    from millflow.mill.axial_open import check_discharge, tail_length
+
+    if not (isinstance(transport, rtd.AxialDispersion) and transport.bc == "open"):
+        raise InputError(f"transport {transport!r}: age_structured_open solves rtd.AxialDispersion(bc='open')")
+    tau, pe = float(transport.tau), float(transport.pe)
+    feed, tau = _check(kin, feed, tau)
+    if kin.age is None:
+        raise InputError("age_structured_open: the kinetics have no kappa(t) (kinetics(..., kappa_t=...))")
+    n_cls = kin.n
+    v = np.ones(n_cls) if d is None else np.asarray(d, float)
+    w = v.copy() if dispersion is None else np.asarray(dispersion, float)
+    for name, x in (("d", v), ("dispersion", w)):
+        if x.shape != (n_cls,) or not np.all(np.isfinite(x)) or np.any(x <= 0):
+            raise InputError(f"{name}: expected ({n_cls},) values > 0")
+    if not (np.isfinite(pe) and pe > 0):
+        raise InputError(f"Pe = {pe!r}: expected a Peclet number > 0")
+    discharge = check_discharge(discharge, v, w)
+    flux = discharge == "flux"
+    length = tail_length(np.zeros(n_cls), tau, pe, v, w)
+    cell_pe = float(np.max(v / w)) * pe
+    need = max(int(m_start), int(np.ceil(cell_pe))) if m_cells is None else int(m_cells)
+
+    def state(M):  # classes x (nodes of the line + those of the sampled discharge's back layer)
+        z, _, k1 = open_nodes(length, M)
+        return n_cls * (z.size + (0 if flux or not holdup else k1))
+
+    if state(need) > max_state:
+        raise InputError(f"age-structured open axial mill: {n_cls} classes on the grid of {need} volumes in the mill "
+                         f"(where the cell Peclet number Pe d*/dispersion h = {cell_pe:.3g} h reaches 1) and its "
+                         f"tails ({state(need)} states) exceed the state limit {max_state} (AXIS_MAX_STATE); "
+                         "expected fewer classes or a smaller Pe")
+    start = time.perf_counter()
+    K = breakage_matrix(kin.S, kin.b)
+    kap, stencil = _kappa_of(kin.age, tau)
+    fsum = max(float(feed.sum()), 1e-300)
+    T32, _ = _open_transport(v, w, pe, tau, 32, length, False)
+    dense = T32.toarray()
+    slow = float(min(np.min(-np.linalg.eigvals(dense[i::n_cls, i::n_cls]).real) for i in range(n_cls)))
+    if not slow > 0:
+        raise InputError(f"transport {transport!r}: some class never leaves the line (decay rate <= 0)")
+    horizon = 80.0 / slow + 10.0 * tau
+    rtol = max(ODE_SHARE * tol if rtol is None else float(rtol), 1e-13)
+    atol = 0.1 * rtol
+    tail_hold = max(1.0, 1.0 / (slow * tau))  # hold-up / tau of the tail per unit of mass left
+    solves = {}
+
+    def solve(M, rt, at):
+        TX, faces = _open_transport(v, w, pe, tau, M, length, not flux and holdup)
+        n = faces.z.size * n_cls
+        y0 = np.zeros(TX.shape[0])
+        k0, k1 = faces.inlet, faces.outlet
+        y0[k0 * n_cls:(k0 + 1) * n_cls] = feed  # the feed enters the volume of z = 0 at age 0
+        Q, R, A, left, pts = _solve_open_ages(kap, K, TX, n, y0, fsum, tau, horizon, rt, at, tail, flux)
+        u = faces.upstream / faces.weights  # share of each volume upstream of z = 1
+        Qm = Q[:n].reshape(-1, n_cls)
+        hold = u @ Qm
+        if flux:
+            p = feed + K @ (u @ R.reshape(-1, n_cls))
+        else:
+            p = v * Qm[k1] / (tau * faces.weights[k1])
+            if holdup:
+                hold = hold + Q[n:].reshape(-1, n_cls).sum(axis=0) + 0.5 * faces.h[k1 - 1] / faces.weights[k1] * Qm[k1]
+        solves[M] = (A, left, pts)
+        return p, hold, left
+
+    def grid(M):
+        p, hold, left = solve(M, rtol, atol)
+        return None, left, np.concatenate([p, hold / tau])
+
+    if m_cells is not None:
+        _, left, both = grid(int(m_cells))
+        loose, order, history, weight, M = both, float("nan"), [], 1.0, int(m_cells)
+        grid_err = 0.0
+    else:
+        m_max = int(m_start)
+        while state(2 * m_max) <= max_state:
+            m_max *= 2
+        both, estimate, order, history, finest, _, extrapolated = refine_grids(
+            grid, cell_pe, tol=0.5 * tol, m_start=m_start, m_max=max(m_max, 4 * m_start),
+            bytes_per_cell=8.0 * 60 * 4 * n_cls)
+        M = max(solves)
+        left, loose = finest[1], finest[2]
+        weight = 5.0 / 3.0 if extrapolated else 1.0  # sum |w| of r = p4 + (p4 - p2) / 3
+        grid_err = estimate
+    ode_err = 0.0
+    if error_estimate:
+        p2, h2, left2 = solve(M, max(0.1 * rtol, 3e-14), 0.1 * atol)
+        tight = np.concatenate([p2, h2 / tau])
+        ode_err = weight * float(np.abs(tight - loose).max())
+        if m_cells is not None:
+            both, left = tight, left2
+    tail_err = left * tail_hold
+    err = grid_err + ode_err + tail_err
+    p = both[:n_cls]
+    A, _, pts = solves[M]
+    how = (f"age-structured open axial dispersion ({discharge} discharge): finite volumes on the whole line, BDF in "
+           "the particle's age with the sparse Jacobian, tail closed at kappa(A), grid refined (Richardson)")
+    if stencil:
+        how += " (kappa = theta' by a 4th-order stencil)"
+    info = {"kinetics": kin.describe(), "m_cells": M, "state_size": state(M), "order": order,
+            "history": history, "grid_error": float(grid_err), "ode_error": float(ode_err),
+            "tail_error": float(tail_err), "age_horizon_s": A, "mass_left_at_horizon": left / fsum,
+            "ode_points": pts, "rtol": rtol, "discharge": discharge, "tail_length": length,
+            "classification": "none" if d is None else "d* on the axis (relative axial velocity)"}
+    if holdup:
+        info.update(holdup=tau * both[n_cls:], holdup_overflow=0.0)
     return NonlinearSteady(p, 0.0, how, 0.0, float(err), float(abs(p.sum() - feed.sum())), 0,
                            time.perf_counter() - start, info)

@@ -34,9 +34,9 @@ hold-up / tau between the two (plus the tail bound) is the error estimate (measu
 
 With classification on the axis of plug flow or axial dispersion classes travel at
 different speeds, so a particle's age and its position are not tied and the state is a
-density in both: the closed axial-dispersion vessel is solved by
-:mod:`millflow.mill.age_axis` (:func:`millflow.mill.nonlinear.age_slowing` routes it there); plug flow and the
-open vessel with classification stay refused (:data:`AXIS_REFUSED`).
+density in both: plug flow and the closed and open axial-dispersion vessels are solved by
+:mod:`millflow.mill.age_axis` (:func:`millflow.mill.nonlinear.age_slowing` routes them there);
+here classification on the axis is refused (:data:`AXIS_REFUSED`).
 """
 from __future__ import annotations
 
@@ -58,12 +58,13 @@ __all__ = ["age_structured", "integrate_ages", "AGE_RTOL", "AGE_ATOL", "AGE_TAIL
 AGE_RTOL, AGE_ATOL = 1e-10, 1e-14
 #: The integration stops once the mass still in the mill is below this share of the feed.
 AGE_TAIL = 1e-13
-#: Why plug flow and axial dispersion with classification stay refused.
-AXIS_REFUSED = ("kappa(t) (slowing-down in the particle's age) with classification on the axis of the open axial-"
-                "dispersion vessel: classes travel at different speeds, so age and position are not tied and the "
-                "state is a density in both, which millflow solves for plug flow and the closed vessel only; "
-                "expected rtd.AxialDispersion(tau, pe) (closed), rtd.PlugFlow, a cell transport (rtd.PerfectMixing, "
-                "rtd.TanksInSeries, rtd.RecirculatingCells, a CompartmentNetwork) or d = None")
+#: Why classification on the axis stays refused here (plug flow and axial dispersion: millflow.mill.age_axis).
+AXIS_REFUSED = ("kappa(t) (slowing-down in the particle's age) with classification on the axis: classes travel at "
+                "different speeds, so age and position are not tied and the state is a density in both, which "
+                "millflow solves for plug flow and axial dispersion (closed and open vessel, millflow.mill.age_axis) "
+                "only; expected rtd.PlugFlow, rtd.AxialDispersion, a cell transport with classification at its "
+                "outlets (rtd.PerfectMixing, rtd.TanksInSeries, rtd.RecirculatingCells, a CompartmentNetwork) or "
+                "d = None")
 
 
 def _kappa_of(age, scale: float):

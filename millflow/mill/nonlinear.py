@@ -29,10 +29,10 @@ the linear mill, with classification d* where the linear mill takes it.
   recirculating cells, compartment networks) no one E(t) applies (a particle's exit depends
   on the class it is in, which changes as it breaks) and the age-structured balance of
   :mod:`millflow.mill.age_cells` is solved, one linear ODE in the age; with classification on
-  the axis of the closed axial-dispersion vessel age and position are not tied and the
-  age-position balance of :mod:`millflow.mill.age_axis` is solved (finite volumes in z, one
-  sparse linear ODE in the age), and for plug flow the limit of upwind cells extrapolated in
-  1/M (Romberg); the open vessel with classification on the axis is refused;
+  the axis of the closed or open axial-dispersion vessel age and position are not tied and
+  the age-position balance of :mod:`millflow.mill.age_axis` is solved (finite volumes in z,
+  on the open vessel's whole line with its flux or sampled discharge, one sparse linear ODE
+  in the age), and for plug flow the limit of upwind cells extrapolated in 1/M (Romberg);
 - micromixing limits for any RTD model with ``pdf``/``cdf``: complete segregation,
   int_0^inf E(t) M_batch(t) dt, and maximum mixedness (Zwietering 1959),
   dM/dlambda = -R(M) + h(lambda) (M - f), h = E/(1 - F), integrated from large lambda
@@ -456,8 +456,8 @@ def _rtd():
 
 
 # ---------------------------------------------------------------- slowing-down in age
-#: The refusal that remains: classification on the axis of plug flow and of the open vessel (cells are
-#: solved by :mod:`millflow.mill.age_cells`, the closed vessel by :mod:`millflow.mill.age_axis`).
+#: The refusal that remains: classification on the axis of a transport without one (cells are solved by
+#: :mod:`millflow.mill.age_cells`, plug flow and both axial vessels by :mod:`millflow.mill.age_axis`).
 _AGE_CLASSIFIED = AXIS_REFUSED
 
 
@@ -484,13 +484,15 @@ def age_slowing(kin: Kinetics, feed, transport, d=None, where="discharge", *, to
     vessel with ``d`` the relative axial velocities by the age-position balance
     (:func:`millflow.mill.age_axis.age_structured_axial`, to max(``tol``, AXIS_TOL): its grid
     in z), plug flow with ``d`` by its upwind cells extrapolated to plug flow
-    (:func:`~millflow.mill.age_axis.age_structured_plug`); the open vessel with
-    classification is refused (age and position are not tied).
+    (:func:`~millflow.mill.age_axis.age_structured_plug`), the open vessel by the same
+    balance on its whole line with the sampled discharge (the linear open vessel's default,
+    and what segregated flow with its exit-age density E is;
+    :func:`~millflow.mill.age_axis.age_structured_open`).
     """
     feed, _ = _check(kin, feed, float(getattr(transport, "mean", 1.0)))
     if kin.age is None:
         raise InputError("age_slowing: the kinetics have no kappa(t) (kinetics(..., kappa_t=...))")
-    if d is not None and isinstance(transport, _rtd().AxialDispersion) and transport.bc == "closed":
+    if d is not None and isinstance(transport, _rtd().AxialDispersion):  # closed; open: sampled discharge
         from millflow.mill.age_axis import AXIS_TOL, age_structured_axial
 
         return age_structured_axial(kin, feed, transport, d, tol=max(tol, AXIS_TOL), holdup=holdup,
@@ -576,6 +578,11 @@ def solve_transport(kin: Kinetics, feed, transport, d=None, *, where=None, dispe
 
             return age_structured_axial(kin, feed, transport, sc.d, dispersion=sc.dispersion, tol=tol,
                                         holdup=holdup, m_cells=m_cells)
+        if sc.kind == "axial_open" and (sc.d is not None or sc.dispersion is not None or sc.discharge == "flux"):
+            from millflow.mill.age_axis import age_structured_open
+
+            return age_structured_open(kin, feed, transport, sc.d, dispersion=sc.dispersion,
+                                       discharge=sc.discharge or "sampled", tol=tol, holdup=holdup, m_cells=m_cells)
         if sc.kind == "plug" and sc.d is not None:
             from millflow.mill.age_axis import age_structured_plug
 

@@ -3,15 +3,18 @@ axial-dispersion vessel (millflow.mill.age_axis): the age-position balance again
 linear classified axial mill (kappa = 1), against segregated flow with the vessel's exit-age
 density (v = w = 1), its mass balance, its observed order in z, its error estimate against
 a much finer reference, the routing through the non-linear entry points, and the refusals
-(the open vessel with classification, the state limit); and plug flow with classification
-on the axis (the extrapolated upwind cells) against its exact limits."""
+(the state limit); plug flow with classification on the axis (the extrapolated upwind
+cells) against its exact limits; and the open vessel (its whole line, flux and sampled
+discharges) against the linear open vessel and segregated flow with its open density."""
 import numpy as np
 import pytest
 
 import rtd
 from millflow.errors import InputError
 from millflow.mill import nonlinear as nl
-from millflow.mill.age_axis import age_structured_axial, age_structured_plug
+from millflow.mill.age_axis import age_structured_axial, age_structured_open, age_structured_plug
+from millflow.mill.age_cells import age_structured
+from millflow.mill.axial_open import solve_axial_open
 from millflow.mill.axial import solve_axial
 from millflow.nonlinear import kinetics
 from tests.millflow.mill.nonlinear_scene import TAU, breakage_scene
@@ -113,13 +116,8 @@ def test_the_non_linear_entry_points_reach_it():
 def test_what_is_not_built_is_refused():
     S, b, feed, d = _scene()
     kin = _slow(S, b)
-    T = rtd.AxialDispersion(TAU, 8.0, bc="open")
-    with pytest.raises(InputError, match="age and position are not tied"):
-        nl.solve_transport(kin, feed, T, d, where="axis")
-    with pytest.raises(InputError, match="age and position are not tied"):
-        nl.age_slowing(kin, feed, T, d)
-    with pytest.raises(InputError, match="open axial-dispersion vessel is not solved"):
-        age_structured_axial(kin, feed, T, d)
+    with pytest.raises(InputError, match="age and position are not tied"):  # cells carry no axis
+        age_structured(kin, feed, rtd.TanksInSeries(TAU, 3), d, "axis")
     with pytest.raises(InputError, match="exceed the state limit 4096"):
         age_structured_axial(kin, feed, rtd.AxialDispersion(TAU, 1e4), d, max_state=4096)
     with pytest.raises(InputError, match="exceed the state limit 64"):
@@ -172,3 +170,75 @@ def test_plug_flow_entry_points_reach_it():
     for r in (nl.age_slowing(kin, feed, rtd.PlugFlow(TAU), d), nl.solve_transport(kin, feed, rtd.PlugFlow(TAU), d),
               nl.plug_flow(kin, feed, TAU, d)):
         assert "age-structured plug flow" in r.method
+
+
+# ------------------------------------------------------------------ the open vessel
+def _open(pe):
+    return rtd.AxialDispersion(TAU, pe, bc="open")
+
+
+@pytest.mark.parametrize("pe, discharge, dispersion", [(1.0, "flux", None), (10.0, "flux", None),
+                                                       (1.0, "sampled", None), (10.0, "sampled", None),
+                                                       (10.0, "flux", "varied")])
+def test_open_kappa_one_is_the_linear_open_vessel(pe, discharge, dispersion):
+    S, b, feed, d = _scene()
+    w = None if dispersion is None else np.linspace(2.0, 0.5, S.size)  # unequal Peclet numbers: flux only
+    one = kinetics(S, b, kappa_t=lambda t: 1.0)
+    r = age_structured_open(one, feed, _open(pe), d, dispersion=w, discharge=discharge, tol=1e-6)
+    lin = solve_axial_open(S, b, feed, TAU, pe, d=d, w=w, discharge=discharge, tol=1e-10)
+    # two estimates of the same continuous mill (hold-up with the back-dispersion layer when
+    # sampled): within the sum of the two estimates (the linear one's hold-up part is in
+    # units of tau (1 + 2/Pe) >= tau, so it bounds hold-up / tau as well)
+    assert _err(r, lin.product, lin.holdup) <= r.error_estimate + lin.error_estimate * (1.0 + 2.0 / pe)
+    assert r.error_estimate < 1e-6
+
+
+@pytest.mark.parametrize("pe", [1.0, 10.0])
+def test_open_without_classification_is_segregated_flow_with_the_open_density(pe):
+    S, b, feed, _ = _scene()
+    kin, T = _slow(S, b), _open(pe)
+    r = age_structured_open(kin, feed, T, None, discharge="sampled", tol=1e-6)
+    # segregated flow over the open density E (what the sampled discharge measures); the
+    # hold-up int (1 - F) exp(K theta) f dt against the sampled one with its back layer
+    ref = nl.age_slowing(kin, feed, T, tol=1e-11)
+    assert _err(r, ref.product, ref.info["holdup"]) <= r.error_estimate + ref.error_estimate
+    assert r.error_estimate < 1e-6
+
+
+@pytest.mark.parametrize("pe, strong", [(1.0, False), (10.0, True)])
+def test_open_flux_mass_balance_and_estimate_against_a_tighter_solve(pe, strong):
+    S, b, feed, d = _scene(strong=strong)
+    kin, T = _slow(S, b), _open(pe)
+    one = age_structured_open(kin, feed, T, d, discharge="flux", m_cells=32, rtol=1e-6)
+    # the flux product is f + K int kappa U: the columns of K sum to zero, so on one grid the
+    # mass balance closes to rounding whatever the grid and the ODE tolerance
+    assert one.mass_balance_error < 1e-12 * feed.sum()
+    r = age_structured_open(kin, feed, T, d, discharge="flux", tol=1e-5)
+    # the refined product is extrapolated and clipped at 0 (refine_grids): within its estimate
+    assert r.mass_balance_error <= r.error_estimate
+    ref = age_structured_open(kin, feed, T, d, discharge="flux", tol=1e-8)
+    assert _err(r, ref.product, ref.info["holdup"]) <= r.error_estimate + ref.error_estimate
+    assert ref.error_estimate < 0.1 * r.error_estimate  # the reference is the tighter one
+
+
+def test_open_entry_points_reach_it_and_its_refusals():
+    S, b, feed, d = _scene()
+    kin, T = _slow(S, b), _open(8.0)
+    a = nl.age_slowing(kin, feed, T, d)  # the sampled discharge (the linear open vessel's default)
+    assert "open axial dispersion (sampled discharge)" in a.method
+    r = nl.solve_transport(kin, feed, T, d, where="axis", discharge="flux", tol=1e-6)
+    assert "(flux discharge)" in r.method
+    s = nl.solve_transport(kin, feed, T, d, where="axis", tol=1e-6)
+    assert "(sampled discharge)" in s.method
+    assert np.abs(a.product - s.product).max() <= a.error_estimate + s.error_estimate
+    x = age_structured_axial(kin, feed, T, d, tol=1e-6)
+    assert "(sampled discharge)" in x.method
+    # the flux discharge without classification: not segregated flow with E, routed here too
+    f = nl.solve_transport(kin, feed, T, discharge="flux", tol=1e-6)
+    assert "(flux discharge)" in f.method
+    with pytest.raises(InputError, match="same Peclet number"):
+        age_structured_open(kin, feed, T, d, dispersion=np.ones(S.size), discharge="sampled")
+    with pytest.raises(InputError, match="exceed the state limit 4096"):
+        age_structured_open(kin, feed, _open(1e4), d, max_state=4096)
+    with pytest.raises(InputError, match="bc='open'"):
+        age_structured_open(kin, feed, rtd.AxialDispersion(TAU, 8.0), d)
