@@ -17,7 +17,7 @@ import numpy as np
 from millflow.breakage.rates import X0_DEFAULT
 from millflow.errors import InputError
 from millflow.mill.transport import TRANSPORT_FIT as _TRANSPORT_FIT
-from millflow.mill.transport import TRANSPORT_NAMES, is_axial, is_cells, is_tanks, mode_transport
+from millflow.mill.transport import classification_places, is_cells, is_tanks
 
 __all__ = ["Parameter", "ModelSpec", "RATE_FORMS", "BREAKAGE_FORMS", "MODES", "canonical_location",
            "CLASSIFICATIONS", "TRANSPORTS", "TRANSPORT_FIT", "FORWARD_TOL", "default_parameters"]
@@ -191,17 +191,10 @@ class ModelSpec:
 
     def _check_age_slowing(self, consts: dict):
         """Refuse what slowing-down in the particle's age cannot fit in a continuous mill."""
-        name, _, at = mode_transport(self.mode, self.n_tanks, self.transport, self.transport_params, self.where)
-        solved = (is_cells(name) and at != "axis") or is_axial(name)
-        if self.classification is not None and not solved:
-            where = self.transport if self.mode == "mill" else self.mode
-            raise InputError(f"model.classification = {self.classification!r} with model.kinetics = 'slowing_down' "
-                             f"({where}): classification on the axis makes classes travel at different speeds, so "
-                             "a particle's age and its position are not tied (millflow solves the age-structured "
-                             "balance for well-mixed cells and the age-position balance for plug flow and the closed "
-                             "and open axial-dispersion vessels); expected a cell transport (well_mixed, "
-                             f"{', '.join(n for n in TRANSPORT_NAMES if is_cells(n))}), plug_flow, axial_dispersion, "
-                             "axial_dispersion_open or no classification")
+        # classification takes every transport here: the age-structured balance of the cells
+        # (millflow.mill.age_cells) and the age-position balance of plug flow and the two
+        # axial-dispersion vessels (millflow.mill.age_axis); model.where is checked with the
+        # transport
         if "tau" in self.transport_fit and "t_ref_s" not in consts:
             raise InputError("model.kinetics = 'slowing_down' with model.transport_fit = ['tau']: the default t_ref "
                              "(the longest tau) would move with the fit; expected model.kinetics_params.t_ref_s "
@@ -249,6 +242,11 @@ class ModelSpec:
         self.make_transport(1.0, **{k: 1.0 for k in fitted if k != "tau"})  # values checked by rtd
         if self.where is not None and self.classification is None:
             raise InputError("model.where is given but there is no classification")
+        places = classification_places(self.transport)
+        if isinstance(self.where, str) and self.where not in places:
+            raise InputError(f"model.where = {self.where!r} is not possible for transport {self.transport!r}; "
+                             f"expected one of {list(places)}" + (" or cell numbers" if is_cells(self.transport)
+                                                                  else ""))
 
     def make_transport(self, tau: float, **fitted):
         """The rtd transport model of mode "mill" with mean residence time ``tau`` [s].

@@ -38,7 +38,8 @@ from rtd import names as _names
 __all__ = ["KINDS", "TRANSPORT_NAMES", "TRANSPORT_FIT", "BUILDERS", "canonical_transport", "transport_kind",
            "is_cells", "is_tanks", "is_network", "is_plug", "is_axial", "is_axial_dispersion", "equal_cells",
            "cell_count",
-           "shape_parameter", "fit_parameters", "build_transport", "mode_transport", "solve_nonlinear"]
+           "shape_parameter", "fit_parameters", "classification_places", "build_transport", "mode_transport",
+           "solve_nonlinear"]
 
 #: Kinds of transport: well-mixed cells (one cell, a chain of equal tanks, a network of
 #: cells with back-flow), plug flow, the closed and the open axial-dispersion vessel,
@@ -189,6 +190,20 @@ def cell_count(transport, params: dict):
 def shape_parameter(transport) -> str | None:
     """The parameter that shapes the RTD besides tau: ``"n"`` (cells) or ``"pe"`` (axial), else None."""
     return {"tanks": "n", "network": "n", "axial": "pe", "axial_open": "pe"}.get(_kind_of(transport))
+
+
+def classification_places(transport) -> tuple[str, ...]:
+    """Where classification d* can act on a transport (the ``where`` values of a mill).
+
+    ``("discharge", "cells")`` for well-mixed cells (a network of cells also takes 1-based
+    cell numbers), ``("axis",)`` for plug flow and axial dispersion (d* the relative axial
+    velocity), ``()`` for a transport with neither.
+    """
+    if is_cells(transport):
+        return ("discharge", "cells")
+    if is_axial(transport):
+        return ("axis",)
+    return ()
 
 
 def fit_parameters(transport) -> tuple[str, ...]:

@@ -105,10 +105,12 @@ def test_continuous_population_fit_uses_the_non_linear_steady_solve():
 def test_bad_kinetics_inputs_are_one_line_errors():
     with pytest.raises(InputError, match="model.kinetics = 'nipping'"):
         ModelSpec(mode="batch", kinetics=("nipping",))
-    with pytest.raises(InputError, match="model.classification = 'screen_power' with model.kinetics = 'slowing_down'"):
-        ModelSpec(mode="plug_flow", kinetics=("slowing_down",), classification="screen_power")
-    # in well-mixed cells the age-structured balance takes it (no error)
+    with pytest.raises(InputError, match="model.where = 'axis' is not possible for transport 'perfect_mixing'"):
+        ModelSpec(mode="mill", transport="perfect_mixing", where="axis", kinetics=("slowing_down",),
+                  classification="screen_power")
+    # the age-structured balances take it: cells, and plug flow along its axis (no error)
     ModelSpec(mode="well_mixed", kinetics=("slowing_down",), classification="screen_power")
+    ModelSpec(mode="plug_flow", kinetics=("slowing_down",), classification="screen_power")
     # classification along the axis of a mill with non-linear kinetics is a model like any other
     ModelSpec(mode="mill", transport="axial_dispersion", transport_params={"pe": 8.0}, tau_column="tau_s",
               kinetics=("population",), classification="screen_power")

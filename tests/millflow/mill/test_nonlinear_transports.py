@@ -202,13 +202,14 @@ def test_kappa_of_age_is_segregated_flow_exactly():
     assert np.abs(ds["product"].values - lin["product"].values).max() <= ds.attrs["error_estimate"] + 1e-13
 
 
-def test_kappa_of_age_with_classification_is_refused_with_the_reason():
+def test_kappa_of_age_refusals_are_one_line_errors():
     grid, S, b, feed = _scene()
     kin = kinetics(S, b, kappa_t=lambda t: 1.0 / (1.0 + t / TAU))
-    # cells with classification are solved (the age-structured balance, test_age_classified.py);
-    # classification on the axis is refused: age and position are not tied
-    with pytest.raises(InputError, match="age and position are not tied"):
-        steady_mill(kin, None, feed, rtd.PlugFlow(TAU), np.full(S.size, 0.5))
+    # cells and axes with classification are solved (the age-structured balances,
+    # test_age_classified.py, test_age_axis.py); a composition has nowhere to put d*
+    with pytest.raises(InputError, match="cannot carry classification"):
+        steady_mill(kin, None, feed, rtd.Series(rtd.PerfectMixing(TAU / 2), rtd.PlugFlow(TAU / 2)),
+                    np.full(S.size, 0.5))
     with pytest.raises(InputError, match="combines with no other non-linear term"):
         kinetics(S, b, w=np.ones((S.size, S.size)), lam=-1.0, kappa_t=lambda t: 1.0)
     with pytest.raises(InputError, match="no rate R"):
