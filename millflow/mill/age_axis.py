@@ -93,18 +93,11 @@ def _fv_transport(v, w, pe: float, tau: float, m_cells: int):
     of class i sums to minus its outflow (zero but at the last node).
     """
     faces = closed_faces(pe, m_cells, v, w)
-    lower, diag, upper = tridiagonal(faces, node_losses(faces, v))
-    n_cls, nodes = diag.shape
+    n_cls = np.size(v)
     scale = 1.0 / (tau * faces.weights)  # c = m / (tau h_k)
-    idx = np.arange(nodes)[:, None] * n_cls + np.arange(n_cls)[None, :]  # (nodes, N) state index
-    rows = np.concatenate([idx[1:].ravel(), idx[:-1].ravel(), idx.ravel()])
-    cols = np.concatenate([idx[:-1].ravel(), idx[1:].ravel(), idx.ravel()])
-    vals = -np.concatenate([(lower.T * scale[:-1, None]).ravel(), (upper.T * scale[1:, None]).ravel(),
-                            (diag.T * scale[:, None]).ravel()])
-    n = nodes * n_cls
-    T = sp.csc_matrix((vals, (rows, cols)), shape=(n, n))
-    out = np.asarray(v, float) * scale[-1]
-    exit_ = sp.csr_matrix((out, (np.arange(n_cls), idx[-1])), shape=(n_cls, n))
+    T = _node_major(*tridiagonal(faces, node_losses(faces, v)), scale, n_cls)
+    last = faces.outlet * n_cls + np.arange(n_cls)
+    exit_ = sp.csr_matrix((np.asarray(v, float) * scale[-1], (np.arange(n_cls), last)), shape=(n_cls, T.shape[0]))
     return T, exit_, faces.weights
 
 
@@ -115,6 +108,19 @@ def _slowest_decay(v, w, pe: float, tau: float) -> float:
     dense = T.toarray()
     rates = [np.min(-np.linalg.eigvals(dense[i::n_cls, i::n_cls]).real) for i in range(n_cls)]
     return float(min(rates))
+
+
+def _age_limits(slow: float, transport, tau: float, tol: float, rtol):
+    """(horizon [s], rtol, atol, hold-up / tau of the tail per unit of mass left) of an age solve.
+
+    ``slow`` the slowest decay rate [1/s] of the transport alone: the horizon is 80 of its
+    decay times plus 10 tau; the ODE's rtol :data:`ODE_SHARE` x ``tol`` unless given, its
+    atol a tenth of that (of the feed).
+    """
+    if not slow > 0:
+        raise InputError(f"transport {transport!r}: some class never leaves the mill (decay rate <= 0)")
+    rtol = max(ODE_SHARE * tol if rtol is None else float(rtol), 1e-13)
+    return 80.0 / slow + 10.0 * tau, rtol, 0.1 * rtol, max(1.0, 1.0 / (slow * tau))
 
 
 def _solve_ages(kap, K, T, exit_, y0, fsum, tau, horizon, rtol, atol, tail):
@@ -143,6 +149,36 @@ def _solve_ages(kap, K, T, exit_, y0, fsum, tau, horizon, rtol, atol, tail):
     p = exit_ @ Q
     hold = Q.reshape(nodes, n_cls).sum(axis=0)
     return p, hold, A, float(max(yA.sum(), 0.0)), steps
+
+
+def _refined(grid, solve, *, tau, m_cells, cell_pe, tol, m_start, m_max, bytes_per_cell, rtol, atol,
+             error_estimate):
+    """The grids of an axial age solve refined (or one fixed grid) and the ODE's share of the error.
+
+    ``grid(M)`` -> (nodes, mass left, product and hold-up / tau) at (rtol, atol); ``solve(M,
+    rt, at)`` -> (product, hold-up, mass left). Grids are doubled by
+    :func:`millflow.mill.axial.refine_grids` (Richardson, to ``tol`` / 2) unless ``m_cells``
+    fixes one. The ODE part: the finest grid solved again at tolerances 10x tighter, the
+    difference times the sum of |weights| of the extrapolation (5/3 when extrapolated).
+    Returns (product and hold-up / tau, M, order, history, grid error, ODE error, mass left).
+    """
+    if m_cells is not None:
+        _, left, both = grid(int(m_cells))
+        loose, order, history, weight, M, grid_err = both, float("nan"), [], 1.0, int(m_cells), 0.0
+    else:
+        both, grid_err, order, history, finest, _, extrapolated = refine_grids(
+            grid, cell_pe, tol=0.5 * tol, m_start=m_start, m_max=m_max, bytes_per_cell=bytes_per_cell)
+        M = max(m for m, _ in history if isinstance(m, int))  # the finest grid solved
+        left, loose = finest[1], finest[2]
+        weight = 5.0 / 3.0 if extrapolated else 1.0  # sum |w| of r = p4 + (p4 - p2) / 3
+    ode_err = 0.0
+    if error_estimate:
+        p2, h2, left2 = solve(M, max(0.1 * rtol, 3e-14), 0.1 * atol)
+        tight = np.concatenate([p2, h2 / tau])
+        ode_err = weight * float(np.abs(tight - loose).max())
+        if m_cells is not None:
+            both, left = tight, left2
+    return both, M, order, history, float(grid_err), ode_err, left
 
 
 @limit_blas_threads
@@ -223,13 +259,7 @@ def age_structured_axial(kin: Kinetics, feed, transport, d=None, *, dispersion=N
     K = breakage_matrix(kin.S, kin.b)
     kap, stencil = _kappa_of(kin.age, tau)
     fsum = max(float(feed.sum()), 1e-300)
-    slow = _slowest_decay(v, w, pe, tau)
-    if not slow > 0:
-        raise InputError(f"transport {transport!r}: some class never leaves the mill (decay rate <= 0)")
-    horizon = 80.0 / slow + 10.0 * tau
-    rtol = max(ODE_SHARE * tol if rtol is None else float(rtol), 1e-13)
-    atol = 0.1 * rtol
-    tail_hold = max(1.0, 1.0 / (slow * tau))  # hold-up / tau of the tail per unit of mass left
+    horizon, rtol, atol, tail_hold = _age_limits(_slowest_decay(v, w, pe, tau), transport, tau, tol, rtol)
     solves = {}
 
     def solve(M, rt, at):
@@ -244,25 +274,10 @@ def age_structured_axial(kin: Kinetics, feed, transport, d=None, *, dispersion=N
         p, hold, left = solve(M, rtol, atol)
         return np.linspace(0.0, 1.0, M + 1), left, np.concatenate([p, hold / tau])
 
-    if m_cells is not None:
-        z, left, both = grid(int(m_cells))
-        estimate, order, history, weight, M = float("nan"), float("nan"), [], 1.0, int(m_cells)
-        grid_err = 0.0
-    else:
-        both, estimate, order, history, finest, _, extrapolated = refine_grids(
-            grid, cell_pe, tol=0.5 * tol, m_start=m_start, m_max=max(m_max, 4 * m_start),
-            bytes_per_cell=8.0 * 60 * n_cls)
-        M = finest[0].size - 1
-        left, loose = finest[1], finest[2]
-        weight = 5.0 / 3.0 if extrapolated else 1.0  # sum |w| of r = p4 + (p4 - p2) / 3
-        grid_err = estimate
-    ode_err = 0.0
-    if error_estimate:
-        p2, h2, left2 = solve(M, max(0.1 * rtol, 3e-14), 0.1 * atol)
-        tight = np.concatenate([p2, h2 / tau])
-        ode_err = weight * float(np.abs(tight - loose).max())
-        if m_cells is not None:
-            both, left = tight, left2
+    both, M, order, history, grid_err, ode_err, left = _refined(
+        grid, solve, tau=tau, m_cells=m_cells, cell_pe=cell_pe, tol=tol, m_start=m_start,
+        m_max=max(m_max, 4 * m_start), bytes_per_cell=8.0 * 60 * n_cls, rtol=rtol, atol=atol,
+        error_estimate=error_estimate)
     tail_err = left * tail_hold
     err = grid_err + ode_err + tail_err
     p = both[:n_cls]
@@ -621,12 +636,7 @@ def age_structured_open(kin: Kinetics, feed, transport, d=None, *, dispersion=No
     T32, _ = _open_transport(v, w, pe, tau, 32, length, False)
     dense = T32.toarray()
     slow = float(min(np.min(-np.linalg.eigvals(dense[i::n_cls, i::n_cls]).real) for i in range(n_cls)))
-    if not slow > 0:
-        raise InputError(f"transport {transport!r}: some class never leaves the line (decay rate <= 0)")
-    horizon = 80.0 / slow + 10.0 * tau
-    rtol = max(ODE_SHARE * tol if rtol is None else float(rtol), 1e-13)
-    atol = 0.1 * rtol
-    tail_hold = max(1.0, 1.0 / (slow * tau))  # hold-up / tau of the tail per unit of mass left
+    horizon, rtol, atol, tail_hold = _age_limits(slow, transport, tau, tol, rtol)
     solves = {}
 
     def solve(M, rt, at):
@@ -652,28 +662,13 @@ def age_structured_open(kin: Kinetics, feed, transport, d=None, *, dispersion=No
         p, hold, left = solve(M, rtol, atol)
         return None, left, np.concatenate([p, hold / tau])
 
-    if m_cells is not None:
-        _, left, both = grid(int(m_cells))
-        loose, order, history, weight, M = both, float("nan"), [], 1.0, int(m_cells)
-        grid_err = 0.0
-    else:
-        m_max = int(m_start)
-        while state(2 * m_max) <= max_state:
-            m_max *= 2
-        both, estimate, order, history, finest, _, extrapolated = refine_grids(
-            grid, cell_pe, tol=0.5 * tol, m_start=m_start, m_max=max(m_max, 4 * m_start),
-            bytes_per_cell=8.0 * 60 * 4 * n_cls)
-        M = max(solves)
-        left, loose = finest[1], finest[2]
-        weight = 5.0 / 3.0 if extrapolated else 1.0  # sum |w| of r = p4 + (p4 - p2) / 3
-        grid_err = estimate
-    ode_err = 0.0
-    if error_estimate:
-        p2, h2, left2 = solve(M, max(0.1 * rtol, 3e-14), 0.1 * atol)
-        tight = np.concatenate([p2, h2 / tau])
-        ode_err = weight * float(np.abs(tight - loose).max())
-        if m_cells is not None:
-            both, left = tight, left2
+    m_max = int(m_start)
+    while state(2 * m_max) <= max_state:
+        m_max *= 2
+    both, M, order, history, grid_err, ode_err, left = _refined(
+        grid, solve, tau=tau, m_cells=m_cells, cell_pe=cell_pe, tol=tol, m_start=m_start,
+        m_max=max(m_max, 4 * m_start), bytes_per_cell=8.0 * 60 * 4 * n_cls, rtol=rtol, atol=atol,
+        error_estimate=error_estimate)
     tail_err = left * tail_hold
     err = grid_err + ode_err + tail_err
     p = both[:n_cls]

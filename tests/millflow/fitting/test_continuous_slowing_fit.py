@@ -303,55 +303,45 @@ def test_noise_free_truth_with_classification_is_recovered():
         assert abs(got - v) < 1e-5 * max(1.0, abs(v)), (name, got, v)
 
 
-@pytest.mark.parametrize("bc", ["closed", pytest.param("open", marks=pytest.mark.slow)])  # open: ~50 s
-def test_classified_forward_model_on_the_axis_of_the_vessel(bc):
-    """Classification on the axis of the closed or open axial-dispersion vessel: the forward
-    model is the age-position balance on the fit's fixed grid (millflow.mill.age_axis; the
-    open vessel with the sampled discharge, the linear fit's), to the ODE's tolerance (1e-8
-    relative: ~1e-9 of the feed), and within the fixed grid's error of the refined solve
-    (64 volumes at Pe 8: ~1e-4 of the feed measured, second order)."""
-    from millflow.fitting.kinetics import AGE_ODE_ATOL, AGE_ODE_RTOL, AXIAL_CELLS
-    from millflow.mill.age_axis import age_structured_axial
+#: The axis cases of the fit with slowing-down and classification: spec, fixed-grid solve,
+#: tolerance of the fixed grid against the refined solve (measured: ~1e-4 for 64 volumes at
+#: Pe 8, second order; ~2e-7 for the plug-flow cells 8..128 extrapolated).
+AXIS_CASES = {
+    "closed": (dict(mode="mill", transport="axial_dispersion", transport_params={"pe": 8.0}), 1e-3),
+    "open": (dict(mode="mill", transport="axial_dispersion_open", transport_params={"pe": 8.0}), 1e-3),
+    "plug": (dict(mode="plug_flow"), 1e-5),
+}
 
+
+@pytest.mark.parametrize("case", ["closed", pytest.param("open", marks=pytest.mark.slow), "plug"])  # open: ~50 s
+def test_classified_forward_model_on_the_axis(case):
+    """Classification on the axis with slowing-down: the forward model is the age-position
+    balance on the fit's fixed grids (millflow.mill.age_axis: the closed or open vessel,
+    the latter with the sampled discharge, the linear fit's; plug flow by its upwind cells
+    extrapolated, PLUG_LEVELS), to the ODE's tolerance (1e-8 relative: ~1e-9 of the feed),
+    and within the fixed grids' error of the refined solve (AXIS_CASES)."""
+    from millflow.fitting.kinetics import AGE_ODE_ATOL, AGE_ODE_RTOL, AXIAL_CELLS, PLUG_LEVELS
+    from millflow.mill.age_axis import age_structured_axial, age_structured_plug
+
+    kw, tol = AXIS_CASES[case]
     design = continuous_design(TAUS, extra_process={"screen_mm": [1.0] * len(TAUS)})
     spec = ModelSpec(tau_column="tau_s", kinetics=("slowing_down",), classification="screen",
-                     screen_column="screen_mm", mode="mill",
-                     transport="axial_dispersion" if bc == "closed" else "axial_dispersion_open",
-                     transport_params={"pe": 8.0})
+                     screen_column="screen_mm", **kw)
     m = ForwardModel(spec, design.data(), design.grid)
     d = m.discharge(m._unpack(_theta(spec, {**TRUTH, **SCREEN})), 1)[0]
     S, b, feed = SlowingDownTruth(0.0).linear_parts(design)
     kin = kinetics(S[0], b, kappa_t=lambda t: 1.0 / (1.0 + t / T_REF))
     got = m.predict_grid(_theta(spec, {**TRUTH, **SCREEN}))[0]
     for c, tau in enumerate(TAUS):
-        T = rtd.AxialDispersion(tau, 8.0, bc=bc)  # the open vessel: routed to age_structured_open, sampled
-        fixed = age_structured_axial(kin, feed, T, d[c], m_cells=AXIAL_CELLS, rtol=AGE_ODE_RTOL, tail=AGE_ODE_ATOL,
-                                     error_estimate=False)
+        if case == "plug":
+            T = rtd.PlugFlow(tau)
+            fixed = age_structured_plug(kin, feed, T, d[c], rtol=AGE_ODE_RTOL, tail=AGE_ODE_ATOL, levels=PLUG_LEVELS,
+                                        error_estimate=False)
+        else:
+            T = rtd.AxialDispersion(tau, 8.0, bc=case)  # the open vessel: routed to age_structured_open, sampled
+            fixed = age_structured_axial(kin, feed, T, d[c], m_cells=AXIAL_CELLS, rtol=AGE_ODE_RTOL,
+                                         tail=AGE_ODE_ATOL, error_estimate=False)
         assert np.abs(got[c] - fixed.product).max() < 1e-8
-        refined = age_structured_axial(kin, feed, T, d[c], tol=1e-6)
-        assert np.abs(got[c] - refined.product).max() < 1e-3
+        refined = age_structured_axial(kin, feed, T, d[c], tol=1e-7 if case == "plug" else 1e-6)
+        assert np.abs(got[c] - refined.product).max() < tol
 
-
-def test_classified_forward_model_on_the_axis_of_plug_flow():
-    """Mode plug_flow with classification (class i at d_i* u) and slowing-down: the forward
-    model is the extrapolated upwind cells on the fit's fixed grids (millflow.mill.age_axis,
-    PLUG_LEVELS), to the ODE's tolerance (~1e-9 of the feed), and within ~1e-6 of the feed
-    of the refined solve (the fixed grids' extrapolation, measured ~2e-7)."""
-    from millflow.fitting.kinetics import AGE_ODE_ATOL, AGE_ODE_RTOL, PLUG_LEVELS
-    from millflow.mill.age_axis import age_structured_plug
-
-    design = continuous_design(TAUS, extra_process={"screen_mm": [1.0] * len(TAUS)})
-    spec = ModelSpec(tau_column="tau_s", kinetics=("slowing_down",), classification="screen",
-                     screen_column="screen_mm", mode="plug_flow")
-    m = ForwardModel(spec, design.data(), design.grid)
-    d = m.discharge(m._unpack(_theta(spec, {**TRUTH, **SCREEN})), 1)[0]
-    S, b, feed = SlowingDownTruth(0.0).linear_parts(design)
-    kin = kinetics(S[0], b, kappa_t=lambda t: 1.0 / (1.0 + t / T_REF))
-    got = m.predict_grid(_theta(spec, {**TRUTH, **SCREEN}))[0]
-    for c, tau in enumerate(TAUS):
-        T = rtd.PlugFlow(tau)
-        fixed = age_structured_plug(kin, feed, T, d[c], rtol=AGE_ODE_RTOL, tail=AGE_ODE_ATOL, levels=PLUG_LEVELS,
-                                    error_estimate=False)
-        assert np.abs(got[c] - fixed.product).max() < 1e-8
-        refined = age_structured_plug(kin, feed, T, d[c], tol=1e-7)
-        assert np.abs(got[c] - refined.product).max() < 1e-5

@@ -242,3 +242,12 @@ def test_open_entry_points_reach_it_and_its_refusals():
         age_structured_open(kin, feed, _open(1e4), d, max_state=4096)
     with pytest.raises(InputError, match="bc='open'"):
         age_structured_open(kin, feed, rtd.AxialDispersion(TAU, 8.0), d)
+
+
+def test_a_fixed_grid_reports_its_ode_and_tail_parts():
+    """m_cells fixes the grid (the fit's forward model): the estimate is then the ODE's
+    (tight against loose) and the tail's only, no grid part, and says so in info."""
+    S, b, feed, d = _scene()
+    r = age_structured_axial(_slow(S, b), feed, rtd.AxialDispersion(TAU, 5.0), d, m_cells=32)
+    assert r.info["m_cells"] == 32 and r.info["grid_error"] == 0.0
+    assert 0.0 < r.error_estimate == pytest.approx(r.info["ode_error"] + r.info["tail_error"], rel=1e-12)
