@@ -36,7 +36,7 @@ def _dataset(diag):
 
     rows = diag.table
     labels = [r["model"] for r in rows]
-    num = lambda key: np.array([np.nan if r[key] is None else float(r[key]) for r in rows])  # noqa: E731
+    num = lambda key: np.array([np.nan if r.get(key) is None else float(r[key]) for r in rows])  # noqa: E731
     ds = xr.Dataset(
         {"ssr": ("candidate", num("ssr"), {"long_name": "weighted sum of squared residuals", "units": "1"}),
          "n_params": ("candidate", num("n_params")),
@@ -47,7 +47,13 @@ def _dataset(diag):
          "drift_pct": ("candidate", num("drift_pct"), {"long_name": "A(long half) / A(short half) - 1",
                                                        "units": "%"}),
          "drift_se": ("candidate", num("drift_se"), {"units": "SE"}),
-         "lag1": ("candidate", num("lag1")), "runs_reject": ("candidate", num("runs_reject"))},
+         "lag1": ("candidate", num("lag1")), "runs_reject": ("candidate", num("runs_reject")),
+         "separation_lambda": ("candidate", num("separation_lambda"),
+                               {"long_name": "non-centrality of the best model against this candidate on this design "
+                                             "(noise-free refit SSR / sigma^2; NaN: not computed)", "units": "1"}),
+         "repeat_choice": ("candidate", num("repeat_choice"),
+                           {"long_name": "probability that a repeat of the experiment prefers the best model by BIC "
+                                         "(approximate; NaN: not computed)", "units": "1"})},
         coords={"candidate": labels},
         attrs={"best": diag.best, "user_model": diag.user, "verdicts": json.dumps(diag.verdicts),
                "notes": "; ".join(diag.notes)})
