@@ -4,8 +4,8 @@ Fits the candidate set of a fit config (linear, slowing-down, fines cushioning,
 aggregation; for continuous data alternative RTDs: tanks in series, recirculating cells
 with r fitted, axial dispersion with Pe fitted; and a classification), ranks them by BIC,
 AICc and leave-one-condition-out prediction error, reports the drift test and residual
-structure of each and a verdict per parameter of the config's model
-(:mod:`millflow.fitting.diagnose`). Writes table.csv, results.nc and fits.png into the
+structure of each, how far the design separates the close candidates, and a verdict per
+parameter of the config's model (:mod:`millflow.fitting.diagnose`). Writes table.csv, results.nc and fits.png into the
 output folder (default ``<config stem>-diagnose/`` in the current folder).
 """
 from __future__ import annotations
@@ -24,6 +24,8 @@ def add_parser(subparsers) -> None:
                      json="print one JSON object instead of the table", plots="do not write the plot")
     p.add_argument("--no-loco", action="store_true", help="skip the leave-one-condition-out refits")
     p.add_argument("--no-drift", action="store_true", help="skip the drift refits (short and long half)")
+    p.add_argument("--no-separation", action="store_true",
+                   help="skip the noise-free refits that say how far the design separates the close candidates")
     p.add_argument("--candidates", metavar="LABELS", default=None,
                    help="comma-separated candidates to fit, e.g. linear,tanks_2 (default: the whole set; "
                         "linear and the config's model are always fitted)")
@@ -99,7 +101,7 @@ def run(args) -> int:
     with progress("millflow diagnose", ["candidate fits"], enabled=not args.quiet) as stage:
         stage("candidate fits")
         diag = diagnose(cfg, progress=note, quiet=False, loco=not args.no_loco, drift=not args.no_drift,
-                        candidates=only)
+                        separation=not args.no_separation, candidates=only)
     summary = diag.to_dict()
     with staged_folder(out, overwrite=args.overwrite, input_path=args.config, command="diagnose") as tmp:
         ds = _dataset(diag)
