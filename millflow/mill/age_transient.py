@@ -20,10 +20,13 @@ linearisation): one ODE in the age per feed, evaluated at the output times.
 
 Built for cells (perfect mixing, tanks in series, recirculating cells, compartment
 networks) with and without classification (:func:`millflow.mill.age_cells._operators`, LSODA)
-and the closed axial-dispersion vessel with and without d* on the axis (the finite volumes
+the closed axial-dispersion vessel with and without d* on the axis (the finite volumes
 of :func:`millflow.mill.age_axis.age_structured_axial` on one grid, the one its steady
-refinement chooses for the largest feed; BDF with the sparse Jacobian). Refused: plug flow
-(a step travels as a front the cells-to-plug extrapolation does not resolve) and the open
+refinement chooses for the largest feed; BDF with the sparse Jacobian), and plug flow without
+classification (exact: every parcel is the batch grind at theta(age); the product is the
+feed ground for tau, delayed by tau; the hold-up int_0^min(t, tau) Y_f1 + the old contents
+older than t). Refused: plug flow with d* (a step travels as fronts the cells-to-plug-flow
+extrapolation does not resolve), a pulse through plug flow (a delta at tau), the open
 vessel.
 
 Error estimate (measured): every age ODE at (rtol, atol) and 10x tighter, the tighter
@@ -180,6 +183,58 @@ def _axial_model(kin, sc, M):
             "horizon": 80.0 / slow + 10.0 * tau, "method": "BDF", "m_cells": M}
 
 
+def _plug(kin, sc, t, feed, start_feed, pulse, rtol, atol):
+    """Plug flow without classification: the batch grind in the age, exact (module docstring)."""
+    from millflow.linalg import breakage_matrix
+
+    if sc.d is not None:
+        raise InputError("transient plug flow with kappa(t) and d*: a step travels as fronts the cells-to-plug-flow "
+                         "extrapolation does not resolve; expected d = None or rtd.AxialDispersion")
+    if np.any(pulse > 0):
+        raise InputError("pulse: plug flow passes a pulse as a delta at t = tau; expected feed or initial_feed steps "
+                         "(or a transport with dispersion)")
+    tau = float(sc.transport.mean)
+    K = breakage_matrix(kin.S, kin.b)
+    N = kin.n
+    kap = _kappa_of(kin.age, tau)[0]
+    a = np.minimum(t, tau)  # the age of the oldest new feed inside
+    ages = np.unique(np.concatenate([a, [tau]]))
+    J_T = np.zeros((2 * N, 2 * N))
+    J_T[N:, :N] = np.eye(N)
+    J_K = np.zeros((2 * N, 2 * N))
+    J_K[:N, :N] = K
+
+    def rhs(s, z):
+        return np.concatenate([kap(s) * (K @ z[:N]), z[:N]])
+
+    def jac(s, _z):
+        return J_T + kap(s) * J_K
+    res, nfev = [], 0
+    for rt, at in ((rtol, atol), (max(0.1 * rtol, 3e-14), 0.1 * atol)):
+        parts = {}
+        for name, f in (("new", feed), ("old", np.zeros(N) if start_feed is None else start_feed)):
+            fs = max(float(f.sum()), 1e-300)
+            Z = np.zeros((ages.size, 2 * N))
+            Z[0, :N] = f
+            if ages.size > 1:
+                sol = integrate(rhs, (0.0, tau), np.concatenate([f, np.zeros(N)]), method="LSODA", jac=jac, rtol=rt,
+                                atol=np.concatenate([np.full(N, at * fs), np.full(N, at * fs * tau)]),
+                                t_eval=ages[1:], what="transient plug flow with kappa(t) (the batch grind in the age)")
+                Z[1:] = sol.y.T
+                nfev += int(sol.nfev)
+            parts[name] = Z
+        idx = np.searchsorted(ages, a)
+        Zn, Zo = parts["new"], parts["old"]
+        product = np.where((t >= tau)[:, None], Zn[-1, :N][None, :], Zo[-1, :N][None, :])
+        holdup = Zn[idx, N:] + (Zo[-1, N:][None, :] - Zo[idx, N:])
+        res.append((product, holdup))
+    (p1, h1), (p2, h2) = res
+    diff = {"product": float(np.abs(p2 - p1).max()), "holdup": float(np.abs(h2 - h1).max())}
+    zero = np.zeros((t.size, 1))
+    out = {"product": np.hstack([p2, zero]), "holdup": np.hstack([h2, zero])}
+    return out, {"nfev": nfev, "njev": 0, "nlu": 0}, diff, {}, "plug_flow_age_batch_transient"
+
+
 def age_transient(kin, sc, t, feed, start_feed, pulse, *, rtol: float = AGE_RTOL, atol: float = AGE_ATOL,
                   tail: float = AGE_TAIL):
     """Product and hold-up over time of a mill with kappa(t) kinetics (module docstring).
@@ -214,6 +269,8 @@ def age_transient(kin, sc, t, feed, start_feed, pulse, *, rtol: float = AGE_RTOL
     feeds = [f for f in (feed, start_feed, pulse) if f is not None and np.any(f > 0)]
     if not feeds:
         feeds = [feed]
+    if sc.kind == "plug":
+        return _plug(kin, sc, t, feed, start_feed, pulse, rtol, atol)
     if sc.kind in ("perfect_mixing", "network"):
         model = _cells_model(kin, sc)
         name = "age_structured_cells_transient"
@@ -222,8 +279,8 @@ def age_transient(kin, sc, t, feed, start_feed, pulse, *, rtol: float = AGE_RTOL
         name = "age_structured_axial_transient"
     else:
         raise InputError(f"transient_mill with kappa(t) (slowing-down in the particle's age): solved for cells "
-                         f"(perfect mixing, tanks in series, recirculating cells, networks) and the closed axial "
-                         f"vessel; transport {sc.transport!r} is solved in the steady state only")
+                         f"(perfect mixing, tanks in series, recirculating cells, networks), the closed axial "
+                         f"vessel and plug flow; transport {sc.transport!r} is solved in the steady state only")
     model["kap"] = _kappa_of(kin.age, model["tau"])[0]
     out, diff, tail_b, nfev = _scenario(model, t, feed, start_feed, pulse, rtol, atol, tail)
     N = kin.n
