@@ -19,6 +19,12 @@ plug flow), with classification where the steady non-linear mill takes it.
   integral over ages of the parcels inside (new feed younger than t, the old steady
   contents older). With d* in the velocity classes travel at different speeds and the
   fronts of a step spread: refused (use axial dispersion at a large Peclet number).
+- Slowing-down in the particle's age, kappa(t) (``kin.age``): the mill is linear in its feed
+  and invariant under shifts of entry time, so the content at time t is int_0^t Y_f1 +
+  int_t^inf Y_f0 (+ the pulse's Y_P(t)), Y_f(a) the age-structured balance of the steady
+  solvers for feed f (:mod:`millflow.mill.age_transient`): cells with and without
+  classification, the closed axial vessel with and without d* on the axis, plug flow without
+  d* (the batch grind in the age). Plug flow with d* and the open vessel are refused.
 
 Integration by scipy's ``solve_ivp`` (through :func:`millflow.ode.integrate`) with the analytic
 Jacobian (sparse: the transport plus the dense blocks dR/dc of the cells or nodes). Default
@@ -254,10 +260,6 @@ def transient_nonlinear(kin, b, transport, t, *, feed=None, initial_feed=None, p
 
     start = time.perf_counter()
     check_no_b(kin, b, "transient_mill")
-    if kin.age is not None:
-        raise InputError("transient_mill: kinetics with kappa(t) (slowing-down in the material's age) are solved in "
-                         "the steady state only (segregated flow over the exit ages); expected kinetics without "
-                         "kappa_t")
     sc = _scene(kin.S, kin.b, transport, d, where, dispersion, discharge=discharge)
     n = kin.n
     t = np.atleast_1d(np.asarray(t, dtype=float))
@@ -267,7 +269,11 @@ def transient_nonlinear(kin, b, transport, t, *, feed=None, initial_feed=None, p
     feed = zeros if feed is None else _check_feed(feed, n)
     pulse_m = zeros if pulse is None else _check_feed(pulse, n)
     start_feed = None if initial_feed is None else _check_feed(initial_feed, n)
-    if sc.kind in ("perfect_mixing", "network"):
+    if kin.age is not None:  # kappa(t): the age-structured balances (millflow.mill.age_transient)
+        from millflow.mill.age_transient import age_transient
+
+        out, info, diff, extra, name = age_transient(kin, sc, t, feed, start_feed, pulse_m)
+    elif sc.kind in ("perfect_mixing", "network"):
         if method is None:  # a small state: ODEPACK with the dense Jacobian; a large one: Radau, sparse
             cells = sc.network.n if sc.network is not None else 1
             method = "LSODA" if cells * (n + 1) <= DENSE_STATE else "Radau"
