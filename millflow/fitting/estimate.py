@@ -327,8 +327,8 @@ def _local(prob: _Problem, z0, tight: bool = False):
     try:
         r = least_squares(prob.resid, z0, jac=prob.jac, bounds=(prob.lower, prob.upper), method="trf",
                           x_scale="jac", ftol=tol, xtol=tol, gtol=tol, max_nfev=200 if tight else 60)
-    except ValueError as exc:  # a start where the model cannot be solved (non-finite residuals)
-        if "not finite" not in str(exc):
+    except ValueError as exc:  # a start (or a step's Jacobian) where the model cannot be solved
+        if "not finite" not in str(exc) and "infs or NaNs" not in str(exc):
             raise
         return z0, math.inf
     return r.x, float(2 * r.cost)

@@ -34,7 +34,10 @@ def jacobian(resid_pop, theta, lower, upper, noise: float | None = None):
     Step h = noise^(1/3) x max(|theta|, 0.1 x width, 1e-3): the optimum of a central
     difference whose function values carry relative noise ``noise`` (machine epsilon by
     default, exact solves; an adaptive ODE solve's tolerance otherwise, since its error
-    is not smooth in the parameters).
+    is not smooth in the parameters). Where the solve fails at one side of a central
+    difference (or at the far point of a one-sided one), that column falls back to the
+    first-order difference on the side that was solved; where both fail it stays
+    non-finite (the caller sees it).
     """
     theta = np.asarray(theta, dtype=float)
     p = theta.size
@@ -58,14 +61,19 @@ def jacobian(resid_pop, theta, lower, upper, noise: float | None = None):
     R = resid_pop(np.array(pts))
     r0 = R[0]
     J = np.empty((r0.size, p))
+    ok = np.isfinite(R).all(axis=1)
     for k in range(p):
         a, b2 = R[1 + 2 * k], R[2 + 2 * k]
+        oka, okb = ok[1 + 2 * k], ok[2 + 2 * k]
         if kind[k] == "c":
-            J[:, k] = (a - b2) / (2 * h[k])
+            if oka and okb:
+                J[:, k] = (a - b2) / (2 * h[k])
+            else:  # one side's solve failed (a non-linear mill at an extreme): the other side, first order
+                J[:, k] = (a - r0) / h[k] if oka else (r0 - b2) / h[k]
         elif kind[k] == "f":
-            J[:, k] = (-3 * r0 + 4 * a - b2) / (2 * h[k])
+            J[:, k] = (-3 * r0 + 4 * a - b2) / (2 * h[k]) if okb else (a - r0) / h[k]
         else:
-            J[:, k] = (3 * r0 - 4 * a + b2) / (2 * h[k])
+            J[:, k] = (3 * r0 - 4 * a + b2) / (2 * h[k]) if okb else (r0 - a) / h[k]
     return J
 
 
