@@ -65,7 +65,7 @@ def test_column_sums_are_the_losses(pe):
         loss = node_losses(faces, V, rates)
         expected = rates[:, None] * faces.weights[None, :]
         expected[:, -1] += V
-        assert np.array_equal(loss, expected)
+        assert np.allclose(loss, expected, rtol=2 * EPS, atol=0.0)  # one product and one sum: 2 eps
         lower, diag, upper = tridiagonal(faces, loss)
         in_place = loss.copy()
         assert np.array_equal(tridiagonal(faces, in_place, overwrite_loss=True)[1], diag)
@@ -101,13 +101,14 @@ def test_open_grid_in_the_mill_is_the_closed_grid(pe, M):
     closed = closed_faces(pe, M, V, W)
     opened = open_faces(pe, M, V, W, 2.0)
     mill = slice(opened.inlet, opened.outlet + 1)
-    assert np.array_equal(opened.z[mill], closed.z)
+    assert np.all(np.abs(opened.z[mill] - closed.z) <= 2 * EPS)  # the same nodes, two constructions: 2 eps
     faces = slice(opened.inlet, opened.outlet)
-    # The open grid's widths are differences of the same nodes: exactly 1/M when M is a
-    # power of two (the coefficients then agree bit for bit), else within ~M eps of it
-    # relative, which moves the coefficients by (1 + P) times that.
+    # The open grid's widths are differences of the same nodes: 1/M to ~M eps relative
+    # (exactly when M is a power of two), which moves the coefficients by (1 + P) times that;
+    # plus a few eps for exp evaluated in arrays of different lengths (SIMD and scalar paths
+    # of libm may differ by an ulp on other machines).
     P = closed.cell_peclet
-    tol = 0.0 if M & (M - 1) == 0 else 4 * M * (1 + P) * EPS
+    tol = (4 * EPS if M & (M - 1) == 0 else 4 * M * EPS) * (1 + P) + 4 * EPS
     for a, b in ((opened.alpha, closed.alpha), (opened.beta, closed.beta), (opened.cell_peclet, P)):
         assert np.all(np.abs(a[:, faces] - b) <= tol * np.abs(b))
     # the volumes (h_(k-1) + h_k) / 2 ~ 1/M, each h within ~M eps / M of 1/M: 4 eps absolute
