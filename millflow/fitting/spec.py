@@ -80,8 +80,6 @@ _DEFAULTS = {  # value, min, max
 }
 #: Transports of mode "mill" with a non-linear steady solve (millflow.mill.nonlinear).
 _NONLINEAR_TRANSPORTS = tuple(TRANSPORTS)
-#: Transports of mode "mill" where non-linear kinetics take classification: all (where the linear mill does).
-_NONLINEAR_CLASSIFIED = tuple(TRANSPORTS)
 
 
 @dataclass(frozen=True)
