@@ -17,14 +17,15 @@ plug flow), with classification where the steady non-linear mill takes it.
 - Plug flow (d* = 1): no mixing, so the answer is exact from the batch grind in contact
   time: the product is the feed ground for tau, delayed by tau; the hold-up is the
   integral over ages of the parcels inside (new feed younger than t, the old steady
-  contents older). With d* in the velocity classes travel at different speeds and the
-  fronts of a step spread: refused (use axial dispersion at a large Peclet number).
+  contents older). With d* in the velocity classes travel at different speeds and a step
+  spreads into one front per speed: the sector between the fronts by
+  :mod:`millflow.mill.plug_fronts` (the aggregation overflow at d* = 1).
 - Slowing-down in the particle's age, kappa(t) (``kin.age``): the mill is linear in its feed
   and invariant under shifts of entry time, so the content at time t is int_0^t Y_f1 +
   int_t^inf Y_f0 (+ the pulse's Y_P(t)), Y_f(a) the age-structured balance of the steady
   solvers for feed f (:mod:`millflow.mill.age_transient`): cells with and without
   classification, the closed axial vessel with and without d* on the axis, plug flow without
-  d* (the batch grind in the age). Plug flow with d* and the open vessel are refused.
+  d* (the batch grind in the age); plug flow with d* is refused there.
 
 Integration by scipy's ``solve_ivp`` (through :func:`millflow.ode.integrate`) with the analytic
 Jacobian (sparse: the transport plus the dense blocks dR/dc of the cells or nodes). Default
@@ -217,15 +218,21 @@ def _axial(kin, sc, t, feed, start_feed, pulse, method, rtol, atol, m_cells):
 def _plug(kin, sc, t, feed, start_feed, pulse, rtol, atol):
     from millflow.mill.nonlinear import _plug_ode
 
-    if sc.d is not None:
-        raise InputError("transient plug flow with d* in the velocity: classes travel at different speeds, so a "
-                         "step spreads into fronts that a delay cannot describe; expected d = None, or "
-                         "rtd.AxialDispersion at a large Peclet number")
     if np.any(pulse > 0):
         raise InputError("pulse: plug flow passes a pulse as a delta at t = tau; expected feed or initial_feed steps "
                          "(or a transport with dispersion)")
     tau = float(sc.transport.mean)
     n1 = kin.n + 1
+    if sc.d is not None and np.ptp(np.append(sc.d, 1.0)) > 0:
+        # classes at different speeds (the overflow at d* = 1): the fronts' sector
+        from millflow.mill.plug_fronts import plug_fronts
+
+        old = np.zeros(n1) if start_feed is None else np.append(start_feed, 0.0)
+        product, holdup, diff, info = plug_fronts(kin.rate_many, kin.jacobian_many, np.append(sc.d, 1.0), tau,
+                                                  np.append(feed, 0.0), old, t, rtol=min(rtol, 1e-9))
+        extra = {"spatial_error_estimate": diff["product"], "spatial_holdup_error_estimate": diff["holdup"]}
+        return {"product": product, "holdup": holdup}, info, {"product": 0.0, "holdup": 0.0}, extra, \
+            "plug_flow_fronts_nonlinear"
     ones = np.ones(n1)
     a = np.minimum(t, tau) / tau  # the youngest part of the contents, new feed, as a fraction of the length
     z = np.unique(np.concatenate([a, [1.0]]))
@@ -295,6 +302,9 @@ def transient_nonlinear(kin, b, transport, t, *, feed=None, initial_feed=None, p
         "overflow": ("time", product[:, n], {"units": "mass/s",
                                              "long_name": "aggregation overflow above the top class, discharged"}),
     }
+    if holdup.shape[1] > n:
+        data["overflow_holdup"] = ("time", holdup[:, n], {"units": "mass",
+                                                          "long_name": "aggregation overflow held in the mill"})
     if "cells" in out:
         coords["cell"] = ("cell", np.arange(1, out["cells"].shape[1] + 1))
         data["cell_holdup"] = (("time", "cell", "size"), out["cells"][:, :, :n],

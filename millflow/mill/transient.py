@@ -16,7 +16,11 @@ integrated by scipy's implicit ``solve_ivp`` (BDF by default, through
 (for axial dispersion: in the inlet control volume, an O(h) approximation of the inlet
 delta).
 
-Plug flow is exact: the product is the feed delayed by tau and ground for tau.
+Plug flow with one speed v (d* = v for every class, 1 without classification) is exact:
+the product is the feed delayed by tau / v and ground for tau / v. With classification on
+the axis the classes travel at different speeds and a step spreads into one front per
+speed: :mod:`millflow.mill.plug_fronts` solves the sector between the fronts (spectral in
+the similarity coordinate z / t, with its measured error estimate).
 Any other rtd model, without classification, passes a pulse exactly by segregated
 flow: product(t) = E(t) exp(K t) pulse (the tracer of the model, ground for its age).
 With S = 0 every path reproduces the transport model's own E(t).
@@ -282,24 +286,35 @@ def transient_mill(S, b, transport, t, *, feed=None, initial_feed=None, pulse=No
         if pulse is not None and np.any(pulse_m > 0):
             raise InputError("pulse: plug flow passes a pulse as a delta at t = tau; expected feed or "
                              "initial_feed steps (or a transport with dispersion)")
-        rates = sc.S if sc.d is None else sc.S / sc.d
         old = zeros if start_feed is None else start_feed
-        after = batch_grind(rates, sc.b, feed, tau)[0]
-        before = batch_grind(rates, sc.b, old, tau)[0]
-        product = np.where((t >= tau)[:, np.newaxis], after, before)
-        # hold-up: ages below min(t, tau) come from the new feed, older ones from the old
-        # one; G(a) = int_0^a exp(K' s) ds (flux ground for its age), divided by d*
-        scale = 1.0 if sc.d is None else 1.0 / sc.d
-        full = plug_flow(rates, sc.b, old, tau)[1]
-        holdup = np.empty((t.size, n_cls))
-        for k, tk in enumerate(t):
-            a = min(tk, tau)
-            if a <= 0:
-                holdup[k] = scale * full
-                continue
-            new_part = plug_flow(rates, sc.b, np.stack([feed, old], axis=1), a)[1]
-            holdup[k] = scale * (new_part[:, 0] + full - new_part[:, 1])
-        info, name = {}, "plug_flow_delay"
+        speeds = np.ones(n_cls) if sc.d is None else np.asarray(sc.d, dtype=float)
+        if np.ptp(speeds) > 0:  # classes at different speeds: the fronts' sector
+            from millflow.mill.plug_fronts import plug_fronts
+
+            K = breakage_matrix(sc.S, sc.b)
+            product, holdup, diff, info = plug_fronts(lambda C: C @ K.T,
+                                                      lambda C: np.broadcast_to(K, (C.shape[0],) + K.shape),
+                                                      speeds, tau, feed, old, t)
+            extra["spatial_error_estimate"] = diff["product"]  # nodes and tolerances (plug_fronts)
+            extra["spatial_holdup_error_estimate"] = diff["holdup"]
+            name = "plug_flow_fronts"
+        else:  # one speed v: plug flow with the residence time tau / v, exact
+            tau_v = tau / speeds[0]
+            after = batch_grind(sc.S, sc.b, feed, tau_v)[0]
+            before = batch_grind(sc.S, sc.b, old, tau_v)[0]
+            product = np.where((t >= tau_v)[:, np.newaxis], after, before)
+            # hold-up: ages below min(t, tau / v) come from the new feed, older ones from the
+            # old one; G(a) = int_0^a exp(K s) ds (the flux ground for its age)
+            full = plug_flow(sc.S, sc.b, old, tau_v)[1]
+            holdup = np.empty((t.size, n_cls))
+            for k, tk in enumerate(t):
+                a = min(tk, tau_v)
+                if a <= 0:
+                    holdup[k] = full
+                    continue
+                new_part = plug_flow(sc.S, sc.b, np.stack([feed, old], axis=1), a)[1]
+                holdup[k] = new_part[:, 0] + full - new_part[:, 1]
+            info, name = {}, "plug_flow_delay"
     else:
         if np.any(feed > 0) or start_feed is not None or sc.d is not None:
             raise InputError(f"transport {transport!r}: only a tracer pulse (no feed, no "

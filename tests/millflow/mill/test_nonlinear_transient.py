@@ -8,7 +8,6 @@ from scipy.integrate import quad_vec, solve_ivp
 
 import rtd
 from millflow.classifiers import screen_discharge
-from millflow.errors import InputError
 from millflow.mill import transient_mill
 from millflow.mill import nonlinear as nl
 from millflow.mill.axial import _bernoulli
@@ -145,5 +144,3 @@ def test_plug_flow_start_up_is_the_batch_grind_delayed():
     for k in (1, 4):
         ref, _ = quad_vec(lambda s: sol.sol(s)[:-1], 0.0, min(t[k], TAU), epsabs=1e-11)
         assert np.abs(ds["holdup"].values[k] - ref).max() <= ds.attrs["holdup_error_estimate"] + 1e-7
-    with pytest.raises(InputError, match="travel at different speeds"):
-        transient_mill(kin, None, rtd.PlugFlow(TAU), t, feed=feed, d=np.full(grid.n, 0.5))
