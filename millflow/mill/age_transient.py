@@ -22,12 +22,12 @@ Built for cells (perfect mixing, tanks in series, recirculating cells, compartme
 networks) with and without classification (:func:`millflow.mill.age_cells._operators`, LSODA)
 the closed axial-dispersion vessel with and without d* on the axis (the finite volumes
 of :func:`millflow.mill.age_axis.age_structured_axial` on one grid, the one its steady
-refinement chooses for the largest feed; BDF with the sparse Jacobian), and plug flow without
+refinement chooses for the largest feed; BDF with the sparse Jacobian), plug flow without
 classification (exact: every parcel is the batch grind at theta(age); the product is the
 feed ground for tau, delayed by tau; the hold-up int_0^min(t, tau) Y_f1 + the old contents
-older than t). Refused: plug flow with d* (a step travels as fronts the cells-to-plug-flow
-extrapolation does not resolve), a pulse through plug flow (a delta at tau), the open
-vessel.
+older than t) and plug flow with d* (classes at different speeds: an impulse's deltas and
+fragments on the strip of :mod:`millflow.mill.plug_fronts_age`). Refused: a pulse through plug
+flow (a delta at tau / d*), the open vessel.
 
 Error estimate (measured): every age ODE at (rtol, atol) and 10x tighter, the tighter
 returned; the largest difference of product and of hold-up, plus the tail: the ODE stops
@@ -187,9 +187,6 @@ def _plug(kin, sc, t, feed, start_feed, pulse, rtol, atol):
     """Plug flow without classification: the batch grind in the age, exact (module docstring)."""
     from millflow.linalg import breakage_matrix
 
-    if sc.d is not None:
-        raise InputError("transient plug flow with kappa(t) and d*: a step travels as fronts the cells-to-plug-flow "
-                         "extrapolation does not resolve; expected d = None or rtd.AxialDispersion")
     if np.any(pulse > 0):
         raise InputError("pulse: plug flow passes a pulse as a delta at t = tau; expected feed or initial_feed steps "
                          "(or a transport with dispersion)")
@@ -197,6 +194,18 @@ def _plug(kin, sc, t, feed, start_feed, pulse, rtol, atol):
     K = breakage_matrix(kin.S, kin.b)
     N = kin.n
     kap = _kappa_of(kin.age, tau)[0]
+    if sc.d is not None and np.ptp(sc.d) > 0:  # classes at different speeds: the impulse's strip
+        from millflow.mill.plug_fronts_age import plug_fronts_age
+
+        old = np.zeros(N) if start_feed is None else start_feed
+        product, holdup, diff, info = plug_fronts_age(kap, K, np.asarray(sc.d, dtype=float), tau, feed, old, t,
+                                                      rtol=min(rtol, 1e-9))
+        zero = np.zeros((t.size, 1))
+        extra = {"spatial_error_estimate": diff["product"], "spatial_holdup_error_estimate": diff["holdup"]}
+        return ({"product": np.hstack([product, zero]), "holdup": np.hstack([holdup, zero])}, info,
+                {"product": 0.0, "holdup": 0.0}, extra, "plug_flow_age_fronts")
+    if sc.d is not None:  # one speed v: plug flow with the residence time tau / v
+        tau = tau / float(sc.d[0])
     a = np.minimum(t, tau)  # the age of the oldest new feed inside
     ages = np.unique(np.concatenate([a, [tau]]))
     J_T = np.zeros((2 * N, 2 * N))

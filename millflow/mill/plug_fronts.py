@@ -79,7 +79,9 @@ def _faces(v, width: float):
     parts = [speeds[:1]]
     for a, b in zip(speeds[:-1], speeds[1:]):
         k = max(1, int(np.ceil((b - a) / width * (1.0 - 1e-12))))
-        parts.append(a + (b - a) * np.arange(1, k + 1) / k)
+        cut = a + (b - a) * np.arange(1, k + 1) / k
+        cut[-1] = b  # the speeds themselves exactly
+        parts.append(cut)
     faces = np.concatenate(parts)
     faces[-1] = speeds[-1]
     return faces
@@ -99,6 +101,14 @@ class _Strip:
         self.J = J
         x, D, self.to_coef = _lobatto(P)
         self.x = x
+        # int_{-1}^{X} of the interpolant = chebvander(X, P) @ _anti @ values; _cc: Clenshaw-Curtis weights
+        anti = np.zeros((P + 1, P))
+        for n in range(P):
+            e = np.zeros(P)
+            e[n] = 1.0
+            anti[:, n] = cheb.chebint(e, lbnd=-1.0)
+        self._anti = anti @ self.to_coef
+        self._cc = cheb.chebvander(np.ones(1), P)[0] @ self._anti
         self.xi = self.lo[:, None] + 0.5 * (x[None, :] + 1.0) * self.h[:, None]  # (J, P)
         self.D = D[None, :, :] * (2.0 / self.h)[:, None, None]  # (J, P, P)
         # each class flows towards its front: rightwards where v_i >= the interval's top
@@ -140,27 +150,26 @@ class _Strip:
         j = np.clip(np.searchsorted(self.hi, xi, side="left"), 0, self.J - 1)
         return j, 2.0 * (xi - self.lo[j]) / self.h[j] - 1.0
 
+    def point_weights(self, xi):
+        """(j, w): c(xi) = w @ C[j] for the nodal values C (J, P, m) (the interval's interpolant)."""
+        j, X = self.locate(xi)
+        return j, cheb.chebvander(np.atleast_1d(X), self.P - 1)[0] @ self.to_coef
+
+    def integral_weights(self, top):
+        """(j, w_full, w_top): int_{v_min}^{top} c dxi = sum_{k<j} w_full[k] @ C[k] + w_top @ C[j]."""
+        j, X = self.locate(top)
+        w_top = 0.5 * self.h[j] * (cheb.chebvander(np.atleast_1d(X), self.P)[0] @ self._anti)
+        return j, 0.5 * self.h[:j, None] * self._cc[None, :], w_top
+
     def value(self, C, xi):
         """c at xi (m,) from the nodal values C (J, P, m)."""
-        j, X = self.locate(xi)
-        return cheb.chebvander(np.atleast_1d(X), self.P - 1)[0] @ (self.to_coef @ C[j])
+        j, w = self.point_weights(xi)
+        return w @ C[j]
 
     def integral(self, C, top):
         """int_{v_min}^{top} c dxi (m,) from the nodal values C (J, P, m)."""
-        j, X = self.locate(top)
-        N = self.P - 1
-        anti = np.empty((2, N + 1))  # int_{-1}^{X} T_n, for X = 1 and X = X_top
-        for n in range(N + 1):
-            e = np.zeros(N + 1)
-            e[n] = 1.0
-            a = cheb.chebint(e, lbnd=-1.0)
-            anti[0, n], anti[1, n] = cheb.chebval(1.0, a), cheb.chebval(X, a)
-        w_full = anti[0] @ self.to_coef  # Clenshaw-Curtis weights on [-1, 1]
-        total = np.zeros(self.m)
-        if j > 0:
-            total += np.einsum("j,p,jpm->m", 0.5 * self.h[:j], w_full, C[:j])
-        total += 0.5 * self.h[j] * (anti[1] @ self.to_coef) @ C[j]
-        return total
+        j, w_full, w_top = self.integral_weights(top)
+        return np.einsum("jp,jpm->m", w_full, C[:j]) + w_top @ C[j]
 
 
 def _system(strip: _Strip, rate_many, jacobian_many, tau: float):
@@ -250,6 +259,41 @@ def _solve(strip, rate_many, jacobian_many, tau, c_new, c_old, theta, theta0, rt
     return product, holdup, {"nfev": int(sol.nfev), "njev": int(sol.njev), "nlu": int(sol.nlu)}
 
 
+def refine(run, v, width, nodes, rtol, atol, tol, target, max_state):
+    """Halve the pieces' width from ``width`` until the estimate meets ``target``.
+
+    ``run(P, width, rtol, atol)`` -> (product, hold-up, info) on P nodes per piece; the estimate
+    is the coarse against the fine strip plus the fine one at 10x looser tolerances. Returns
+    the fine run, the estimate and the info; SolverError when the strip would exceed
+    ``max_state`` first.
+    """
+    def gap(x, y):
+        return {"product": float(np.abs(x[0] - y[0]).max(initial=0.0)),
+                "holdup": float(np.abs(x[1] - y[1]).max(initial=0.0))}
+
+    est, pieces = None, 0
+    while True:
+        wanted = _faces(v, width).size - 1
+        if wanted * nodes[1] * v.size > max_state:
+            missed = "no solve" if est is None else \
+                f"estimate {max(est[k] / target[k] for k in est) * tol:.2g} (relative) on {pieces} pieces"
+            raise SolverError(f"transient plug flow with classes at different speeds: tol {tol:g} missed ({missed}; "
+                              f"{wanted} pieces of {nodes[1]} nodes would exceed max_state {max_state}); expected "
+                              "a larger tol or max_state")
+        pieces = wanted
+        coarse, fine = run(nodes[0], width, rtol, atol), run(nodes[1], width, rtol, atol)
+        est = gap(coarse, fine)
+        if all(est[k] <= 0.5 * target[k] for k in est):
+            loose = run(nodes[1], width, 10 * rtol, 10 * atol)
+            more = gap(loose, fine)
+            est = {k: est[k] + more[k] for k in est}
+            if all(est[k] <= target[k] for k in est):
+                break
+        width /= 2.0
+    info = dict(fine[2], fronts_nodes=int(nodes[1]), fronts_pieces=int(pieces), speeds=int(np.unique(v).size))
+    return fine, est, info
+
+
 @limit_blas_threads
 def plug_fronts(rate_many, jacobian_many, v, tau: float, feed, old, t, *, tol: float = FRONT_TOL,
                 nodes=FRONT_NODES, rtol: float = 1e-9, atol: float | None = None, method: str = "Radau",
@@ -315,31 +359,8 @@ def plug_fronts(rate_many, jacobian_many, v, tau: float, feed, old, t, *, tol: f
     def run(P, width, r, a):
         return _solve(_Strip(v, P, width), rate_many, jacobian_many, tau, c_new, c_old, th, theta0, r, a, method)
 
-    def gap(x, y):
-        return {"product": float(np.abs(x[0] - y[0]).max(initial=0.0)),
-                "holdup": float(np.abs(x[1] - y[1]).max(initial=0.0))}
-
     # first width: about 8 e-folds of the fastest decay across a piece, at most 8 pieces (halved from there)
     folds = rho / vmin * (vmax - vmin) / vmin
-    width = (vmax - vmin) / float(np.clip(folds / 8.0, 1.0, 8.0))
-    est, pieces = None, 0
-    while True:
-        wanted = _faces(v, width).size - 1
-        if wanted * nodes[1] * v.size > max_state:
-            missed = "no solve" if est is None else \
-                f"estimate {max(est[k] / target[k] for k in est) * tol:.2g} (relative) on {pieces} pieces"
-            raise SolverError(f"transient plug flow with classes at different speeds: tol {tol:g} missed ({missed}; "
-                              f"{wanted} pieces of {nodes[1]} nodes would exceed max_state {max_state}); expected "
-                              "a larger tol or max_state")
-        pieces = wanted
-        coarse, fine = run(nodes[0], width, rtol, atol), run(nodes[1], width, rtol, atol)
-        est = gap(coarse, fine)
-        if all(est[k] <= 0.5 * target[k] for k in est):
-            loose = run(nodes[1], width, 10 * rtol, 10 * atol)
-            more = gap(loose, fine)
-            est = {k: est[k] + more[k] for k in est}
-            if all(est[k] <= target[k] for k in est):
-                break
-        width /= 2.0
-    info = dict(fine[2], fronts_nodes=int(nodes[1]), fronts_pieces=int(pieces), speeds=int(np.unique(v).size))
+    fine, est, info = refine(run, v, (vmax - vmin) / float(np.clip(folds / 8.0, 1.0, 8.0)), nodes, rtol, atol, tol,
+                             target, max_state)
     return fine[0][where], fine[1][where], est, info

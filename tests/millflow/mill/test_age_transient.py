@@ -154,8 +154,6 @@ def test_plug_flow_is_the_batch_grind(start):
 def test_refusals():
     S, b, feed, _, d = _scene()
     kin = _slow(S, b)
-    with pytest.raises(InputError, match="fronts"):
-        transient_mill(kin, None, rtd.PlugFlow(TAU), T_OUT, feed=feed, d=d)
     with pytest.raises(InputError, match="delta"):
         transient_mill(kin, None, rtd.PlugFlow(TAU), T_OUT, pulse=feed)
     with pytest.raises(InputError, match="steady state only"):

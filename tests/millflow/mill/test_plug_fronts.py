@@ -170,3 +170,70 @@ def test_the_estimate_covers_the_error_against_a_finer_strip():
     assert np.abs(p - pr).max() <= diff["product"]
     assert np.abs(h - hr).max() <= diff["holdup"]
     assert dr["product"] <= 1e-8 * f.sum()
+
+
+# ---------------------------------------------------------------- slowing-down in the age, kappa(a)
+S3 = np.array([0.08, 0.03, 0.0])
+B3 = np.eye(3, k=-1)
+
+
+def _hyperbolic(s=2.0, tau=10.0):
+    return (lambda a: 1.0 / (1.0 + s * a / tau)), (lambda a: tau / s * np.log1p(s * a / tau))
+
+
+@pytest.mark.parametrize("v", [(0.5, 1.0), (1.0, 0.4)])
+def test_kappa_in_the_age_against_the_exit_ages_by_quadrature(v):
+    """Class 1 leaves whole at tau / v1 (a delta), ground for theta(tau / v1); a fragment born
+    at age a1 (at z = v1 a1 / tau) leaves at a = a1 + (1 - v1 a1 / tau) tau / v2, so class 2's
+    product at t is the integral over exit ages up to t of S1 kappa(a1) e^{-S1 theta(a1)}
+    e^{-S2 (theta(a) - theta(a1))} |da1/da|."""
+    tau = 10.0
+    kap, theta = _hyperbolic(tau=tau)
+    kin = kinetics(S3, B3, kappa_t=kap)
+    d = np.array([*v, v[1]])
+    t = np.array([3.0, 7.0, 10.0, 13.0, 17.0, 21.0, 24.0, 26.0])
+    ds = transient_mill(kin, None, rtd.PlugFlow(tau), t, feed=FEED, d=d)
+    assert ds.attrs["method"] == "plug_flow_age_fronts"
+    v1, v2 = v
+    jac = 1.0 / abs(1.0 - v1 / v2)
+
+    def exit_density(a):
+        a1 = (a - tau / v2) / (1.0 - v1 / v2)
+        if not 0.0 <= a1 <= tau / v1:
+            return 0.0
+        return S3[0] * kap(a1) * np.exp(-S3[0] * theta(a1) - S3[1] * (theta(a) - theta(a1))) * jac
+
+    lo, hi = sorted((tau / v1, tau / v2))
+    for k, tk in enumerate(t):
+        p1 = np.exp(-S3[0] * theta(tau / v1)) if tk >= tau / v1 else 0.0
+        p2 = quad(exit_density, lo, min(tk, hi), epsabs=1e-14, epsrel=1e-12)[0] if tk > lo else 0.0
+        # quadrature to 1e-12: the estimate covers the difference
+        assert abs(ds["product"].values[k, 0] - p1) <= ds.attrs["error_estimate"]
+        assert abs(ds["product"].values[k, 1] - p2) <= ds.attrs["error_estimate"]
+
+
+def test_kappa_one_in_the_age_is_the_first_order_fronts_and_the_ends_are_steady():
+    grid, S, b, feed = breakage_scene(6)
+    S = 0.25 * S  # tau S up to 7.5: a few pieces, a test of seconds
+    d = D3
+    old = 0.5 * feed[::-1]
+    t = np.array([0.0, 0.5, 1.2, 1.5, 2.6, 3.0, 4.0, 4.5]) * TAU
+    one = kinetics(S, b, kappa_t=lambda a: 1.0)
+    ds = transient_mill(one, None, rtd.PlugFlow(TAU), t, feed=feed, initial_feed=old, d=d)
+    lin = transient_mill(S, b, rtd.PlugFlow(TAU), t, feed=feed, initial_feed=old, d=d)
+    # two formulations: an impulse with its deltas (age) against the step (first order)
+    for var, est in (("product", "error_estimate"), ("holdup", "holdup_error_estimate")):
+        assert np.abs(ds[var] - lin[var]).max() <= ds.attrs[est] + lin.attrs[est]
+    kin = kinetics(S, b, kappa_t=_hyperbolic(tau=TAU)[0])
+    ds = transient_mill(kin, None, rtd.PlugFlow(TAU), t, feed=feed, initial_feed=old, d=d)
+    for k, f in ((0, old), (-1, feed)):  # the ends: the steady age-position balance (Romberg over cells)
+        ss = nl.plug_flow(kin, f, TAU, d)
+        assert np.abs(ds["product"].values[k] - ss.product).max() <= ds.attrs["error_estimate"] + ss.error_estimate
+        assert np.abs(ds["holdup"].values[k] - ss.info["holdup"]).max() <= (ds.attrs["holdup_error_estimate"]
+                                                                          + TAU * ss.error_estimate)
+    # d(hold-up)/dt = feed - product inside the sector (central difference, O(dt^2): 1e-6 of the feed)
+    dt = 1e-3 * TAU
+    dc = transient_mill(kin, None, rtd.PlugFlow(TAU), np.array([1.5 * TAU - dt, 1.5 * TAU + dt, 1.5 * TAU]),
+                        feed=feed, initial_feed=old, d=d)
+    H = dc["holdup"].values.sum(axis=1)
+    assert abs((H[1] - H[0]) / (2 * dt) - (feed.sum() - dc["product"].values[2].sum())) <= 1e-5 * feed.sum()
