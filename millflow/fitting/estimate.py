@@ -541,10 +541,12 @@ def _profile_intervals(prob: _Problem, zb, sb: float, st: dict, n_data: int) -> 
 
     95 % profile-likelihood intervals for the parameters whose symmetric interval
     crosses a bound or that sit at one: {v : min over the others of SSR(v) <= SSR_best
-    (1 + D^2 F_{1,n-p,0.95} / (n - p))}, D the parameter's SE inflation for correlated
-    residuals (1 under eq. 9), found by bisection to 1e-3 of the range and clipped to
-    the bounds; asymmetric where the likelihood is. Stored as ``ci95`` (the symmetric one
-    stays as ``ci95_wald``) with a flag saying so.
+    (1 + D^2 F_{1,nu,0.95} / (n - p))}, D the parameter's SE inflation for correlated
+    residuals (1 under eq. 9) and nu the degrees of freedom of the symmetric intervals
+    (n - p, or G - 1 where the cluster-robust SE was used: where the SSR is quadratic the
+    profile interval is then the symmetric one), found by bisection to 1e-3 of the range
+    and clipped to the bounds; asymmetric where the likelihood is. Stored as ``ci95``
+    (the symmetric one stays as ``ci95_wald``) with a flag saying so.
     """
     from scipy import stats as _stats
 
@@ -552,6 +554,7 @@ def _profile_intervals(prob: _Problem, zb, sb: float, st: dict, n_data: int) -> 
     dof = n_data - p
     if dof <= 0 or p < 1:
         return
+    dof_i = st.get("dof_intervals", dof)
     for k, name in enumerate(prob.names):
         s = st["params"][name]
         lo_b, hi_b = float(prob.lower[k]), float(prob.upper[k])
@@ -559,7 +562,7 @@ def _profile_intervals(prob: _Problem, zb, sb: float, st: dict, n_data: int) -> 
         if not (s.get("at_bound") or lo_w < lo_b or hi_w > hi_b) or not math.isfinite(s["se"]):
             continue
         infl = s["se"] / s["se_eq9"] if s.get("se_eq9") else 1.0
-        limit = sb * (1 + infl ** 2 * float(_stats.f.ppf(0.95, 1, dof)) / dof)
+        limit = sb * (1 + infl ** 2 * float(_stats.f.ppf(0.95, 1, dof_i)) / dof)
         sub_prob = _Problem.__new__(_Problem)
         sub_prob.__dict__.update(prob.__dict__)
         keep = np.array([j for j in range(p) if j != k], dtype=int)

@@ -32,7 +32,7 @@ SLOW = ("diagnose", "falsify", "model_error", "startup")
 DECOYS = ("flowsheets", "examples", "benchmarks", "docs", "tests")
 
 _CHILD = r"""
-import importlib, json, os, sys
+import importlib, json, os, shutil, sys
 from pathlib import Path
 
 repo, work = Path(sys.argv[1]).resolve(), Path.cwd().resolve()
@@ -48,6 +48,13 @@ def hook(event, args):
     path = args[0]
     if isinstance(path, int):
         return
+    # shutil.rmtree (a TemporaryDirectory's clean-up) opens the folders it removes by their
+    # names relative to their parent's descriptor, os.open(name, dir_fd=fd): the event carries
+    # the bare name, which is not relative to the working folder, so it says nothing about it
+    caller = sys._getframe(1).f_code
+    if caller.co_filename == shutil.__file__ and caller.co_name.startswith("_rmtree"):
+        if path is not None and not os.path.isabs(os.fsdecode(path)):
+            return
     busy[0] = True
     try:
         p = Path(os.fsdecode(path) if path is not None else ".").resolve()

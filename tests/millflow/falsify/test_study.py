@@ -90,12 +90,29 @@ def test_bias_grows_monotonically_full(kind):
     else:
         d = batch_design(TIMES, n_sieves=16)
         truth, spec, strengths = lambda s: SlowingDownTruth(s), ModelSpec(mode="batch"), [0.0, 1.0, 2.0, 4.0]
-    ds = study(truth, spec, d, noise=GaussianNoise(0.01), strengths=strengths, replicates=10, seed=4,
+    R = 10
+    ds = study(truth, spec, d, noise=GaussianNoise(0.01), strengths=strengths, replicates=R, seed=4,
                drift_replicates=0).dataset
     b = np.abs(ds.bias_pct.sel(parameter="ln_A0").values)
     assert np.all(np.diff(b) > 0), b
-    assert ds.coverage.sel(parameter="ln_A0").values[0] >= _binomial_floor(10)
-    assert ds.coverage.sel(parameter="ln_A0").values[-1] <= 0.1
+    assert ds.coverage.sel(parameter="ln_A0").values[0] >= _binomial_floor(R)
+    if kind == "slowing":
+        assert ds.coverage.sel(parameter="ln_A0").values[-1] <= 0.1
+        return
+    # tanks in series: the perfectly mixed fit's SEs grow with the misfit, so the coverage of
+    # ln_A0 does not fall to 0 (measured 1.0, 0.2, 0.7, 0.5 at n = 1, 2, 4, 8). Its residuals
+    # are correlated within samples (lag-1 ~0.8), so the SE is the cluster-robust one with
+    # t(G - 1) = t(4) from the 5 samples (2.78 SE half-widths instead of 1.99), and beta
+    # runs to its upper bound 8 (0, 0, 4, 9 of 10 fits), where corr(ln_A0, beta) ~ 0.985
+    # widens the SE of ln_A0 to ~0.85 (0.16 with beta held): half the n = 8 intervals reach
+    # the truth. The stable signal is the bias in reported SEs (measured 3.45, 2.63, 2.02; an
+    # honest fit stays within 3 / sqrt(R) = 0.95, test_zero_model_error_*) while the SER grows
+    # above the noise (SER / sigma 0.99, 2.23, 3.33, 3.96) and the runs test rejects
+    t = ds.bias_se.sel(parameter="ln_A0").values
+    assert abs(t[0]) <= 3.0 / math.sqrt(R) and np.all(t[1:] > 1.5), t
+    ser = ds.ser_over_sigma.values
+    assert np.all(np.diff(ser) > 0) and ser[1] > 2.0, ser
+    assert np.all(ds.runs_reject.values[1:] >= 0.8), ds.runs_reject.values
 
 
 def test_parallel_equals_serial():
