@@ -58,6 +58,7 @@ integral of the mass upstream of z = 1 and the sampled one from the concentratio
 from __future__ import annotations
 
 import time
+from typing import NamedTuple
 
 import numpy as np
 import scipy.sparse as sp
@@ -492,6 +493,101 @@ def _open_transport(v, w, pe: float, tau: float, m_cells: int, length: float, ba
     return sp.bmat([[T, None], [src, Tb]], format="csc"), faces
 
 
+class OpenGrid(NamedTuple):
+    """The open vessel's age operators on one grid (:func:`open_grid`), node-major (k N + i).
+
+    Attributes
+    ----------
+    TX : sparse csc (nx, nx)
+        The transport [1/s] on X = (m, m^): the masses of the whole line, then those of the
+        sampled discharge's back layer (if any).
+    n : int
+        The states of the line (the first n of X).
+    inlet : slice
+        The states of the volume of z = 0, where the feed enters.
+    upstream : sparse csr (N, nx)
+        The mass of each class upstream of z = 1 (the discharge volume's left half).
+    exit : sparse csr (N, nx)
+        The product rate [1/s] of a content X: ``"sampled"`` v c(1) = v m_(k1) / (tau w_k1);
+        ``"flux"`` the net flux through z = 1, -upstream TX (the transport's outflow of the
+        part upstream of z = 1; breakage moves mass between classes, not across z = 1).
+    hold : sparse csr (N, nx)
+        The hold-up of a content X: ``upstream`` (flux; sampled without the layer), plus the
+        back layer and its half volume at z = 1 on c(1) (sampled with the layer).
+    faces : millflow.mill.finite_volume.AxialFaces
+        The grid.
+    """
+
+    TX: sp.csc_matrix
+    n: int
+    inlet: slice
+    upstream: sp.csr_matrix
+    exit: sp.csr_matrix
+    hold: sp.csr_matrix
+    faces: object
+
+
+def open_vessel(n_cls: int, tau: float, pe: float, d, dispersion, discharge):
+    """The open vessel's checked classification: (v, w, discharge, tail length [mill lengths]).
+
+    v = d* (None: 1), w = ``dispersion`` (None: v, one Peclet number), the discharge checked
+    by :func:`millflow.mill.axial_open.check_discharge` (sampled refused for unequal Peclet
+    numbers), the tails of :func:`millflow.mill.axial_open.tail_length` without breakage
+    (which holds for any kappa).
+    """
+    from millflow.mill.axial_open import check_discharge, tail_length
+
+    v = np.ones(n_cls) if d is None else np.asarray(d, float)
+    w = v.copy() if dispersion is None else np.asarray(dispersion, float)
+    for name, x in (("d", v), ("dispersion", w)):
+        if x.shape != (n_cls,) or not np.all(np.isfinite(x)) or np.any(x <= 0):
+            raise InputError(f"{name}: expected ({n_cls},) values > 0")
+    if not (np.isfinite(pe) and pe > 0):
+        raise InputError(f"Pe = {pe!r}: expected a Peclet number > 0")
+    discharge = check_discharge(discharge, v, w)
+    return v, w, discharge, tail_length(np.zeros(n_cls), tau, pe, v, w)
+
+
+def open_slowest_decay(v, w, pe: float, tau: float, length: float) -> float:
+    """Slowest decay rate [1/s] of the open line's transport alone, each class on 32 volumes."""
+    n_cls = np.size(v)
+    T32, _ = _open_transport(v, w, pe, tau, 32, length, False)
+    dense = T32.toarray()
+    return float(min(np.min(-np.linalg.eigvals(dense[i::n_cls, i::n_cls]).real) for i in range(n_cls)))
+
+
+def open_grid(v, w, pe: float, tau: float, m_cells: int, length: float, flux: bool, layer: bool) -> OpenGrid:
+    """The open vessel's transport, inlet, exit and hold-up on one grid (:class:`OpenGrid`).
+
+    One home for the steady (:func:`age_structured_open`) and the transient
+    (:mod:`millflow.mill.age_transient`) age solvers; ``layer`` adds the sampled discharge's
+    back-dispersion layer (:func:`_open_transport`).
+    """
+    TX, faces = _open_transport(v, w, pe, tau, m_cells, length, layer)
+    n_cls = np.size(v)
+    nx = TX.shape[0]
+    n = faces.z.size * n_cls
+    k0, k1 = faces.inlet, faces.outlet
+    cls = np.tile(np.arange(n_cls), faces.z.size)
+    u = np.repeat(faces.upstream / faces.weights, n_cls)  # share of each volume upstream of z = 1
+    upstream = sp.csr_matrix((u, (cls, np.arange(n))), shape=(n_cls, nx))
+    upstream.eliminate_zeros()
+    if flux:
+        exit_ = sp.csr_matrix(-(upstream @ TX))
+    else:
+        exit_ = sp.csr_matrix((np.asarray(v, float) / (tau * faces.weights[k1]),
+                               (np.arange(n_cls), k1 * n_cls + np.arange(n_cls))), shape=(n_cls, nx))
+    hold = upstream
+    if layer:
+        nl = nx - n  # the layer's states, nodes 0 .. k1 - 1
+        half = 0.5 * faces.h[k1 - 1] / faces.weights[k1]  # its half volume at z = 1, on c(1)
+        hold = hold + sp.csr_matrix((np.ones(nl), (np.tile(np.arange(n_cls), nl // n_cls), n + np.arange(nl))),
+                                    shape=(n_cls, nx))
+        hold = hold + sp.csr_matrix((np.full(n_cls, half), (np.arange(n_cls), k1 * n_cls + np.arange(n_cls))),
+                                    shape=(n_cls, nx))
+    return OpenGrid(TX, n, slice(k0 * n_cls, (k0 + 1) * n_cls), upstream, exit_, sp.csr_matrix(hold), faces)
+
+
 def _solve_open_ages(kap, K, TX, n, y0, fsum, tau, horizon, rtol, atol, tail, kappa_weighted: bool):
     """One solve of the open vessel's age ODE on one grid.
 
@@ -598,8 +694,6 @@ def age_structured_open(kin: Kinetics, feed, transport, d=None, *, dispersion=No
     """
     import rtd
 
-    from millflow.mill.axial_open import check_discharge, tail_length
-
     if not (isinstance(transport, rtd.AxialDispersion) and transport.bc == "open"):
         raise InputError(f"transport {transport!r}: age_structured_open solves rtd.AxialDispersion(bc='open')")
     tau, pe = float(transport.tau), float(transport.pe)
@@ -607,16 +701,8 @@ def age_structured_open(kin: Kinetics, feed, transport, d=None, *, dispersion=No
     if kin.age is None:
         raise InputError("age_structured_open: the kinetics have no kappa(t) (kinetics(..., kappa_t=...))")
     n_cls = kin.n
-    v = np.ones(n_cls) if d is None else np.asarray(d, float)
-    w = v.copy() if dispersion is None else np.asarray(dispersion, float)
-    for name, x in (("d", v), ("dispersion", w)):
-        if x.shape != (n_cls,) or not np.all(np.isfinite(x)) or np.any(x <= 0):
-            raise InputError(f"{name}: expected ({n_cls},) values > 0")
-    if not (np.isfinite(pe) and pe > 0):
-        raise InputError(f"Pe = {pe!r}: expected a Peclet number > 0")
-    discharge = check_discharge(discharge, v, w)
+    v, w, discharge, length = open_vessel(n_cls, tau, pe, d, dispersion, discharge)
     flux = discharge == "flux"
-    length = tail_length(np.zeros(n_cls), tau, pe, v, w)
     cell_pe = float(np.max(v / w)) * pe
     need = max(int(m_start), int(np.ceil(cell_pe))) if m_cells is None else int(m_cells)
 
@@ -633,30 +719,20 @@ def age_structured_open(kin: Kinetics, feed, transport, d=None, *, dispersion=No
     K = breakage_matrix(kin.S, kin.b)
     kap, stencil = _kappa_of(kin.age, tau)
     fsum = max(float(feed.sum()), 1e-300)
-    T32, _ = _open_transport(v, w, pe, tau, 32, length, False)
-    dense = T32.toarray()
-    slow = float(min(np.min(-np.linalg.eigvals(dense[i::n_cls, i::n_cls]).real) for i in range(n_cls)))
+    slow = open_slowest_decay(v, w, pe, tau, length)
     horizon, rtol, atol, tail_hold = _age_limits(slow, transport, tau, tol, rtol)
     solves = {}
 
     def solve(M, rt, at):
-        TX, faces = _open_transport(v, w, pe, tau, M, length, not flux and holdup)
-        n = faces.z.size * n_cls
-        y0 = np.zeros(TX.shape[0])
-        k0, k1 = faces.inlet, faces.outlet
-        y0[k0 * n_cls:(k0 + 1) * n_cls] = feed  # the feed enters the volume of z = 0 at age 0
-        Q, R, A, left, pts = _solve_open_ages(kap, K, TX, n, y0, fsum, tau, horizon, rt, at, tail, flux)
-        u = faces.upstream / faces.weights  # share of each volume upstream of z = 1
-        Qm = Q[:n].reshape(-1, n_cls)
-        hold = u @ Qm
-        if flux:
-            p = feed + K @ (u @ R.reshape(-1, n_cls))
-        else:
-            p = v * Qm[k1] / (tau * faces.weights[k1])
-            if holdup:
-                hold = hold + Q[n:].reshape(-1, n_cls).sum(axis=0) + 0.5 * faces.h[k1 - 1] / faces.weights[k1] * Qm[k1]
+        g = open_grid(v, w, pe, tau, M, length, flux, not flux and holdup)
+        y0 = np.zeros(g.TX.shape[0])
+        y0[g.inlet] = feed  # the feed enters the volume of z = 0 at age 0
+        Q, R, A, left, pts = _solve_open_ages(kap, K, g.TX, g.n, y0, fsum, tau, horizon, rt, at, tail, flux)
+        # the flux product from the kappa-weighted integral (conserves mass to rounding on any
+        # grid), the sampled one from the exit weights
+        p = feed + K @ (g.upstream[:, :g.n] @ R) if flux else g.exit @ Q
         solves[M] = (A, left, pts)
-        return p, hold, left
+        return p, g.hold @ Q, left
 
     def grid(M):
         p, hold, left = solve(M, rtol, atol)

@@ -24,8 +24,9 @@ plug flow), with classification where the steady non-linear mill takes it.
   and invariant under shifts of entry time, so the content at time t is int_0^t Y_f1 +
   int_t^inf Y_f0 (+ the pulse's Y_P(t)), Y_f(a) the age-structured balance of the steady
   solvers for feed f (:mod:`millflow.mill.age_transient`): cells with and without
-  classification, the closed axial vessel with and without d* on the axis, plug flow without
-  d* (the batch grind in the age) and plug flow with d* (:mod:`millflow.mill.plug_fronts_age`).
+  classification, the closed and the open axial vessel (flux and sampled discharges) with and
+  without d* on the axis, plug flow without d* (the batch grind in the age) and plug flow with
+  d* (:mod:`millflow.mill.plug_fronts_age`). A pulse through plug flow is refused.
 
 Integration by scipy's ``solve_ivp`` (through :func:`millflow.ode.integrate`) with the analytic
 Jacobian (sparse: the transport plus the dense blocks dR/dc of the cells or nodes). Default
