@@ -94,13 +94,12 @@ class _Strip:
         self.v, self.P = v, P
         m = v.size
         self.m = m
-        self.faces = faces = _faces(v, width)
+        faces = _faces(v, width)
         self.lo, self.hi = faces[:-1], faces[1:]
         self.h = self.hi - self.lo
         J = self.lo.size
         self.J = J
         x, D, self.to_coef = _lobatto(P)
-        self.x = x
         # int_{-1}^{X} of the interpolant = chebvander(X, P) @ _anti @ values; _cc: Clenshaw-Curtis weights
         anti = np.zeros((P + 1, P))
         for n in range(P):
@@ -138,8 +137,6 @@ class _Strip:
         self.t_vals = (speed[:, None] * self.D[jj, qq, :]).ravel()
         self.r_rows = np.repeat(np.arange(n_s), m)
         self.r_cols = idx[jj, qq, :].ravel()
-        self.kk = kk
-        self.speed = speed.reshape(-1)
 
     def full(self, y):
         """Every node's values (J, P, m), the inflow nodes copied from upstream."""

@@ -91,7 +91,6 @@ class _AgeSystem:
         self.MK = (R @ kop @ Psel).tocsr()  # x e k: breakage
         self.MKA = (R @ kop @ A).tocsr()  # x e k^2: breakage of the births
         self.n_s = n_s
-        self.right = right
 
     def initial(self, f, k0):
         """y at theta -> 0: each fragment class uniform between its source's face and its own speed."""

@@ -32,6 +32,16 @@ def _slow(S, b):
     return kinetics(S, b, kappa_t=lambda t: 1.0 / (1.0 + S_SLOW * t / TAU))
 
 
+def _balance(kin, transport, **kw):
+    """d(total hold-up)/dt by central differences (h = 1 s) and the total product, at 100, 700
+    and 2000 s."""
+    h = 1.0
+    ts = np.array([100.0, 700.0, 2000.0])
+    ds = transient_mill(kin, None, transport, np.concatenate([ts - h, ts, ts + h]), **kw)
+    H = ds["holdup"].values.sum(axis=1)
+    return (H[2 * ts.size:] - H[:ts.size]) / (2 * h), ds["product"].values.sum(axis=1)[ts.size:2 * ts.size]
+
+
 @pytest.mark.parametrize("name", list(CELLS))
 @pytest.mark.parametrize("classified", [False, True])
 @pytest.mark.parametrize("start", [False, True])
@@ -100,13 +110,7 @@ def test_perfect_mixing_is_segregated_flow():
 def test_mass_balance(classified):
     S, b, feed, f0, d = _scene()
     kin, T = _slow(S, b), rtd.RecirculatingCells(TAU, 4, 0.5)
-    h = 1.0
-    ts = np.array([100.0, 700.0, 2000.0])
-    tt = np.concatenate([ts - h, ts, ts + h])
-    ds = transient_mill(kin, None, T, tt, feed=feed, initial_feed=f0, d=d if classified else None)
-    H = ds["holdup"].values.sum(axis=1)
-    dH = (H[2 * ts.size:] - H[:ts.size]) / (2 * h)
-    p = ds["product"].values.sum(axis=1)[ts.size:2 * ts.size]
+    dH, p = _balance(kin, T, feed=feed, initial_feed=f0, d=d if classified else None)
     # central differences with h = 1 s: error h^2 H''' / 6 ~ 1e-8 of the feed at these times; measured 1.6e-15
     # (no d*) and 2.7e-9 (d*)
     assert np.abs(dH - (feed.sum() - p)).max() < 1e-6 * feed.sum()
@@ -260,13 +264,7 @@ def test_open_vessel_ends_are_the_steady_states(discharge, classified):
 def test_open_vessel_flux_mass_balance():
     S, b, feed, _, d = _open_scene()
     kin = _slow(S, b)
-    h = 1.0
-    ts = np.array([100.0, 700.0, 2000.0])
-    tt = np.concatenate([ts - h, ts, ts + h])
-    ds = transient_mill(kin, None, _open(10.0), tt, feed=feed, pulse=100.0 * feed, d=d, discharge="flux")
-    H = ds["holdup"].values.sum(axis=1)
-    dH = (H[2 * ts.size:] - H[:ts.size]) / (2 * h)
-    p = ds["product"].values.sum(axis=1)[ts.size:2 * ts.size]
+    dH, p = _balance(kin, _open(10.0), feed=feed, pulse=100.0 * feed, d=d, discharge="flux")
     # the flux product is the transport's outflow of the upstream part and breakage conserves the
     # total, so dH/dt = f - p holds for the sums on every grid; central differences with h = 1 s
     # err by h^2 H''' / 6 (~1e-8 of the feed here) and the ODE by its tolerance
